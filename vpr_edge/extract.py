@@ -1,0 +1,101 @@
+"""Local deep features from an ONNX layer tap: preprocessing, batched inference, (N, K) descriptor sets."""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from vpr_edge.errors import VprError
+
+MODEL_SCHEMA = 1
+_REQUIRED = ("backbone", "tap", "input_width", "input_height", "mean", "std", "channels", "weights_sha256")
+
+
+def default_model_path() -> Path:
+    """The bundled default model: ``$VPR_EDGE_MODEL`` if set, else ``models/`` beside the package source."""
+    env = os.environ.get("VPR_EDGE_MODEL")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parent.parent / "models" / "efficientnet_lite0_stage5_320x240.onnx"
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+class FeatureExtractor:
+    """An ONNX feature tap (exported by ``vpr_edge_export.onnx_export``) and its preprocessing.
+
+    ``info`` is the model's metadata (backbone, tap, input size, mean/std, channels, weights hash);
+    ``fingerprint`` is the SHA-256 of the ONNX file, which maps record to refuse a different model.
+    """
+
+    def __init__(self, model_path: str | os.PathLike[str], threads: int = 0) -> None:
+        import onnxruntime as ort
+
+        self.path = Path(model_path)
+        if not self.path.is_file():
+            raise VprError(f"{self.path}: model file not found (pass --model PATH)")
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = max(0, int(threads))
+        opts.log_severity_level = 3
+        try:
+            self.session = ort.InferenceSession(str(self.path), opts, providers=["CPUExecutionProvider"])
+        except Exception as e:  # onnxruntime raises several private exception types
+            raise VprError(f"{self.path}: not a loadable ONNX model ({str(e).splitlines()[0][:120]})") from None
+        raw = self.session.get_modelmeta().custom_metadata_map.get("vpr_edge")
+        if raw is None:
+            raise VprError(f"{self.path}: ONNX model has no vpr_edge metadata (export it with vpr_edge_export)")
+        info = json.loads(raw)
+        missing = [k for k in _REQUIRED if k not in info]
+        if info.get("schema") != MODEL_SCHEMA or missing:
+            raise VprError(f"{self.path}: model metadata schema {info.get('schema')} unsupported "
+                           f"(expected {MODEL_SCHEMA}{', missing ' + ', '.join(missing) if missing else ''})")
+        self.info: dict = info
+        self.fingerprint = _sha256(self.path)
+        self.size = (int(info["input_width"]), int(info["input_height"]))
+        self._mean = np.asarray(info["mean"], np.float32)
+        self._std = np.asarray(info["std"], np.float32)
+        self._input = self.session.get_inputs()[0].name
+
+    @property
+    def dim(self) -> int:
+        """Channels K of the tap: the dimension of each local descriptor."""
+        return int(self.info["channels"])
+
+    def preprocess(self, rgb: np.ndarray) -> np.ndarray:
+        """RGB uint8 (H, W, 3) -> normalised float32 (3, input_height, input_width)."""
+        interp = cv2.INTER_AREA if rgb.shape[1] > self.size[0] else cv2.INTER_LINEAR
+        x = cv2.resize(rgb, self.size, interpolation=interp).astype(np.float32) * (1.0 / 255.0)
+        x = (x - self._mean) / self._std
+        return np.ascontiguousarray(x.transpose(2, 0, 1))
+
+    def feature_maps(self, batch: np.ndarray) -> np.ndarray:
+        """Preprocessed batch (B, 3, H, W) float32 -> tap output (B, K, h, w) float32."""
+        return self.session.run(None, {self._input: batch.astype(np.float32, copy=False)})[0]
+
+    def local_features(self, batch: np.ndarray) -> np.ndarray:
+        """Preprocessed batch (B, 3, H, W) -> local descriptors (B, N = h*w, K) float32."""
+        fmap = self.feature_maps(batch)
+        b, k = fmap.shape[:2]
+        return np.ascontiguousarray(fmap.reshape(b, k, -1).transpose(0, 2, 1))
+
+    def iter_local_features(self, images: Iterable[np.ndarray], batch_size: int = 8) -> Iterator[np.ndarray]:
+        """Yield (N, K) descriptors per RGB image, running the model ``batch_size`` images at a time."""
+        pending: list[np.ndarray] = []
+        for image in images:
+            pending.append(self.preprocess(image))
+            if len(pending) >= batch_size:
+                yield from self.local_features(np.stack(pending))
+                pending.clear()
+        if pending:
+            yield from self.local_features(np.stack(pending))

@@ -1,0 +1,93 @@
+"""Image and frame-source I/O: folders of images in name order, video files, decoding errors."""
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from vpr_edge.errors import VprError
+
+IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm"})
+VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg"})
+
+
+def list_images(folder: str | os.PathLike[str]) -> list[Path]:
+    """Image files directly in ``folder``, sorted by name. Raises VprError if missing or empty."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise VprError(f"{folder}: not a folder")
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+    if not files:
+        raise VprError(f"{folder}: no images found (looked for {', '.join(sorted(IMAGE_SUFFIXES))})")
+    return files
+
+
+def load_image(path: str | os.PathLike[str]) -> np.ndarray:
+    """Decode an image file to RGB uint8 (H, W, 3). Raises VprError naming the file if it can't."""
+    data = np.fromfile(str(path), dtype=np.uint8) if os.path.isfile(path) else None
+    if data is None:
+        raise VprError(f"{path}: no such file")
+    image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+    if image is None:
+        raise VprError(f"{path}: cannot decode image (corrupt or unsupported format)")
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One frame of a stream: its position, a name for reports, and the RGB image or the decode error."""
+
+    index: int
+    name: str
+    image: np.ndarray | None
+    error: str | None = None
+
+
+def _folder_frames(files: list[Path]) -> Iterator[Frame]:
+    for i, f in enumerate(files):
+        try:
+            yield Frame(i, f.name, load_image(f))
+        except VprError as e:
+            yield Frame(i, f.name, None, str(e))
+
+
+def _video_frames(path: Path) -> Iterator[Frame]:
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        raise VprError(f"{path}: cannot open video")
+    try:
+        i = 0
+        while True:
+            ok, bgr = cap.read()
+            if not ok:
+                break
+            yield Frame(i, f"{path.name}#{i}", cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+            i += 1
+    finally:
+        cap.release()
+    if i == 0:
+        raise VprError(f"{path}: no frames could be decoded")
+
+
+def open_stream(source: str | os.PathLike[str]) -> tuple[Iterator[Frame], int | None]:
+    """Frames from a folder of images (name order) or a video file, with the frame count if known.
+
+    Undecodable images come through as frames with ``image=None`` and an ``error`` so that the caller can
+    report and skip them; a missing or empty source raises VprError at once.
+    """
+    source = Path(source)
+    if source.is_dir():
+        files = list_images(source)
+        return _folder_frames(files), len(files)
+    if source.is_file() and source.suffix.lower() in VIDEO_SUFFIXES:
+        cap = cv2.VideoCapture(str(source))
+        count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
+        cap.release()
+        return _video_frames(source), (count or None)
+    if source.is_file():
+        raise VprError(f"{source}: not a folder of images nor a video ({', '.join(sorted(VIDEO_SUFFIXES))})")
+    raise VprError(f"{source}: no such folder or video file")

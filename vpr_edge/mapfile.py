@@ -1,0 +1,113 @@
+"""The map: reference encodings plus everything needed to encode a query the same way, in one file."""
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from vpr_edge import __version__
+from vpr_edge.codebook import Codebook
+from vpr_edge.encode import fisher_vector
+from vpr_edge.errors import VprError
+from vpr_edge.extract import FeatureExtractor
+from vpr_edge.images import list_images, load_image
+from vpr_edge.store import read_npz, write_npz
+
+MAP_SCHEMA = 1
+Progress = Callable[[int], None]
+
+
+@dataclass(frozen=True)
+class PlaceMap:
+    """Reference encodings (R, D) float32 (L2-normalised IFVs), their image names, the codebook, and
+    metadata: model identity (``model_sha256``, ``model``), ``alpha``, and how the codebook was made."""
+
+    encodings: np.ndarray
+    names: list[str]
+    codebook: Codebook
+    meta: dict
+
+    @property
+    def alpha(self) -> float:
+        """Power-normalisation exponent used for the reference encodings (queries must use the same)."""
+        return float(self.meta["alpha"])
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the map atomically to ``path`` (a ``.npz`` file)."""
+        meta = self.meta | {"kind": "map", "schema": MAP_SCHEMA, "names": self.names,
+                            "n_refs": len(self.names), "dim": int(self.encodings.shape[1])}
+        write_npz(path, {"encodings": self.encodings} | self.codebook.to_arrays("codebook_"), meta)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> "PlaceMap":
+        """Read a map, checking kind, schema version and internal consistency."""
+        arrays, meta = read_npz(path, "map", MAP_SCHEMA)
+        enc = arrays.get("encodings")
+        names = meta.get("names")
+        if enc is None or enc.ndim != 2 or not isinstance(names, list) or len(names) != len(enc):
+            raise VprError(f"{path}: map is inconsistent (encodings and names disagree)")
+        codebook = Codebook.from_arrays(arrays, int(meta["model"]["channels"]), "codebook_", str(path))
+        return cls(enc.astype(np.float32, copy=False), names, codebook, meta)
+
+    def check_model(self, extractor: FeatureExtractor, map_path: str | os.PathLike[str]) -> None:
+        """Raise VprError unless ``extractor`` is the model the map was built with."""
+        if extractor.fingerprint != self.meta.get("model_sha256"):
+            m = self.meta.get("model", {})
+            raise VprError(
+                f"{map_path}: map was built with model {m.get('backbone')}/{m.get('tap')} "
+                f"({self.meta.get('model_file')}, sha256 {str(self.meta.get('model_sha256'))[:12]}) but "
+                f"{extractor.path} is {extractor.info['backbone']}/{extractor.info['tap']} "
+                f"(sha256 {extractor.fingerprint[:12]}); pass --model with the map's model")
+
+    def encode(self, local: np.ndarray) -> np.ndarray:
+        """Local descriptors (B, N, K) -> query encodings (B, D) compatible with this map."""
+        return fisher_vector(local, self.codebook, self.alpha)
+
+
+def _encode_all(local: np.ndarray, codebook: Codebook, alpha: float, chunk: int = 32) -> np.ndarray:
+    return np.concatenate([fisher_vector(local[i:i + chunk], codebook, alpha) for i in range(0, len(local), chunk)])
+
+
+def build_map(refs: str | os.PathLike[str], extractor: FeatureExtractor, codebook: Codebook | None = None,
+              n_components: int = 128, pca_dim: int | None = None, whiten: bool = True, alpha: float = 0.5,
+              max_descriptors: int = 100_000, batch_size: int = 8, seed: int = 0,
+              progress: Progress | None = None) -> PlaceMap:
+    """Extract local features of every image in ``refs`` (name order), fit a codebook on them unless one
+    is given, and encode each reference. Local features are staged in a temporary memory-mapped file so
+    that RAM does not grow with the number of references. Raises VprError on an unreadable image."""
+    files = list_images(refs)
+    if codebook is not None and codebook.input_dim != extractor.dim:
+        raise VprError(f"codebook expects {codebook.input_dim}-dim descriptors but the model gives {extractor.dim}")
+    n_local = int(extractor.info["grid_width"]) * int(extractor.info["grid_height"])
+    fitted = codebook is None
+    with tempfile.TemporaryDirectory(prefix="vpr-edge-") as tmp:
+        local = np.lib.format.open_memmap(Path(tmp) / "local.npy", mode="w+", dtype=np.float32,
+                                          shape=(len(files), n_local, extractor.dim))
+        for i, feats in enumerate(extractor.iter_local_features((load_image(f) for f in files), batch_size)):
+            local[i] = feats
+            if progress:
+                progress(1)
+        if codebook is None:
+            from vpr_edge_export.codebook_fit import fit_codebook
+
+            take = max(1, max_descriptors // len(files))
+            rng = np.random.default_rng(seed)
+            sample = local[:, np.sort(rng.permutation(n_local)[:take])] if take < n_local else local
+            codebook = fit_codebook(np.asarray(sample), n_components, pca_dim, whiten, max_descriptors, seed)
+        encodings = _encode_all(local, codebook, alpha)
+        del local
+    meta = {
+        "alpha": alpha,
+        "model": extractor.info,
+        "model_file": extractor.path.name,
+        "model_sha256": extractor.fingerprint,
+        "codebook": {"fitted_on_refs": fitted, "n_components": codebook.gmm.n_components,
+                     "pca_dim": codebook.gmm.dim if codebook.pca is not None else None, "seed": seed},
+        "refs_folder": str(Path(refs)),
+        "vpr_edge_version": __version__,
+    }
+    return PlaceMap(encodings, [f.name for f in files], codebook, meta)

@@ -1,0 +1,68 @@
+"""Array files: ``.npz`` arrays plus a JSON metadata entry, written atomically, read without pickle."""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from vpr_edge.errors import VprError
+
+META_KEY = "__meta__"
+
+
+def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta: dict) -> None:
+    """Write ``arrays`` and JSON ``meta`` to ``path`` atomically: a temp file in the same folder, then rename.
+
+    An interrupted or failed write leaves any previous file at ``path`` untouched and no partial file behind.
+    """
+    path = Path(path)
+    if META_KEY in arrays:
+        raise ValueError(f"array name {META_KEY} is reserved")
+    payload = {k: np.asarray(v) for k, v in arrays.items()}
+    if any(a.dtype == object for a in payload.values()):
+        raise ValueError("object arrays cannot be stored without pickle")
+    payload[META_KEY] = np.array(json.dumps(meta, sort_keys=True))
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise VprError(f"{path}: folder {folder} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, **payload)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def read_npz(path: str | os.PathLike[str], kind: str, schema: int) -> tuple[dict[str, np.ndarray], dict]:
+    """Read a file written by :func:`write_npz`; check its ``kind`` and ``schema`` version.
+
+    Raises VprError with a one-line reason naming ``path`` for a missing, corrupt or foreign file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise VprError(f"{path}: no such file")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
+        raise VprError(f"{path}: not a readable vpr-edge {kind} file ({e})") from None
+    if META_KEY not in arrays:
+        raise VprError(f"{path}: not a vpr-edge {kind} file (no metadata)")
+    try:
+        meta = json.loads(str(arrays.pop(META_KEY)))
+    except json.JSONDecodeError as e:
+        raise VprError(f"{path}: corrupt metadata ({e})") from None
+    if meta.get("kind") != kind:
+        raise VprError(f"{path}: is a {meta.get('kind')!r} file, expected a {kind!r} file")
+    if meta.get("schema") != schema:
+        raise VprError(f"{path}: {kind} schema version {meta.get('schema')} is not supported "
+                       f"(this vpr-edge reads version {schema}); rebuild it")
+    return arrays, meta
