@@ -14,6 +14,7 @@ import json
 import os
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -85,9 +86,11 @@ def export_onnx(backbone: str, tap: str, weights: Path, width: int, height: int,
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
         raw = Path(tmp) / "raw.onnx"
-        torch.onnx.export(model, (dummy,), str(raw), input_names=["image"], output_names=["features"],
-                          dynamic_axes={"image": {0: "batch"}, "features": {0: "batch"}}, opset_version=opset,
-                          dynamo=False)
+        with warnings.catch_warnings():  # the TorchScript exporter is deprecated but exact for these graphs
+            warnings.simplefilter("ignore")  # also tracer notes on the fixed input size
+            torch.onnx.export(model, (dummy,), str(raw), input_names=["image"], output_names=["features"],
+                              dynamic_axes={"image": {0: "batch"}, "features": {0: "batch"}},
+                              opset_version=opset, dynamo=False)
         proto = onnx.load(str(raw))
         proto.doc_string = f"vpr-edge feature tap: {backbone}/{tap}"
         entry = proto.metadata_props.add()

@@ -50,7 +50,8 @@ class PlaceMap:
         names = meta.get("names")
         if enc is None or enc.ndim != 2 or not isinstance(names, list) or len(names) != len(enc):
             raise VprError(f"{path}: map is inconsistent (encodings and names disagree)")
-        codebook = Codebook.from_arrays(arrays, int(meta["model"]["channels"]), "codebook_", str(path))
+        channels = int((meta.get("model") or {}).get("channels", -1))
+        codebook = Codebook.from_arrays(arrays, channels, "codebook_", str(path))
         return cls(enc.astype(np.float32, copy=False), names, codebook, meta)
 
     def check_model(self, extractor: FeatureExtractor, map_path: str | os.PathLike[str]) -> None:

@@ -1,0 +1,35 @@
+"""Shared fixtures: the bundled sample (real Corridor frames) and the bundled default model."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLE = ROOT / "samples" / "corridor"
+
+
+@pytest.fixture(scope="session")
+def model_path() -> Path:
+    from vpr_edge.extract import default_model_path
+
+    return default_model_path()
+
+
+@pytest.fixture(scope="session")
+def small_refs(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The first 24 real reference frames of the bundled sample, in a folder of their own."""
+    folder = tmp_path_factory.mktemp("refs")
+    for f in sorted((SAMPLE / "ref").glob("*.jpg"))[:24]:
+        shutil.copy(f, folder / f.name)
+    return folder
+
+
+@pytest.fixture(scope="session")
+def small_queries(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The first 24 real query frames of the bundled sample."""
+    folder = tmp_path_factory.mktemp("queries")
+    for f in sorted((SAMPLE / "query").glob("*.jpg"))[:24]:
+        shutil.copy(f, folder / f.name)
+    return folder

@@ -1,0 +1,152 @@
+"""The command line end to end on real frames, and its handling of bad input."""
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vpr_edge.mapfile import PlaceMap
+from vpr_edge.store import read_npz, write_npz
+
+
+def run(*args: str | Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "vpr_edge.cli", *map(str, args)], capture_output=True, text=True,
+                          timeout=600)
+
+
+def assert_one_line_error(proc: subprocess.CompletedProcess, *needles: str) -> None:
+    assert proc.returncode != 0
+    assert "Traceback" not in proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("vpr-edge: error:")]
+    assert len(lines) == 1, proc.stderr
+    for needle in needles:
+        assert needle in lines[0]
+
+
+@pytest.fixture(scope="module")
+def small_map(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Path:
+    out = tmp_path_factory.mktemp("map") / "small.map.npz"
+    proc = run("build-map", small_refs, "--out", out, "--components", "8", "--pca-dim", "32")
+    assert proc.returncode == 0, proc.stderr
+    assert "24 references" in proc.stderr
+    return out
+
+
+def test_help() -> None:
+    for args in ([], ["build-map"], ["localize"]):
+        proc = run(*args, "--help")
+        assert proc.returncode == 0 and "Usage" in proc.stdout
+    assert "--stream" in run("localize", "--help").stdout
+    assert "--codebook" in run("build-map", "--help").stdout
+
+
+def test_map_contents(small_map: Path, model_path: Path) -> None:
+    pm = PlaceMap.load(small_map)
+    assert pm.encodings.shape == (24, 2 * 8 * 32)
+    np.testing.assert_allclose(np.linalg.norm(pm.encodings, axis=1), 1.0, rtol=1e-5)
+    assert pm.names[0] == "0000000.jpg" and pm.meta["model"]["tap"] == "stage5"
+    assert pm.meta["codebook"] == {"fitted_on_refs": True, "n_components": 8, "pca_dim": 32, "seed": 0}
+
+
+@pytest.mark.parametrize("mode", ["stream", "dtw", "single"])
+def test_localize_matches_real_frames(small_map: Path, small_queries: Path, mode: str) -> None:
+    proc = run("localize", "--map", small_map, "--stream", small_queries, "--mode", mode)
+    assert proc.returncode == 0, proc.stderr
+    rows = list(csv.DictReader(proc.stdout.splitlines()))
+    assert [int(r["frame_index"]) for r in rows] == list(range(24))
+    err = np.array([abs(int(r["ref_index"]) - int(r["frame_index"])) for r in rows])
+    assert np.mean(err <= 2) >= 0.75, err          # the Corridor ground truth is +-2 frames
+    assert all(r["ref"] == f"{int(r['ref_index']):07d}.jpg" for r in rows)
+
+
+def test_localize_jsonl_file_and_reused_codebook(tmp_path: Path, small_map: Path, small_refs: Path,
+                                                 small_queries: Path) -> None:
+    cb = tmp_path / "cb.npz"
+    first = tmp_path / "a.map.npz"
+    assert run("build-map", small_refs, "-o", first, "--components", "4", "--save-codebook", cb).returncode == 0
+    second = tmp_path / "b.map.npz"
+    assert run("build-map", small_refs, "-o", second, "--codebook", cb).returncode == 0
+    np.testing.assert_allclose(PlaceMap.load(first).encodings, PlaceMap.load(second).encodings, atol=1e-6)
+    out = tmp_path / "res.jsonl"
+    proc = run("localize", "-m", second, "-s", small_queries, "-o", out, "--batch-size", "4")
+    assert proc.returncode == 0, proc.stderr
+    lines = [json.loads(x) for x in out.read_text().splitlines()]
+    assert len(lines) == 24 and set(lines[0]) == {"frame_index", "frame", "ref_index", "ref", "score"}
+
+
+def test_video_stream(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
+    import cv2
+
+    video = tmp_path / "q.avi"
+    w = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (160, 120))
+    for f in sorted(small_queries.iterdir())[:10]:
+        w.write(cv2.imread(str(f)))
+    w.release()
+    proc = run("localize", "-m", small_map, "-s", video)
+    assert proc.returncode == 0, proc.stderr
+    assert len(proc.stdout.splitlines()) == 11
+
+
+def test_corrupt_frame_is_reported_and_skipped(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
+    frames = tmp_path / "frames"
+    shutil.copytree(small_queries, frames)
+    (frames / "0000005.jpg").write_bytes(b"\xff\xd8 truncated")
+    proc = run("localize", "-m", small_map, "-s", frames)
+    assert proc.returncode == 0, proc.stderr
+    assert "0000005.jpg: cannot decode image" in proc.stderr and "frame skipped" in proc.stderr
+    idx = [int(r["frame_index"]) for r in csv.DictReader(proc.stdout.splitlines())]
+    assert idx == [i for i in range(24) if i != 5]
+
+
+def test_build_map_bad_input(tmp_path: Path, small_refs: Path) -> None:
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    out = tmp_path / "m.npz"
+    assert_one_line_error(run("build-map", empty, "-o", out), "empty", "no images")
+    assert_one_line_error(run("build-map", tmp_path / "nope", "-o", out), "nope", "not a folder")
+    assert not out.exists()
+
+    bad = tmp_path / "bad"
+    shutil.copytree(small_refs, bad)
+    (bad / "0000003.jpg").write_bytes(b"garbage")
+    out.write_bytes(b"previous map")
+    assert_one_line_error(run("build-map", bad, "-o", out, "--components", "4"), "0000003.jpg", "cannot decode")
+    assert out.read_bytes() == b"previous map"                    # untouched
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad", "empty", "m.npz"]   # no temp files
+
+
+def test_localize_bad_input(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert_one_line_error(run("localize", "-m", small_map, "-s", empty), "empty", "no images")
+    assert_one_line_error(run("localize", "-m", tmp_path / "none.npz", "-s", small_queries), "none.npz")
+    all_bad = tmp_path / "allbad"
+    all_bad.mkdir()
+    (all_bad / "a.jpg").write_bytes(b"x")
+    assert_one_line_error(run("localize", "-m", small_map, "-s", all_bad), "allbad", "none of its frames")
+
+
+def test_map_from_other_schema_version(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
+    arrays, meta = read_npz(small_map, "map", 1)
+    old = tmp_path / "old.npz"
+    write_npz(old, arrays, meta | {"schema": 0})
+    assert_one_line_error(run("localize", "-m", old, "-s", small_queries), "old.npz", "schema version 0")
+
+
+def test_map_from_other_model(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
+    pytest.importorskip("torch")
+    from vpr_edge_export.onnx_export import default_weights, export_onnx
+
+    other = tmp_path / "other.onnx"
+    export_onnx("efficientnet_lite0", "stage4", default_weights("efficientnet_lite0"), 64, 48, other)
+    proc = run("localize", "-m", small_map, "-s", small_queries, "--model", other)
+    assert_one_line_error(proc, "small.map.npz", "efficientnet_lite0/stage5", "efficientnet_lite0/stage4")
+    not_onnx = tmp_path / "x.onnx"
+    not_onnx.write_bytes(b"nope")
+    assert_one_line_error(run("localize", "-m", small_map, "-s", small_queries, "--model", not_onnx), "x.onnx")

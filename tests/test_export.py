@@ -1,0 +1,104 @@
+"""torch -> ONNX export of layer taps: the bundled model against torch on real images, other backbones."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from vpr_edge.extract import FeatureExtractor  # noqa: E402
+from vpr_edge_export.backbones import BACKBONES, build_backbone  # noqa: E402
+from vpr_edge_export.onnx_export import compare_with_torch, default_weights, export_onnx, load_state_dict  # noqa: E402
+
+SAMPLE_REFS = Path(__file__).resolve().parent.parent / "samples" / "corridor" / "ref"
+
+
+def test_bundled_model_matches_torch_on_real_images(model_path: Path) -> None:
+    ex = FeatureExtractor(model_path)
+    info = ex.info
+    weights = default_weights("efficientnet_lite0")
+    from vpr_edge_export.onnx_export import file_sha256
+
+    assert info["weights_sha256"] == file_sha256(weights)           # built from the packaged weights
+    assert (info["backbone"], info["tap"], info["channels"]) == ("efficientnet_lite0", "stage5", 112)
+    assert (info["input_width"], info["input_height"], info["grid_width"], info["grid_height"]) == (320, 240, 20, 15)
+    model = build_backbone("efficientnet_lite0", "stage5", load_state_dict(weights))
+    diff = compare_with_torch(model, model_path, SAMPLE_REFS)
+    print(f"max abs difference torch vs onnxruntime: {diff:.3g}")
+    assert diff < 1e-3
+
+
+def test_lite0_classifies_real_photos() -> None:
+    """The plain-torch EfficientNet-Lite0 (TF 'SAME' padding, 127/128 normalisation) reproduces the
+    network: sklearn's sample photo of a flower is a daisy (ImageNet class 985)."""
+    import cv2
+    import sklearn
+
+    photo = Path(sklearn.__file__).parent / "datasets" / "images" / "flower.jpg"
+    sd = load_state_dict(default_weights("efficientnet_lite0"))
+    model = build_backbone("efficientnet_lite0", "head", sd)
+    rgb = cv2.cvtColor(cv2.imread(str(photo)), cv2.COLOR_BGR2RGB)
+    x = (cv2.resize(rgb, (224, 224)).astype(np.float32) - 127.0) / 128.0
+    with torch.no_grad():
+        feats = model(torch.from_numpy(x.transpose(2, 0, 1)[None])).mean((2, 3))
+        logits = feats @ sd["_fc.weight"].T + sd["_fc.bias"]
+    assert int(logits.argmax()) == 985
+
+
+def _random_state_dict(name: str, tap: str) -> dict:
+    torch.manual_seed(0)
+    model = BACKBONES[name].build(tap)
+    for m in model.modules():
+        if isinstance(m, torch.nn.Conv2d):
+            torch.nn.init.kaiming_normal_(m.weight, nonlinearity="relu")
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.1, 0.1)
+            m.running_var.uniform_(0.5, 1.5)
+    return model.state_dict()
+
+
+TORCHVISION_KEYS = {
+    ("vgg16", "block3_conv3"): ["features.0.weight", "features.14.bias"],
+    ("resnet50", "res3d"): ["conv1.weight", "bn1.running_var", "layer1.0.downsample.0.weight",
+                            "layer2.3.conv3.weight", "layer2.3.bn3.num_batches_tracked"],
+}
+
+
+@pytest.mark.parametrize("name,tap,channels,stride", [("vgg16", "block3_conv3", 256, 4), ("resnet50", "res3d", 512, 8)])
+def test_torchvision_layout_export(tmp_path: Path, name: str, tap: str, channels: int, stride: int) -> None:
+    sd = _random_state_dict(name, tap)
+    for key in TORCHVISION_KEYS[(name, tap)]:
+        assert key in sd
+    weights = tmp_path / "w.pth"
+    torch.save(sd | {"fc.weight": torch.zeros(2, 2)}, weights)   # keys past the tap are ignored
+    out = tmp_path / f"{name}.onnx"
+    model, meta = export_onnx(name, tap, weights, 64, 48, out)
+    assert (meta["channels"], meta["grid_width"], meta["grid_height"]) == (channels, 64 // stride, 48 // stride)
+    ex = FeatureExtractor(out)
+    x = np.random.default_rng(0).normal(size=(2, 3, 48, 64)).astype(np.float32)
+    with torch.no_grad():
+        want = model(torch.from_numpy(x)).numpy()
+    got = ex.feature_maps(x)
+    assert got.shape == want.shape
+    assert np.abs(got - want).max() <= 1e-4 * max(1.0, np.abs(want).max())
+    assert ex.local_features(x).shape == (2, (64 // stride) * (48 // stride), channels)
+
+
+def test_export_names_missing_weights(tmp_path: Path) -> None:
+    sd = _random_state_dict("resnet50", "res3d")
+    del sd["layer2.3.conv3.weight"]
+    with pytest.raises(ValueError, match="lack 1 keys"):
+        build_backbone("resnet50", "res3d", sd)
+    with pytest.raises(ValueError, match="unknown vgg16 tap"):
+        build_backbone("vgg16", "fc1", {})
+
+
+def test_deep_taps_build() -> None:
+    for name, tap, k in [("vgg16", "block5_conv3", 512), ("resnet50", "res5c", 2048), ("resnet50", "res4f", 1024),
+                         ("efficientnet_lite0", "head", 1280)]:
+        model = BACKBONES[name].build(tap)
+        with torch.no_grad():
+            assert model(torch.zeros(1, 3, 64, 64)).shape[1] == k == BACKBONES[name].taps[tap]

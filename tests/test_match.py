@@ -1,0 +1,166 @@
+"""DTW (both variants), best single match and streaming DTW against naive loop implementations."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vpr_edge.match import StreamingDTW, best_match, cosine_similarity, dtw_accumulate, dtw_align
+
+
+def naive_accumulate(sim: np.ndarray, variant: str) -> np.ndarray:
+    term = sim if variant == "similarity" else 1.0 - sim
+    better = max if variant == "similarity" else min
+    q, r = sim.shape
+    acc = np.zeros((q, r))
+    for i in range(q):
+        for j in range(r):
+            prev = [acc[a, b] for a, b in ((i - 1, j - 1), (i - 1, j), (i, j - 1)) if a >= 0 and b >= 0]
+            acc[i, j] = term[i, j] + (better(prev) if prev else 0.0)
+    return acc
+
+
+def naive_path(acc: np.ndarray, variant: str) -> list[tuple[int, int]]:
+    pick = np.argmax if variant == "similarity" else np.argmin
+    i, j = acc.shape[0] - 1, acc.shape[1] - 1
+    path = [(i, j)]
+    while (i, j) != (0, 0):
+        if i == 0:
+            j -= 1
+        elif j == 0:
+            i -= 1
+        else:
+            i, j = [(i - 1, j - 1), (i - 1, j), (i, j - 1)][int(pick([acc[i - 1, j - 1], acc[i - 1, j], acc[i, j - 1]]))]
+        path.append((i, j))
+    return path[::-1]
+
+
+@pytest.mark.parametrize("variant", ["similarity", "distance"])
+@pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (7, 13), (20, 20), (31, 17)])
+def test_dtw_matches_naive(variant: str, shape: tuple[int, int]) -> None:
+    rng = np.random.default_rng(sum(shape))
+    sim = rng.uniform(-1, 1, size=shape)
+    want = naive_accumulate(sim, variant)
+    np.testing.assert_allclose(dtw_accumulate(sim, variant), want, rtol=1e-10, atol=1e-10)
+    result = dtw_align(sim, variant)
+    path = naive_path(want, variant)
+    np.testing.assert_array_equal(result.path, np.array(path))
+    assert result.total == pytest.approx(want[-1, -1])
+    for i in range(shape[0]):
+        row_cells = [j for a, j in path if a == i]
+        best = max(row_cells, key=lambda j: sim[i, j])
+        assert sim[i, result.matches[i]] == sim[i, best] and result.scores[i] == sim[i, best]
+
+
+@pytest.mark.parametrize("variant", ["similarity", "distance"])
+def test_dtw_recovers_a_time_warped_route(variant: str) -> None:
+    rng = np.random.default_rng(7)
+    refs = rng.normal(size=(60, 32))
+    truth = np.clip(np.round(np.cumsum(rng.uniform(0.4, 1.6, size=70))).astype(int) - 1, 0, 59)
+    queries = refs[truth] + 0.5 * rng.normal(size=(70, 32))
+    result = dtw_align(cosine_similarity(queries, refs), variant)
+    assert np.mean(np.abs(result.matches - truth) <= 1) > 0.9
+
+
+def test_dtw_rejects_bad_input() -> None:
+    with pytest.raises(ValueError):
+        dtw_align(np.zeros((0, 3)))
+    with pytest.raises(ValueError):
+        dtw_align(np.zeros((2, 3)), "cosine")  # type: ignore[arg-type]
+
+
+def test_best_match_and_cosine() -> None:
+    rng = np.random.default_rng(0)
+    q, r = rng.normal(size=(5, 8)), rng.normal(size=(9, 8))
+    sim = cosine_similarity(q, r)
+    want = np.array([[a @ b / np.linalg.norm(a) / np.linalg.norm(b) for b in r] for a in q])
+    np.testing.assert_allclose(sim, want, atol=1e-12)
+    idx, score = best_match(sim)
+    np.testing.assert_array_equal(idx, want.argmax(axis=1))
+    np.testing.assert_allclose(score, want.max(axis=1))
+
+
+def naive_stream(rows: np.ndarray, decay: float) -> list[tuple[int, float]]:
+    r = rows.shape[1]
+    cost, weight = np.zeros(r), np.zeros(r)
+    out = []
+    for t, s in enumerate(rows):
+        c = 1.0 - s
+        new_c, new_w = np.zeros(r), np.zeros(r)
+        for j in range(r):
+            cands = [(decay * cost[j], decay * weight[j])]
+            if t > 0 and j > 0:
+                cands.append((decay * cost[j - 1], decay * weight[j - 1]))
+            if j > 0:
+                cands.append((new_c[j - 1], new_w[j - 1]))
+            bc, bw = min(cands, key=lambda p: p[0])
+            new_c[j], new_w[j] = c[j] + bc, 1 + bw
+        cost, weight = new_c, new_w
+        best = int(np.argmin(cost))
+        out.append((best, 1.0 - cost[best] / weight[best]))
+    return out
+
+
+def test_streaming_dtw_matches_naive_recurrence() -> None:
+    rng = np.random.default_rng(5)
+    rows = rng.uniform(-1, 1, size=(40, 25))
+    dtw = StreamingDTW(25, decay=0.8)
+    got = [dtw.update(row) for row in rows]
+    for (gi, gs), (wi, ws) in zip(got, naive_stream(rows, 0.8)):
+        assert gi == wi and gs == pytest.approx(ws, abs=1e-9)
+
+
+def synthetic_route(rng: np.random.Generator, refs: np.ndarray, truth: np.ndarray, noise: float) -> np.ndarray:
+    """Query encodings along ``truth`` (-1 = off the mapped route: a random place)."""
+    out = np.where((truth >= 0)[:, None], refs[np.maximum(truth, 0)], rng.normal(size=(len(truth), refs.shape[1])))
+    return out + noise * rng.normal(size=out.shape)
+
+
+def test_streaming_dtw_follows_route_leaves_and_recovers() -> None:
+    rng = np.random.default_rng(11)
+    refs = rng.normal(size=(300, 64))
+    truth = np.concatenate([np.arange(20, 80), np.full(40, -1), np.arange(200, 260)])
+    queries = synthetic_route(rng, refs, truth, noise=1.6)
+    sim = cosine_similarity(queries, refs)
+    dtw = StreamingDTW(300, decay=0.9)
+    out = np.array([dtw.update(row) for row in sim])
+    pred, score = out[:, 0].astype(int), out[:, 1]
+    single = best_match(sim)[0]
+    on_first, on_second = slice(10, 60), slice(110, 160)   # after 10 frames to lock on
+    assert np.mean(np.abs(pred[on_first] - truth[on_first]) <= 1) > 0.95
+    assert np.mean(np.abs(pred[on_second] - truth[on_second]) <= 1) > 0.95   # re-entered elsewhere
+    assert np.mean(np.abs(single[on_second] - truth[on_second]) <= 1) < np.mean(
+        np.abs(pred[on_second] - truth[on_second]) <= 1)                     # sequence beats single frames
+    assert score[70:100].mean() < score[on_first].mean()                      # confidence drops off-route
+
+
+def test_streaming_dtw_state_does_not_grow() -> None:
+    dtw = StreamingDTW(50)
+    rng = np.random.default_rng(0)
+    sizes = set()
+    for _ in range(500):
+        dtw.update(rng.uniform(-1, 1, 50))
+        sizes.add((dtw.cost.nbytes, dtw.weight.nbytes))
+    assert sizes == {(400, 400)}
+    with pytest.raises(ValueError):
+        dtw.update(np.zeros(49))
+    with pytest.raises(ValueError):
+        StreamingDTW(10, decay=1.0)
+
+
+def test_ground_truth_helpers(tmp_path) -> None:
+    from vpr_edge.errors import VprError
+    from vpr_edge.evaluate import fraction_in_sets, fraction_within, load_ground_truth, window_centres
+
+    path = tmp_path / "gt.csv"
+    n = 10
+    lines = ["query,references"] + [f"{q}," + " ".join(map(str, range(max(0, q - 2), min(n, q + 3))))
+                                    for q in range(n)]
+    path.write_text("\n".join(lines) + "\n")
+    truth = load_ground_truth(path)
+    np.testing.assert_array_equal(window_centres(truth, 2, n), np.arange(n))
+    pred = np.array([0, 1, 4, 3, 4, 5, 6, 7, 9, 9])
+    assert fraction_within(pred, np.arange(n), 1) == 0.9
+    assert fraction_in_sets(pred, truth) == 1.0
+    path.write_text("query,references\n0,1\n2,3\n")
+    with pytest.raises(VprError, match="without gaps"):
+        load_ground_truth(path)

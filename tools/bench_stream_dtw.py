@@ -1,0 +1,90 @@
+#!/usr/bin/env python3
+"""Streaming DTW benchmark: per-frame time and memory over a long synthetic stream against a large map.
+
+    python tools/bench_stream_dtw.py --refs 10000 --frames 100000 --dim 256
+
+A synthetic vehicle drives the mapped route (speed varying 0.5-1.5 references per frame, leaving it for
+50-frame detours now and then), each query encoding a noisy copy of its true reference. Each frame costs
+one similarity row (R x D matrix-vector product) and one StreamingDTW update. At each checkpoint it prints
+the mean per-frame time since the last checkpoint, current RSS and peak RSS.
+"""
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from vpr_edge.match import StreamingDTW  # noqa: E402
+
+
+def rss_mb() -> float:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--refs", type=int, default=10_000)
+    p.add_argument("--frames", type=int, default=100_000)
+    p.add_argument("--dim", type=int, default=256, help="encoding dimension of the synthetic map")
+    p.add_argument("--noise", type=float, default=1.0, help="query noise relative to a unit reference")
+    p.add_argument("--decay", type=float, default=0.9)
+    p.add_argument("--checkpoints", default="1000,10000,100000")
+    p.add_argument("--seed", type=int, default=0)
+    a = p.parse_args()
+    rng = np.random.default_rng(a.seed)
+    refs = rng.normal(size=(a.refs, a.dim)).astype(np.float32)
+    refs /= np.linalg.norm(refs, axis=1, keepdims=True)
+    checkpoints = sorted(int(c) for c in a.checkpoints.split(",") if int(c) <= a.frames)
+    dtw = StreamingDTW(a.refs, a.decay)
+    print(f"map {a.refs} refs x {a.dim} dims ({refs.nbytes / 1e6:.1f} MB), {a.frames} frames, decay {a.decay}")
+    print(f"{'frames':>8s} {'ms/frame':>9s} {'sim ms':>7s} {'dtw ms':>7s} {'RSS MB':>8s} {'peak MB':>8s} {'acc+-1':>7s}")
+    pos, detour = 0.0, 0
+    t_sim = t_dtw = 0.0
+    correct = counted = 0
+    last = 0
+    noise_scale = a.noise / np.sqrt(a.dim)
+    for t in range(1, a.frames + 1):
+        if detour == 0 and rng.random() < 1e-3:
+            detour = 50
+        if detour:
+            detour -= 1
+            q = rng.normal(size=a.dim).astype(np.float32)
+            true = -1
+        else:
+            pos = (pos + rng.uniform(0.5, 1.5)) % a.refs
+            true = int(pos)
+            q = refs[true] + noise_scale * rng.normal(size=a.dim).astype(np.float32)
+        t0 = time.perf_counter()
+        row = refs @ q
+        t1 = time.perf_counter()
+        ref, _ = dtw.update(row)
+        t2 = time.perf_counter()
+        t_sim += t1 - t0
+        t_dtw += t2 - t1
+        if true >= 0:
+            counted += 1
+            correct += abs(ref - true) <= 1 or abs(ref - true) >= a.refs - 1
+        if t in checkpoints:
+            n = t - last
+            print(f"{t:8d} {1e3 * (t_sim + t_dtw) / n:9.3f} {1e3 * t_sim / n:7.3f} {1e3 * t_dtw / n:7.3f} "
+                  f"{rss_mb():8.1f} {peak_rss_mb():8.1f} {correct / max(counted, 1):7.3f}", flush=True)
+            last, t_sim, t_dtw = t, 0.0, 0.0
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
