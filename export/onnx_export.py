@@ -9,7 +9,6 @@ the output is ``features`` (B, K, h, w). Metadata key ``vpr_edge`` holds a JSON 
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import sys
@@ -20,19 +19,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from vpr_edge.store import file_sha256
 from vpr_edge_export.backbones import BACKBONES, build_backbone
 
 MODEL_SCHEMA = 1
 DEFAULT_OPSET = 17
-
-
-def file_sha256(path: str | os.PathLike[str]) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def default_weights(backbone: str) -> Path:

@@ -17,19 +17,20 @@ def model_path() -> Path:
     return default_model_path()
 
 
+def _first_frames(factory: pytest.TempPathFactory, sub: str, n: int = 24) -> Path:
+    folder = factory.mktemp(sub)
+    for f in sorted((SAMPLE / sub).glob("*.jpg"))[:n]:
+        shutil.copy(f, folder / f.name)
+    return folder
+
+
 @pytest.fixture(scope="session")
 def small_refs(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The first 24 real reference frames of the bundled sample, in a folder of their own."""
-    folder = tmp_path_factory.mktemp("refs")
-    for f in sorted((SAMPLE / "ref").glob("*.jpg"))[:24]:
-        shutil.copy(f, folder / f.name)
-    return folder
+    return _first_frames(tmp_path_factory, "ref")
 
 
 @pytest.fixture(scope="session")
 def small_queries(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The first 24 real query frames of the bundled sample."""
-    folder = tmp_path_factory.mktemp("queries")
-    for f in sorted((SAMPLE / "query").glob("*.jpg"))[:24]:
-        shutil.copy(f, folder / f.name)
-    return folder
+    return _first_frames(tmp_path_factory, "query")

@@ -150,3 +150,14 @@ def test_map_from_other_model(tmp_path: Path, small_map: Path, small_queries: Pa
     not_onnx = tmp_path / "x.onnx"
     not_onnx.write_bytes(b"nope")
     assert_one_line_error(run("localize", "-m", small_map, "-s", small_queries, "--model", not_onnx), "x.onnx")
+
+
+def test_runtime_imports_neither_torch_nor_sklearn(small_map: Path, small_queries: Path) -> None:
+    code = ("import sys, runpy; sys.argv = ['vpr-edge', 'localize', '-m', sys.argv[1], '-s', sys.argv[2]];\n"
+            "try: runpy.run_module('vpr_edge.cli', run_name='__main__')\nexcept SystemExit: pass\n"
+            "heavy = sorted(m for m in ('torch', 'sklearn', 'onnx', 'scipy') if m in sys.modules)\n"
+            "print('HEAVY', heavy, file=sys.stderr)")
+    proc = subprocess.run([sys.executable, "-c", code, str(small_map), str(small_queries)], capture_output=True,
+                          text=True, timeout=300)
+    assert "HEAVY []" in proc.stderr, proc.stderr[-500:]
+    assert len(proc.stdout.splitlines()) == 25

@@ -10,6 +10,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from vpr_edge.extract import FeatureExtractor  # noqa: E402
+from vpr_edge.store import file_sha256  # noqa: E402
 from vpr_edge_export.backbones import BACKBONES, build_backbone  # noqa: E402
 from vpr_edge_export.onnx_export import compare_with_torch, default_weights, export_onnx, load_state_dict  # noqa: E402
 
@@ -20,8 +21,6 @@ def test_bundled_model_matches_torch_on_real_images(model_path: Path) -> None:
     ex = FeatureExtractor(model_path)
     info = ex.info
     weights = default_weights("efficientnet_lite0")
-    from vpr_edge_export.onnx_export import file_sha256
-
     assert info["weights_sha256"] == file_sha256(weights)           # built from the packaged weights
     assert (info["backbone"], info["tap"], info["channels"]) == ("efficientnet_lite0", "stage5", 112)
     assert (info["input_width"], info["input_height"], info["grid_width"], info["grid_height"]) == (320, 240, 20, 15)

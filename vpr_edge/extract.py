@@ -1,7 +1,6 @@
 """Local deep features from an ONNX layer tap: preprocessing, batched inference, (N, K) descriptor sets."""
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from collections.abc import Iterable, Iterator
@@ -11,9 +10,11 @@ import cv2
 import numpy as np
 
 from vpr_edge.errors import VprError
+from vpr_edge.store import file_sha256
 
 MODEL_SCHEMA = 1
-_REQUIRED = ("backbone", "tap", "input_width", "input_height", "mean", "std", "channels", "weights_sha256")
+_REQUIRED = ("backbone", "tap", "input_width", "input_height", "mean", "std", "channels", "grid_width",
+             "grid_height", "weights_sha256")
 
 
 def default_model_path() -> Path:
@@ -22,14 +23,6 @@ def default_model_path() -> Path:
     if env:
         return Path(env)
     return Path(__file__).resolve().parent.parent / "models" / "efficientnet_lite0_stage5_320x240.onnx"
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 class FeatureExtractor:
@@ -61,7 +54,7 @@ class FeatureExtractor:
             raise VprError(f"{self.path}: model metadata schema {info.get('schema')} unsupported "
                            f"(expected {MODEL_SCHEMA}{', missing ' + ', '.join(missing) if missing else ''})")
         self.info: dict = info
-        self.fingerprint = _sha256(self.path)
+        self.fingerprint = file_sha256(self.path)
         self.size = (int(info["input_width"]), int(info["input_height"]))
         self._mean = np.asarray(info["mean"], np.float32)
         self._std = np.asarray(info["std"], np.float32)

@@ -1,6 +1,7 @@
 """Array files: ``.npz`` arrays plus a JSON metadata entry, written atomically, read without pickle."""
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import tempfile
@@ -66,3 +67,12 @@ def read_npz(path: str | os.PathLike[str], kind: str, schema: int) -> tuple[dict
         raise VprError(f"{path}: {kind} schema version {meta.get('schema')} is not supported "
                        f"(this vpr-edge reads version {schema}); rebuild it")
     return arrays, meta
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
