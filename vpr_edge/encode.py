@@ -20,8 +20,9 @@ def fisher_vector(x: np.ndarray, codebook: Codebook, alpha: float = 0.5) -> np.n
     n = xb.shape[1]
     gamma = np.exp(gmm.log_responsibilities(xb))                              # (B, N, M)
     s0 = gamma.sum(axis=1)                                                    # (B, M)
-    s1 = np.einsum("bnm,bnk->bmk", gamma, xb)                                 # (B, M, K)
-    s2 = np.einsum("bnm,bnk->bmk", gamma, xb * xb)                            # (B, M, K)
+    gamma_t = gamma.transpose(0, 2, 1)                                        # (B, M, N)
+    s1 = gamma_t @ xb                                                         # (B, M, K)
+    s2 = gamma_t @ (xb * xb)                                                  # (B, M, K)
     mu, var = gmm.means, gmm.variances
     sigma = np.sqrt(var)
     g_mu = (s1 - s0[..., None] * mu) / (sigma * (n * np.sqrt(gmm.weights))[:, None])

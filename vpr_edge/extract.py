@@ -41,6 +41,8 @@ class FeatureExtractor:
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = max(0, int(threads))
         opts.log_severity_level = 3
+        # Idle ORT workers would otherwise spin and starve the NumPy encoding that follows each frame.
+        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
         try:
             self.session = ort.InferenceSession(str(self.path), opts, providers=["CPUExecutionProvider"])
         except Exception as e:  # onnxruntime raises several private exception types

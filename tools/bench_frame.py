@@ -1,0 +1,69 @@
+#!/usr/bin/env python3
+"""Per-frame latency of the on-vehicle path, stage by stage, on real frames (batch size 1).
+
+    python tools/bench_frame.py [--map MAP] [--frames DIR] [--threads 1,2]
+
+Stages: decode (JPEG -> RGB), preprocess (resize, normalise), inference (ONNX tap), encode (IFV),
+match (similarity row + streaming DTW update). Without --map, one is built from the bundled sample's
+references first (not timed).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from vpr_edge.extract import FeatureExtractor, default_model_path  # noqa: E402
+from vpr_edge.images import list_images, load_image  # noqa: E402
+from vpr_edge.mapfile import PlaceMap, build_map  # noqa: E402
+from vpr_edge.match import StreamingDTW  # noqa: E402
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--map", type=Path, default=None)
+    p.add_argument("--model", type=Path, default=None)
+    p.add_argument("--frames", type=Path, default=ROOT / "samples" / "corridor" / "query")
+    p.add_argument("--threads", default="1,2", help="onnxruntime thread counts to try")
+    p.add_argument("--repeat", type=int, default=2, help="passes over the frames (the first is warm-up)")
+    a = p.parse_args()
+    model = a.model or default_model_path()
+    place_map = (PlaceMap.load(a.map) if a.map else
+                 build_map(ROOT / "samples" / "corridor" / "ref", FeatureExtractor(model)))
+    files = list_images(a.frames)
+    print(f"{len(files)} frames from {a.frames}; map {len(place_map.names)} refs x {place_map.encodings.shape[1]} "
+          f"dims; model {model.name}")
+    print(f"{'threads':>7s} {'decode':>7s} {'prep':>7s} {'infer':>7s} {'encode':>7s} {'match':>7s} {'total':>7s}  ms/frame")
+    for threads in (int(t) for t in a.threads.split(",")):
+        ex = FeatureExtractor(model, threads)
+        place_map.check_model(ex, a.map or "built map")
+        times = np.zeros(5)
+        for rep in range(a.repeat):
+            dtw = StreamingDTW(len(place_map.names))
+            times[:] = 0
+            for f in files:
+                t0 = time.perf_counter()
+                rgb = load_image(f)
+                t1 = time.perf_counter()
+                x = ex.preprocess(rgb)[None]
+                t2 = time.perf_counter()
+                local = ex.local_features(x)
+                t3 = time.perf_counter()
+                enc = place_map.encode(local)[0]
+                t4 = time.perf_counter()
+                dtw.update(place_map.encodings @ enc)
+                t5 = time.perf_counter()
+                times += np.diff([t0, t1, t2, t3, t4, t5])
+        ms = 1e3 * times / len(files)
+        print(f"{threads:7d} " + " ".join(f"{v:7.2f}" for v in ms) + f" {ms.sum():7.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
