@@ -35,7 +35,7 @@ def main() -> int:
     a = p.parse_args()
     model = a.model or default_model_path()
     place_map = (PlaceMap.load(a.map) if a.map else
-                 build_map(ROOT / "samples" / "corridor" / "ref", FeatureExtractor(model)))
+                 build_map(list_images(ROOT / "samples" / "corridor" / "ref"), FeatureExtractor(model)))
     files = list_images(a.frames)
     print(f"{len(files)} frames from {a.frames}; map {len(place_map.names)} refs x {place_map.encodings.shape[1]} "
           f"dims; model {model.name}")

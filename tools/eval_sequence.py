@@ -47,7 +47,7 @@ def main() -> int:
     try:
         ex = FeatureExtractor(a.model or default_model_path())
         t0 = time.perf_counter()
-        pm = build_map(a.dataset / "ref", ex, n_components=a.components, pca_dim=a.pca_dim, alpha=a.alpha)
+        pm = build_map(list_images(a.dataset / "ref"), ex, n_components=a.components, pca_dim=a.pca_dim, alpha=a.alpha)
         t1 = time.perf_counter()
         qfiles = list_images(a.dataset / "query")
         queries = np.concatenate([pm.encode(x[None]) for x in ex.iter_local_features(load_image(f) for f in qfiles)])

@@ -80,9 +80,9 @@ def build_map_cmd(
     with _user_errors():
         extractor = FeatureExtractor(model or default_model_path(), threads)
         given = Codebook.load(codebook)[0] if codebook else None
-        n = len(list_images(refs))
-        with typer.progressbar(length=n, label="extracting", file=sys.stderr) as bar:
-            place_map = build_map(refs, extractor, given, components, pca_dim, whiten, alpha, max_descriptors,
+        files = list_images(refs)
+        with typer.progressbar(length=len(files), label="extracting", file=sys.stderr) as bar:
+            place_map = build_map(files, extractor, given, components, pca_dim, whiten, alpha, max_descriptors,
                                   batch_size, seed, progress=bar.update)
         place_map.save(out)
         if save_codebook:
@@ -127,10 +127,11 @@ def localize_cmd(
         place_map.check_model(extractor, map_path)
         frames, count = open_stream(stream)
         chosen = fmt.value if fmt else ("jsonl" if out and out.suffix in (".jsonl", ".json") else "csv")
-        skipped: list[Frame] = []
+        skipped = 0
 
         def skip(frame: Frame) -> None:
-            skipped.append(frame)
+            nonlocal skipped
+            skipped += 1
             typer.echo(f"\nvpr-edge: warning: {frame.error}; frame skipped", err=True)
 
         sink = open(out, "w", newline="") if out else sys.stdout
@@ -142,9 +143,8 @@ def localize_cmd(
                 for match in localize(frames, place_map, extractor, mode.value, variant.value, decay,
                                       batch_size, skip):
                     write(match)
+                    sink.flush()  # a line per frame, as it happens
                     written += 1
-                    if out is None or written % 16 == 0:
-                        sink.flush()
                     bar.update(1)
         finally:
             if out:
@@ -152,7 +152,7 @@ def localize_cmd(
         if written == 0:
             raise VprError(f"{stream}: none of its frames could be decoded")
         if skipped:
-            typer.echo(f"vpr-edge: {len(skipped)} undecodable frame(s) skipped", err=True)
+            typer.echo(f"vpr-edge: {skipped} undecodable frame(s) skipped", err=True)
 
 
 def main() -> None:

@@ -28,9 +28,10 @@ def list_images(folder: str | os.PathLike[str]) -> list[Path]:
 
 def load_image(path: str | os.PathLike[str]) -> np.ndarray:
     """Decode an image file to RGB uint8 (H, W, 3). Raises VprError naming the file if it can't."""
-    data = np.fromfile(str(path), dtype=np.uint8) if os.path.isfile(path) else None
-    if data is None:
-        raise VprError(f"{path}: no such file")
+    try:
+        data = np.fromfile(str(path), dtype=np.uint8)
+    except OSError as e:
+        raise VprError(f"{path}: cannot read ({e.strerror or e})") from None
     image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
     if image is None:
         raise VprError(f"{path}: cannot decode image (corrupt or unsupported format)")

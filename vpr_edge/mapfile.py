@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,7 +14,7 @@ from vpr_edge.codebook import Codebook
 from vpr_edge.encode import fisher_vector
 from vpr_edge.errors import VprError
 from vpr_edge.extract import FeatureExtractor
-from vpr_edge.images import list_images, load_image
+from vpr_edge.images import load_image
 from vpr_edge.store import read_npz, write_npz
 
 MAP_SCHEMA = 1
@@ -73,14 +73,16 @@ def _encode_all(local: np.ndarray, codebook: Codebook, alpha: float, chunk: int 
     return np.concatenate([fisher_vector(local[i:i + chunk], codebook, alpha) for i in range(0, len(local), chunk)])
 
 
-def build_map(refs: str | os.PathLike[str], extractor: FeatureExtractor, codebook: Codebook | None = None,
+def build_map(files: Sequence[Path], extractor: FeatureExtractor, codebook: Codebook | None = None,
               n_components: int = 128, pca_dim: int | None = None, whiten: bool = True, alpha: float = 0.5,
               max_descriptors: int = 100_000, batch_size: int = 8, seed: int = 0,
               progress: Progress | None = None) -> PlaceMap:
-    """Extract local features of every image in ``refs`` (name order), fit a codebook on them unless one
-    is given, and encode each reference. Local features are staged in a temporary memory-mapped file so
-    that RAM does not grow with the number of references. Raises VprError on an unreadable image."""
-    files = list_images(refs)
+    """Extract local features of every reference image in ``files`` (in that order; see ``list_images``), fit
+    a codebook on a random sample of them unless one is given, and encode each reference. Local features are
+    staged in a temporary memory-mapped file so that RAM does not grow with the number of references.
+    Raises VprError on an unreadable image."""
+    if not files:
+        raise VprError("no reference images given")
     if codebook is not None and codebook.input_dim != extractor.dim:
         raise VprError(f"codebook expects {codebook.input_dim}-dim descriptors but the model gives {extractor.dim}")
     n_local = int(extractor.info["grid_width"]) * int(extractor.info["grid_height"])
@@ -95,10 +97,11 @@ def build_map(refs: str | os.PathLike[str], extractor: FeatureExtractor, codeboo
         if codebook is None:
             from vpr_edge_export.codebook_fit import fit_codebook
 
-            take = max(1, max_descriptors // len(files))
+            flat = local.reshape(-1, extractor.dim)
             rng = np.random.default_rng(seed)
-            sample = local[:, np.sort(rng.permutation(n_local)[:take])] if take < n_local else local
-            codebook = fit_codebook(np.asarray(sample), n_components, pca_dim, whiten, max_descriptors, seed)
+            rows = np.sort(rng.choice(len(flat), min(max_descriptors, len(flat)), replace=False))
+            codebook = fit_codebook(flat[rows], n_components, pca_dim, whiten, max_descriptors, seed)
+            del flat
         encodings = _encode_all(local, codebook, alpha)
         del local
     meta = {
@@ -108,7 +111,7 @@ def build_map(refs: str | os.PathLike[str], extractor: FeatureExtractor, codeboo
         "model_sha256": extractor.fingerprint,
         "codebook": {"fitted_on_refs": fitted, "n_components": codebook.gmm.n_components,
                      "pca_dim": codebook.gmm.dim if codebook.pca is not None else None, "seed": seed},
-        "refs_folder": str(Path(refs)),
+        "refs_folder": str(Path(files[0]).parent),
         "vpr_edge_version": __version__,
     }
     return PlaceMap(encodings, [f.name for f in files], codebook, meta)

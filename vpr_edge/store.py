@@ -27,7 +27,7 @@ def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
     if any(a.dtype == object for a in payload.values()):
         raise ValueError("object arrays cannot be stored without pickle")
     payload[META_KEY] = np.array(json.dumps(meta, sort_keys=True))
-    folder = path.parent if str(path.parent) else Path(".")
+    folder = path.parent
     if not folder.is_dir():
         raise VprError(f"{path}: folder {folder} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
