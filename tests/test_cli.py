@@ -39,7 +39,7 @@ def small_map(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Pat
 
 
 def test_help() -> None:
-    for args in ([], ["build-map"], ["localize"]):
+    for args in ([], ["build-map"], ["localize"], ["info"]):
         proc = run(*args, "--help")
         assert proc.returncode == 0 and "Usage" in proc.stdout
     assert "--stream" in run("localize", "--help").stdout
@@ -139,12 +139,40 @@ def test_map_from_other_schema_version(tmp_path: Path, small_map: Path, small_qu
     assert_one_line_error(run("localize", "-m", old, "-s", small_queries), "old.npz", "schema version 0")
 
 
-def test_map_from_other_model(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
+@pytest.fixture(scope="module")
+def other_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A second real model: EfficientNet-Lite0 cut at stage4, 64x48 input."""
     pytest.importorskip("torch")
     from vpr_edge_export.onnx_export import default_weights, export_onnx
 
-    other = tmp_path / "other.onnx"
+    other = tmp_path_factory.mktemp("other") / "other.onnx"
     export_onnx("efficientnet_lite0", "stage4", default_weights("efficientnet_lite0"), 64, 48, other)
+    return other
+
+
+def test_map_remembers_its_model(tmp_path: Path, other_model: Path, small_refs: Path, small_queries: Path) -> None:
+    out = tmp_path / "other.map.npz"
+    assert run("build-map", small_refs, "-o", out, "--model", other_model, "--components", "4").returncode == 0
+    proc = run("localize", "-m", out, "-s", small_queries)          # no --model: the map's own model is used
+    assert proc.returncode == 0, proc.stderr
+    assert len(proc.stdout.splitlines()) == 25
+    info = json.loads(run("info", out).stdout)
+    assert info["references"] == 24 and info["model"]["tap"] == "stage4" and info["encoding_dims"] == 2 * 4 * 80
+    assert info["model_path"] == str(other_model.resolve())
+
+
+def test_codebook_from_other_model(tmp_path: Path, other_model: Path, small_refs: Path) -> None:
+    cb = tmp_path / "cb.npz"
+    assert run("build-map", small_refs, "-o", tmp_path / "a.npz", "--components", "4",
+               "--save-codebook", cb).returncode == 0
+    out = tmp_path / "b.npz"
+    proc = run("build-map", small_refs, "-o", out, "--model", other_model, "--codebook", cb)
+    assert_one_line_error(proc, "cb.npz", "another model")
+    assert not out.exists()
+
+
+def test_map_from_other_model(tmp_path: Path, small_map: Path, small_queries: Path, other_model: Path) -> None:
+    other = other_model
     proc = run("localize", "-m", small_map, "-s", small_queries, "--model", other)
     assert_one_line_error(proc, "small.map.npz", "efficientnet_lite0/stage5", "efficientnet_lite0/stage4")
     not_onnx = tmp_path / "x.onnx"

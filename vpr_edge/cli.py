@@ -79,7 +79,12 @@ def build_map_cmd(
     --codebook is given, encode every reference as an Improved Fisher Vector, and write one map file."""
     with _user_errors():
         extractor = FeatureExtractor(model or default_model_path(), threads)
-        given = Codebook.load(codebook)[0] if codebook else None
+        given = None
+        if codebook:
+            given, cb_meta = Codebook.load(codebook)
+            if cb_meta.get("model_sha256") not in (None, extractor.fingerprint):
+                raise VprError(f"{codebook}: codebook was fitted on features of another model "
+                               f"(sha256 {cb_meta['model_sha256'][:12]}, this is {extractor.fingerprint[:12]})")
         files = list_images(refs)
         with typer.progressbar(length=len(files), label="extracting", file=sys.stderr) as bar:
             place_map = build_map(files, extractor, given, components, pca_dim, whiten, alpha, max_descriptors,
@@ -104,7 +109,8 @@ def _writer(fmt: str, stream: IO[str]):
 def localize_cmd(
     map_path: Path = typer.Option(..., "--map", "-m", help="Map file written by build-map."),
     stream: Path = typer.Option(..., "--stream", "-s", help="Folder of frames (file-name order) or a video file."),
-    model: Optional[Path] = typer.Option(None, help=_MODEL_HELP + " Must be the map's model."),
+    model: Optional[Path] = typer.Option(None, help="ONNX feature model; must be the map's model (default: the "
+                                  "model file the map was built with if it still exists, else the bundled one)."),
     mode: ModeOpt = typer.Option(ModeOpt.stream, help="stream: streaming DTW, a result per frame as it "
                                  "arrives, bounded memory; dtw: offline DTW over the whole sequence (thesis); "
                                  "single: best single match per frame, no sequence information."),
@@ -123,7 +129,7 @@ def localize_cmd(
     stderr and skipped."""
     with _user_errors():
         place_map = PlaceMap.load(map_path)
-        extractor = FeatureExtractor(model or default_model_path(), threads)
+        extractor = FeatureExtractor(place_map.model_path(model), threads)
         place_map.check_model(extractor, map_path)
         frames, count = open_stream(stream)
         chosen = fmt.value if fmt else ("jsonl" if out and out.suffix in (".jsonl", ".json") else "csv")
@@ -153,6 +159,17 @@ def localize_cmd(
             raise VprError(f"{stream}: none of its frames could be decoded")
         if skipped:
             typer.echo(f"vpr-edge: {skipped} undecodable frame(s) skipped", err=True)
+
+
+@app.command("info")
+def info_cmd(map_path: Path = typer.Argument(..., help="Map file written by build-map.")) -> None:
+    """Describe a map: references, encoding size, codebook, model and settings (JSON on stdout)."""
+    with _user_errors():
+        pm = PlaceMap.load(map_path)
+        meta = {k: v for k, v in pm.meta.items() if k != "names"}
+        summary = {"references": len(pm.names), "first": pm.names[0], "last": pm.names[-1],
+                   "encoding_dims": int(pm.encodings.shape[1]), "size_mb": round(map_path.stat().st_size / 1e6, 2)}
+        typer.echo(json.dumps(summary | meta, indent=1, sort_keys=True))
 
 
 def main() -> None:

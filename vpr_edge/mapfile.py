@@ -13,7 +13,7 @@ from vpr_edge import __version__
 from vpr_edge.codebook import Codebook
 from vpr_edge.encode import fisher_vector
 from vpr_edge.errors import VprError
-from vpr_edge.extract import FeatureExtractor
+from vpr_edge.extract import FeatureExtractor, default_model_path
 from vpr_edge.images import load_image
 from vpr_edge.store import read_npz, write_npz
 
@@ -53,6 +53,14 @@ class PlaceMap:
         channels = int((meta.get("model") or {}).get("channels", -1))
         codebook = Codebook.from_arrays(arrays, channels, "codebook_", str(path))
         return cls(enc.astype(np.float32, copy=False), names, codebook, meta)
+
+    def model_path(self, given: Path | None) -> Path:
+        """The model to localise with: ``given``, else the file the map was built with if it is still
+        there, else the bundled default."""
+        if given is not None:
+            return given
+        recorded = Path(self.meta.get("model_path") or "")
+        return recorded if recorded.name and recorded.is_file() else default_model_path()
 
     def check_model(self, extractor: FeatureExtractor, map_path: str | os.PathLike[str]) -> None:
         """Raise VprError unless ``extractor`` is the model the map was built with."""
@@ -108,6 +116,7 @@ def build_map(files: Sequence[Path], extractor: FeatureExtractor, codebook: Code
         "alpha": alpha,
         "model": extractor.info,
         "model_file": extractor.path.name,
+        "model_path": str(extractor.path.resolve()),
         "model_sha256": extractor.fingerprint,
         "codebook": {"fitted_on_refs": fitted, "n_components": codebook.gmm.n_components,
                      "pca_dim": codebook.gmm.dim if codebook.pca is not None else None, "seed": seed},
