@@ -54,9 +54,9 @@ def test_map_contents(small_map: Path, model_path: Path) -> None:
     assert pm.meta["codebook"] == {"fitted_on_refs": True, "n_components": 8, "pca_dim": 32, "seed": 0}
 
 
-@pytest.mark.parametrize("mode", ["stream", "dtw", "single"])
+@pytest.mark.parametrize("mode", ["stream", "dtw", "single", "dtw --variant distance --open-ends"])
 def test_localize_matches_real_frames(small_map: Path, small_queries: Path, mode: str) -> None:
-    proc = run("localize", "--map", small_map, "--stream", small_queries, "--mode", mode)
+    proc = run("localize", "--map", small_map, "--stream", small_queries, "--mode", *mode.split())
     assert proc.returncode == 0, proc.stderr
     rows = list(csv.DictReader(proc.stdout.splitlines()))
     assert [int(r["frame_index"]) for r in rows] == list(range(24))

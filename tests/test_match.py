@@ -7,7 +7,7 @@ import pytest
 from vpr_edge.match import StreamingDTW, best_match, cosine_similarity, dtw_accumulate, dtw_align
 
 
-def naive_accumulate(sim: np.ndarray, variant: str) -> np.ndarray:
+def naive_accumulate(sim: np.ndarray, variant: str, open_ends: bool = False) -> np.ndarray:
     term = sim if variant == "similarity" else 1.0 - sim
     better = max if variant == "similarity" else min
     q, r = sim.shape
@@ -15,16 +15,20 @@ def naive_accumulate(sim: np.ndarray, variant: str) -> np.ndarray:
     for i in range(q):
         for j in range(r):
             prev = [acc[a, b] for a, b in ((i - 1, j - 1), (i - 1, j), (i, j - 1)) if a >= 0 and b >= 0]
-            acc[i, j] = term[i, j] + (better(prev) if prev else 0.0)
+            if i == 0 and (j == 0 or open_ends):
+                prev.append(0.0)           # a path may start here
+            acc[i, j] = term[i, j] + better(prev)
     return acc
 
 
-def naive_path(acc: np.ndarray, variant: str) -> list[tuple[int, int]]:
+def naive_path(acc: np.ndarray, variant: str, open_ends: bool = False) -> list[tuple[int, int]]:
     pick = np.argmax if variant == "similarity" else np.argmin
-    i, j = acc.shape[0] - 1, acc.shape[1] - 1
+    i, j = acc.shape[0] - 1, (int(pick(acc[-1])) if open_ends else acc.shape[1] - 1)
     path = [(i, j)]
     while (i, j) != (0, 0):
         if i == 0:
+            if open_ends and pick([0.0, acc[0, j - 1]]) == 0:
+                break
             j -= 1
         elif j == 0:
             i -= 1
@@ -34,17 +38,18 @@ def naive_path(acc: np.ndarray, variant: str) -> list[tuple[int, int]]:
     return path[::-1]
 
 
+@pytest.mark.parametrize("open_ends", [False, True])
 @pytest.mark.parametrize("variant", ["similarity", "distance"])
 @pytest.mark.parametrize("shape", [(1, 1), (1, 9), (9, 1), (7, 13), (20, 20), (31, 17)])
-def test_dtw_matches_naive(variant: str, shape: tuple[int, int]) -> None:
+def test_dtw_matches_naive(variant: str, shape: tuple[int, int], open_ends: bool) -> None:
     rng = np.random.default_rng(sum(shape))
     sim = rng.uniform(-1, 1, size=shape)
-    want = naive_accumulate(sim, variant)
-    np.testing.assert_allclose(dtw_accumulate(sim, variant), want, rtol=1e-10, atol=1e-10)
-    result = dtw_align(sim, variant)
-    path = naive_path(want, variant)
+    want = naive_accumulate(sim, variant, open_ends)
+    np.testing.assert_allclose(dtw_accumulate(sim, variant, open_ends), want, rtol=1e-10, atol=1e-10)
+    result = dtw_align(sim, variant, open_ends)
+    path = naive_path(want, variant, open_ends)
     np.testing.assert_array_equal(result.path, np.array(path))
-    assert result.total == pytest.approx(want[-1, -1])
+    assert result.total == pytest.approx(want[path[-1]])
     for i in range(shape[0]):
         row_cells = [j for a, j in path if a == i]
         best = max(row_cells, key=lambda j: sim[i, j])
@@ -59,6 +64,16 @@ def test_dtw_recovers_a_time_warped_route(variant: str) -> None:
     queries = refs[truth] + 0.5 * rng.normal(size=(70, 32))
     result = dtw_align(cosine_similarity(queries, refs), variant)
     assert np.mean(np.abs(result.matches - truth) <= 1) > 0.9
+
+
+def test_subsequence_dtw_finds_a_clip_inside_a_long_route() -> None:
+    rng = np.random.default_rng(8)
+    refs = rng.normal(size=(200, 32))
+    truth = np.arange(120, 150)
+    sim = cosine_similarity(refs[truth] + 0.8 * rng.normal(size=(30, 32)), refs)
+    clip = dtw_align(sim, "distance", open_ends=True)
+    assert np.mean(np.abs(clip.matches - truth) <= 1) > 0.9
+    assert clip.path[0, 1] >= 118 and clip.path[-1, 1] <= 152
 
 
 def test_dtw_rejects_bad_input() -> None:

@@ -116,6 +116,8 @@ def localize_cmd(
                                  "single: best single match per frame, no sequence information."),
     variant: VariantOpt = typer.Option(VariantOpt.similarity, help="Offline DTW form: similarity (maximise "
                                        "summed cosine, thesis) or distance (minimise summed 1 - cosine)."),
+    open_ends: bool = typer.Option(False, "--open-ends", help="Offline DTW only: let the path start and end "
+                                   "at any reference (the query covers part of the mapped route)."),
     decay: float = typer.Option(0.9, min=0.01, max=0.999, help="Streaming DTW memory: each frame discounts "
                                 "the past by this factor (about 1/(1-decay) frames remembered)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write results here instead of stdout."),
@@ -147,7 +149,7 @@ def localize_cmd(
             with typer.progressbar(length=count or 0, label="localizing", file=sys.stderr,
                                    hidden=count is None) as bar:
                 for match in localize(frames, place_map, extractor, mode.value, variant.value, decay,
-                                      batch_size, skip):
+                                      batch_size, open_ends, skip):
                     write(match)
                     sink.flush()  # a line per frame, as it happens
                     written += 1

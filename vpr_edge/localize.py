@@ -49,13 +49,13 @@ def _encoded(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExt
 
 
 def localize(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExtractor, mode: Mode = "stream",
-             variant: str = "similarity", decay: float = 0.9, batch_size: int = 1,
+             variant: str = "similarity", decay: float = 0.9, batch_size: int = 1, open_ends: bool = False,
              on_skip: Callable[[Frame], None] = lambda f: None) -> Iterator[Match]:
     """Match every decodable frame to a reference of ``place_map``.
 
     ``stream``: streaming DTW, one result per frame as it arrives, bounded memory. ``single``: best single
-    match per frame. ``dtw``: offline DTW (``variant`` 'similarity' or 'distance') over the whole sequence,
-    results after the last frame. Undecodable frames are passed to ``on_skip`` and left out.
+    match per frame. ``dtw``: offline DTW (``variant`` 'similarity' or 'distance'; ``open_ends`` for a query
+    covering part of the route) over the whole sequence, results after the last frame. Undecodable frames are passed to ``on_skip`` and left out.
     """
     refs = place_map.encodings
     encoded = _encoded(frames, place_map, extractor, batch_size, on_skip)
@@ -72,7 +72,7 @@ def localize(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExt
         pairs = list(encoded)
         if not pairs:
             return
-        result = dtw_align(np.stack([e for _, e in pairs]) @ refs.T, variant)  # type: ignore[arg-type]
+        result = dtw_align(np.stack([e for _, e in pairs]) @ refs.T, variant, open_ends)  # type: ignore[arg-type]
         for (frame, _), ref, score in zip(pairs, result.matches, result.scores):
             yield Match(frame.index, frame.name, int(ref), place_map.names[int(ref)], float(score))
     else:

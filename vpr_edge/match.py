@@ -52,14 +52,14 @@ def _row_scan(terms: np.ndarray, entry: np.ndarray, better: np.ufunc) -> tuple[n
     return p + run, k
 
 
-def dtw_accumulate(sim: np.ndarray, variant: Variant = "similarity") -> np.ndarray:
-    """Accumulated matrix A (Q, R) of DTW from (0, 0): the thesis variant maximises summed similarity,
-    the distance variant minimises summed 1 - similarity."""
+def dtw_accumulate(sim: np.ndarray, variant: Variant = "similarity", open_ends: bool = False) -> np.ndarray:
+    """Accumulated matrix A (Q, R) of DTW from (0, 0), or from any (0, j) with ``open_ends``: the thesis
+    variant maximises summed similarity, the distance variant minimises summed 1 - similarity."""
     terms, better = _terms(sim, variant)
     q, r = terms.shape
     acc = np.empty((q, r), np.float64)
     bad = -np.inf if variant == "similarity" else np.inf
-    entry = np.full(r, bad)
+    entry = np.zeros(r) if open_ends else np.full(r, bad)
     entry[0] = 0.0
     acc[0] = _row_scan(terms[0], entry, better)[0]
     for i in range(1, q):
@@ -72,7 +72,7 @@ def dtw_accumulate(sim: np.ndarray, variant: Variant = "similarity") -> np.ndarr
 
 @dataclass(frozen=True)
 class Alignment:
-    """Offline DTW result: the path (P, 2) of (query, reference) cells from (0, 0) to (Q-1, R-1);
+    """Offline DTW result: the path (P, 2) of (query, reference) cells in order;
     per query frame the matched reference (the most similar cell of that row on the path) and its
     similarity; and the path's accumulated value (summed similarity or summed distance)."""
 
@@ -82,20 +82,24 @@ class Alignment:
     total: float
 
 
-def dtw_align(sim: np.ndarray, variant: Variant = "similarity") -> Alignment:
+def dtw_align(sim: np.ndarray, variant: Variant = "similarity", open_ends: bool = False) -> Alignment:
     """Align query and reference sequences by DTW over ``sim`` (Q, R) and backtrack the best path.
 
-    Ties in backtracking prefer the diagonal, then the vertical, then the horizontal step.
+    By default the path runs from (0, 0) to (Q-1, R-1): both sequences cover the same route. With
+    ``open_ends`` (subsequence DTW) it may start and end at any reference, for a query that covers part of
+    the mapped route. Ties in backtracking prefer the diagonal, then the vertical, then the horizontal step.
     """
     sim = np.asarray(sim)
     if sim.ndim != 2 or 0 in sim.shape:
         raise ValueError(f"similarity matrix must be 2-D and non-empty, got shape {sim.shape}")
-    acc = dtw_accumulate(sim, variant)
+    acc = dtw_accumulate(sim, variant, open_ends)
     pick = np.argmax if variant == "similarity" else np.argmin
-    i, j = sim.shape[0] - 1, sim.shape[1] - 1
+    i, j = sim.shape[0] - 1, (int(pick(acc[-1])) if open_ends else sim.shape[1] - 1)
     path = [(i, j)]
     while i > 0 or j > 0:
         if i == 0:
+            if open_ends and pick([0.0, acc[0, j - 1]]) == 0:
+                break                      # the path started here rather than coming from the left
             j -= 1
         elif j == 0:
             i -= 1
@@ -109,7 +113,7 @@ def dtw_align(sim: np.ndarray, variant: Variant = "similarity") -> Alignment:
     order = np.lexsort((-vals, cells[:, 0]))
     first = np.concatenate(([True], np.diff(cells[order, 0]) > 0))
     chosen = order[first]
-    return Alignment(cells, cells[chosen, 1], vals[chosen], float(acc[-1, -1]))
+    return Alignment(cells, cells[chosen, 1], vals[chosen], float(acc[cells[-1, 0], cells[-1, 1]]))
 
 
 class StreamingDTW:
