@@ -33,7 +33,8 @@ def naive_path(acc: np.ndarray, variant: str, open_ends: bool = False) -> list[t
         elif j == 0:
             i -= 1
         else:
-            i, j = [(i - 1, j - 1), (i - 1, j), (i, j - 1)][int(pick([acc[i - 1, j - 1], acc[i - 1, j], acc[i, j - 1]]))]
+            step = int(pick([acc[i - 1, j - 1], acc[i - 1, j], acc[i, j - 1]]))
+            i, j = [(i - 1, j - 1), (i - 1, j), (i, j - 1)][step]
         path.append((i, j))
     return path[::-1]
 

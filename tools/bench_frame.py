@@ -39,7 +39,8 @@ def main() -> int:
     files = list_images(a.frames)
     print(f"{len(files)} frames from {a.frames}; map {len(place_map.names)} refs x {place_map.encodings.shape[1]} "
           f"dims; model {model.name}")
-    print(f"{'threads':>7s} {'decode':>7s} {'prep':>7s} {'infer':>7s} {'encode':>7s} {'match':>7s} {'total':>7s}  ms/frame")
+    heads = ("threads", "decode", "prep", "infer", "encode", "match", "total")
+    print(" ".join(f"{h:>7s}" for h in heads) + "  ms/frame")
     for threads in (int(t) for t in a.threads.split(",")):
         ex = FeatureExtractor(model, threads)
         place_map.check_model(ex, a.map or "built map")

@@ -51,7 +51,8 @@ def main() -> int:
     checkpoints = sorted(int(c) for c in a.checkpoints.split(",") if int(c) <= a.frames)
     dtw = StreamingDTW(a.refs, a.decay)
     print(f"map {a.refs} refs x {a.dim} dims ({refs.nbytes / 1e6:.1f} MB), {a.frames} frames, decay {a.decay}")
-    print(f"{'frames':>8s} {'ms/frame':>9s} {'sim ms':>7s} {'dtw ms':>7s} {'RSS MB':>8s} {'peak MB':>8s} {'acc+-1':>7s}")
+    print(f"{'frames':>8s} {'ms/frame':>9s} {'sim ms':>7s} {'dtw ms':>7s} {'RSS MB':>8s} {'peak MB':>8s} "
+          f"{'acc+-1':>7s}")
     pos, detour = 0.0, 0
     t_sim = t_dtw = 0.0
     correct = counted = 0

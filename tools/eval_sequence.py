@@ -74,7 +74,8 @@ def main() -> int:
     print(f"build-map {t1 - t0:.1f} s, query encoding {1e3 * (t2 - t1) / len(qfiles):.1f} ms/frame")
     print(f"{'mode':36s} {'within +-%d' % a.tolerance:>12s} {'in GT set':>10s}")
     for name, pred in preds.items():
-        print(f"{name:36s} {fraction_within(pred, truth, a.tolerance):12.3f} {fraction_in_sets(pred, truth_sets):10.3f}")
+        within, in_set = fraction_within(pred, truth, a.tolerance), fraction_in_sets(pred, truth_sets)
+        print(f"{name:36s} {within:12.3f} {in_set:10.3f}")
     return 0
 
 

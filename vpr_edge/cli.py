@@ -168,7 +168,7 @@ def info_cmd(map_path: Path = typer.Argument(..., help="Map file written by buil
     """Describe a map: references, encoding size, codebook, model and settings (JSON on stdout)."""
     with _user_errors():
         pm = PlaceMap.load(map_path)
-        meta = {k: v for k, v in pm.meta.items() if k != "names"}
+        meta = {k: v for k, v in pm.meta.items() if k not in ("names", "n_refs", "dim")}  # said once, below
         summary = {"references": len(pm.names), "first": pm.names[0], "last": pm.names[-1],
                    "encoding_dims": int(pm.encodings.shape[1]), "size_mb": round(map_path.stat().st_size / 1e6, 2)}
         typer.echo(json.dumps(summary | meta, indent=1, sort_keys=True))

@@ -55,7 +55,8 @@ def localize(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExt
 
     ``stream``: streaming DTW, one result per frame as it arrives, bounded memory. ``single``: best single
     match per frame. ``dtw``: offline DTW (``variant`` 'similarity' or 'distance'; ``open_ends`` for a query
-    covering part of the route) over the whole sequence, results after the last frame. Undecodable frames are passed to ``on_skip`` and left out.
+    covering part of the route) over the whole sequence, results after the last frame. Undecodable frames
+    are passed to ``on_skip`` and left out.
     """
     refs = place_map.encodings
     encoded = _encoded(frames, place_map, extractor, batch_size, on_skip)
