@@ -60,9 +60,12 @@ def test_localize_matches_real_frames(small_map: Path, small_queries: Path, mode
     assert proc.returncode == 0, proc.stderr
     rows = list(csv.DictReader(proc.stdout.splitlines()))
     assert [int(r["frame_index"]) for r in rows] == list(range(24))
-    err = np.array([abs(int(r["ref_index"]) - int(r["frame_index"])) for r in rows])
+    found = [r for r in rows if r["lost"] == "0"]
+    assert len(found) >= 12                        # the stream may report lost while it locks on
+    err = np.array([abs(int(r["ref_index"]) - int(r["frame_index"])) for r in found])
     assert np.mean(err <= 2) >= 0.75, err          # the Corridor ground truth is +-2 frames
-    assert all(r["ref"] == f"{int(r['ref_index']):07d}.jpg" for r in rows)
+    assert all(r["ref"] == f"{int(r['ref_index']):07d}.jpg" for r in found)
+    assert all(r["ref"] == "" and r["ref_index"] == "-1" for r in rows if r["lost"] == "1")
 
 
 def test_localize_jsonl_file_and_reused_codebook(tmp_path: Path, small_map: Path, small_refs: Path,
@@ -77,7 +80,7 @@ def test_localize_jsonl_file_and_reused_codebook(tmp_path: Path, small_map: Path
     proc = run("localize", "-m", second, "-s", small_queries, "-o", out, "--batch-size", "4")
     assert proc.returncode == 0, proc.stderr
     lines = [json.loads(x) for x in out.read_text().splitlines()]
-    assert len(lines) == 24 and set(lines[0]) == {"frame_index", "frame", "ref_index", "ref", "score"}
+    assert len(lines) == 24 and set(lines[0]) == {"frame_index", "frame", "ref_index", "ref", "score", "lost"}
 
 
 def test_video_stream(tmp_path: Path, small_map: Path, small_queries: Path) -> None:

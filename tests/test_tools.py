@@ -15,19 +15,10 @@ def tool(name: str, *args: str) -> str:
     return proc.stdout
 
 
-def test_bench_stream_dtw_reports_each_checkpoint() -> None:
-    out = tool("bench_stream_dtw.py", "--refs", "300", "--frames", "2000", "--dim", "32", "--checkpoints",
+def test_bench_matcher_reports_each_checkpoint() -> None:
+    out = tool("bench_matcher.py", "--refs", "300", "--frames", "2000", "--dim", "32", "--checkpoints",
                "500,2000")
     rows = [line.split() for line in out.splitlines()[2:]]
     assert [r[0] for r in rows] == ["500", "2000"]
     assert all(float(r[-1]) > 0.8 for r in rows)          # synthetic route is followed
     assert all(float(r[4]) > 0 and float(r[5]) > 0 for r in rows)   # RSS columns are filled
-
-
-def test_eval_sequence_on_bundled_sample() -> None:
-    out = tool("eval_sequence.py", "--dataset", str(ROOT / "samples" / "corridor"), "--components", "8",
-               "--pca-dim", "32")
-    scores = {line[:36].strip(): float(line.split()[-2]) for line in out.splitlines() if "  0." in line
-              or "  1." in line}
-    assert len(scores) == 4
-    assert scores["offline dtw (distance)"] > 0.8

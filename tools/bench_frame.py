@@ -22,7 +22,7 @@ sys.path.insert(0, str(ROOT))
 from vpr_edge.extract import FeatureExtractor, default_model_path  # noqa: E402
 from vpr_edge.images import list_images, load_image  # noqa: E402
 from vpr_edge.mapfile import PlaceMap, build_map  # noqa: E402
-from vpr_edge.match import StreamingDTW  # noqa: E402
+from vpr_edge.matchers import get_matcher  # noqa: E402
 
 
 def main() -> int:
@@ -31,6 +31,7 @@ def main() -> int:
     p.add_argument("--model", type=Path, default=None)
     p.add_argument("--frames", type=Path, default=ROOT / "samples" / "corridor" / "query")
     p.add_argument("--threads", default="1,2", help="onnxruntime thread counts to try")
+    p.add_argument("--matcher", default="stream", help="registered online matcher")
     p.add_argument("--repeat", type=int, default=2, help="passes over the frames (the first is warm-up)")
     a = p.parse_args()
     model = a.model or default_model_path()
@@ -46,7 +47,7 @@ def main() -> int:
         place_map.check_model(ex, a.map or "built map")
         times = np.zeros(5)
         for rep in range(a.repeat):
-            dtw = StreamingDTW(len(place_map.names))
+            dtw = get_matcher(a.matcher).stream(len(place_map.names))
             times[:] = 0
             for f in files:
                 t0 = time.perf_counter()

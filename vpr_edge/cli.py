@@ -1,38 +1,44 @@
-"""Command line: ``vpr-edge build-map`` and ``vpr-edge localize``."""
+"""Command line: ``vpr-edge build-map``, ``localize``, ``evaluate`` and ``info``."""
 from __future__ import annotations
 
 import contextlib
 import csv
 import json
 import sys
+import time
 from collections.abc import Iterator
 from enum import Enum
 from pathlib import Path
 from typing import IO, Optional
 
+import numpy as np
 import typer
 
 from vpr_edge.codebook import Codebook
 from vpr_edge.errors import VprError
 from vpr_edge.extract import FeatureExtractor, default_model_path
-from vpr_edge.images import Frame, list_images, open_stream
-from vpr_edge.localize import Match, localize
+from vpr_edge.images import Frame, list_images, load_image, open_stream
+from vpr_edge.localize import encode_frames, localize
 from vpr_edge.mapfile import PlaceMap, build_map
+from vpr_edge.matchers import MATCHERS, Matcher, get_matcher
+from vpr_edge.store import atomic_output, check_writable
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Visual place recognition on a CPU: build a map of reference images, then localise "
                        "a stream of frames against it (ONNX features, Improved Fisher Vectors, DTW).")
 
 
-class ModeOpt(str, Enum):
-    stream = "stream"
-    dtw = "dtw"
-    single = "single"
+ModeOpt = Enum("ModeOpt", {name: name for name in MATCHERS}, type=str)  # type: ignore[misc]
 
 
 class VariantOpt(str, Enum):
-    similarity = "similarity"
     distance = "distance"
+    similarity = "similarity"
+
+
+class FeaturesOpt(str, Enum):
+    map = "map"
+    pixels = "pixels"
 
 
 class FormatOpt(str, Enum):
@@ -45,7 +51,7 @@ def _user_errors() -> Iterator[None]:
     """Turn VprError into one line on stderr and exit code 2; Ctrl-C into exit code 130."""
     try:
         yield
-    except VprError as e:
+    except (VprError, ValueError) as e:
         typer.echo(f"vpr-edge: error: {e}", err=True)
         raise typer.Exit(2) from None
     except KeyboardInterrupt:
@@ -78,6 +84,9 @@ def build_map_cmd(
     """Build a map from a folder of reference images: extract features, fit the codebook (PCA + GMM) unless
     --codebook is given, encode every reference as an Improved Fisher Vector, and write one map file."""
     with _user_errors():
+        for target in (out, save_codebook):
+            if target:
+                check_writable(target)
         extractor = FeatureExtractor(model or default_model_path(), threads)
         given = None
         if codebook:
@@ -100,9 +109,21 @@ def build_map_cmd(
 def _writer(fmt: str, stream: IO[str]):
     if fmt == "csv":
         w = csv.writer(stream, lineterminator="\n")
-        w.writerow(["frame_index", "frame", "ref_index", "ref", "score"])
-        return lambda m: w.writerow([m.frame_index, m.frame, m.ref_index, m.ref, f"{m.score:.6f}"])
+        w.writerow(["frame_index", "frame", "ref_index", "ref", "score", "lost"])
+        return lambda m: w.writerow([m.frame_index, m.frame, m.ref_index, m.ref, f"{m.score:.6f}", int(m.lost)])
     return lambda m: stream.write(json.dumps(m.__dict__ | {"score": round(m.score, 6)}) + "\n")
+
+
+def _configured(name: str, given: dict) -> Matcher:
+    """The registered matcher with the options the user gave that it takes; a warning for each it ignores."""
+    matcher = get_matcher(name)
+    used = {k: v for k, v in given.items() if v is not None and k in matcher.params}
+    for k in sorted(k for k, v in given.items() if v not in (None, False) and k not in matcher.params):
+        typer.echo(f"vpr-edge: warning: --{k.replace('_', '-')} does not apply to mode {name}; ignored", err=True)
+    return matcher.with_params(**used)
+
+
+_MODE_HELP = "Matcher: " + "; ".join(f"{m.name}: {m.summary}" for m in MATCHERS.values()) + "."
 
 
 @app.command("localize")
@@ -111,25 +132,31 @@ def localize_cmd(
     stream: Path = typer.Option(..., "--stream", "-s", help="Folder of frames (file-name order) or a video file."),
     model: Optional[Path] = typer.Option(None, help="ONNX feature model; must be the map's model (default: the "
                                   "model file the map was built with if it still exists, else the bundled one)."),
-    mode: ModeOpt = typer.Option(ModeOpt.stream, help="stream: streaming DTW, a result per frame as it "
-                                 "arrives, bounded memory; dtw: offline DTW over the whole sequence (thesis); "
-                                 "single: best single match per frame, no sequence information."),
-    variant: VariantOpt = typer.Option(VariantOpt.similarity, help="Offline DTW form: similarity (maximise "
-                                       "summed cosine, thesis) or distance (minimise summed 1 - cosine)."),
-    open_ends: bool = typer.Option(False, "--open-ends", help="Offline DTW only: let the path start and end "
-                                   "at any reference (the query covers part of the mapped route)."),
-    decay: float = typer.Option(0.9, min=0.01, max=0.999, help="Streaming DTW memory: each frame discounts "
-                                "the past by this factor (about 1/(1-decay) frames remembered)."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write results here instead of stdout."),
+    mode: ModeOpt = typer.Option("stream", help=_MODE_HELP),
+    variant: Optional[VariantOpt] = typer.Option(None, help="DTW modes: distance (minimise summed 1 - cosine, "
+                                                 "default) or similarity (maximise summed cosine, the thesis)."),
+    open_ends: Optional[bool] = typer.Option(None, "--open-ends/--fixed-ends", help="DTW modes: let the path "
+                                             "start and end anywhere, 0-4 references per frame (dtw-open)."),
+    decay: Optional[float] = typer.Option(None, min=0.01, max=0.999, help="stream / stream-dtw: each frame "
+                                          "discounts the past by this factor (about 1/(1-decay) frames kept)."),
+    min_confidence: Optional[float] = typer.Option(
+        None, help="Frames scoring below this are reported lost (ref_index -1). Default: the mode's own "
+                   "(stream: %.1f; other modes: never lost)." % MATCHERS["stream"].min_confidence),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write results here instead of stdout "
+                                       "(written to a temporary file, renamed when the stream is done)."),
     fmt: Optional[FormatOpt] = typer.Option(None, "--format", help="csv or jsonl (default: from --out's "
                                             "suffix, csv on stdout)."),
     batch_size: int = typer.Option(1, min=1, help="Frames per model run (1 = lowest latency)."),
     threads: int = typer.Option(0, min=0, help=_THREADS_HELP),
 ) -> None:
     """Localise every frame of a stream against a map. One line per frame: frame index, frame name,
-    matched reference index and name, score (higher = more confident). Undecodable frames are reported on
-    stderr and skipped."""
+    matched reference index and name (-1 and empty when lost), score (higher = more confident), lost (0/1).
+    Undecodable frames are reported on stderr and skipped."""
     with _user_errors():
+        if out:
+            check_writable(out)
+        matcher = _configured(mode.value, {"variant": variant.value if variant else None, "open_ends": open_ends,
+                                           "decay": decay})
         place_map = PlaceMap.load(map_path)
         extractor = FeatureExtractor(place_map.model_path(model), threads)
         place_map.check_model(extractor, map_path)
@@ -142,25 +169,181 @@ def localize_cmd(
             skipped += 1
             typer.echo(f"\nvpr-edge: warning: {frame.error}; frame skipped", err=True)
 
-        sink = open(out, "w", newline="") if out else sys.stdout
-        try:
+        with contextlib.ExitStack() as stack:
+            if out:
+                sink = stack.enter_context(open(stack.enter_context(atomic_output(out)), "w", newline=""))
+            else:
+                sink = sys.stdout
             write = _writer(chosen, sink)
             written = 0
             with typer.progressbar(length=count or 0, label="localizing", file=sys.stderr,
                                    hidden=count is None) as bar:
-                for match in localize(frames, place_map, extractor, mode.value, variant.value, decay,
-                                      batch_size, open_ends, skip):
+                for match in localize(frames, place_map, extractor, matcher, batch_size, min_confidence, skip):
                     write(match)
                     sink.flush()  # a line per frame, as it happens
                     written += 1
                     bar.update(1)
-        finally:
-            if out:
-                sink.close()
-        if written == 0:
-            raise VprError(f"{stream}: none of its frames could be decoded")
+            if written == 0:
+                raise VprError(f"{stream}: none of its frames could be decoded")
         if skipped:
             typer.echo(f"vpr-edge: {skipped} undecodable frame(s) skipped", err=True)
+
+
+def _load_truth(gt: Optional[Path], positions: Optional[tuple[Path, Path]], radius: float):
+    """Ground truth from --gt (CSV or .npy matrix) or --gt-positions; exactly one must be given."""
+    from vpr_edge import groundtruth
+
+    if (gt is None) == (positions is None):
+        raise VprError("give ground truth: --gt FILE (.csv or .npy) or --gt-positions REFS.csv QUERIES.csv")
+    if positions is not None:
+        return groundtruth.from_positions(positions[0], positions[1], radius), None
+    if gt.suffix.lower() == ".npy":
+        return groundtruth.load_matrix(gt), np.load(gt, mmap_mode="r").shape
+    return groundtruth.load_csv(gt), None
+
+
+def _load_similarity(path: Path) -> np.ndarray:
+    try:
+        sim = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as e:
+        raise VprError(f"{path}: not a readable .npy matrix ({str(e).splitlines()[0][:100]})") from None
+    if sim.ndim != 2 or 0 in sim.shape or not np.issubdtype(sim.dtype, np.number):
+        raise VprError(f"{path}: similarity must be a non-empty 2-D numeric (queries x references) matrix, "
+                       f"got shape {sim.shape} {sim.dtype}")
+    if not np.isfinite(sim).all():
+        raise VprError(f"{path}: similarity matrix holds NaN or infinite values")
+    return sim.astype(np.float64)
+
+
+@app.command("evaluate")
+def evaluate_cmd(
+    map_path: Optional[Path] = typer.Option(None, "--map", "-m", help="Map from build-map: the queries are "
+                                            "encoded with its model and codebook."),
+    queries: Optional[Path] = typer.Option(None, "--queries", "-q", help="Query frames: a folder (file-name "
+                                           "order) or a video. Row i of the ground truth is frame i."),
+    similarity: Optional[Path] = typer.Option(None, "--similarity", help="Evaluate a (Q, R) float .npy "
+                                              "similarity matrix instead (rows = queries, higher = more "
+                                              "alike), e.g. from another tool's descriptors; no model needed."),
+    refs: Optional[Path] = typer.Option(None, "--refs", help="With --features pixels: the reference folder."),
+    features: FeaturesOpt = typer.Option(FeaturesOpt.map, help="map: the map's CNN features and encoding; "
+                                         "pixels: SeqSLAM's front end (grey, 64x32, patch-normalised, "
+                                         "mean absolute difference), from --refs and --queries, no map."),
+    gt: Optional[Path] = typer.Option(None, "--gt", help="Ground truth: the project's CSV 'query,references' "
+                                      "(space-separated reference indices, empty = place not in the map) or a "
+                                      "boolean (Q, R) .npy matrix (VPR_Tutorial's GThard/GTsoft)."),
+    gt_positions: Optional[tuple[Path, Path]] = typer.Option(
+        None, "--gt-positions", help="Ground truth from positions: REFS.csv QUERIES.csv with columns x,y "
+                                     "(metres) or lat,lon (degrees); see --radius."),
+    radius: float = typer.Option(25.0, min=0.0, help="With --gt-positions: references within this many "
+                                                    "metres of a query are correct."),
+    modes: str = typer.Option(",".join(MATCHERS), help="Comma-separated matchers to run on the same "
+                              "similarity matrix: " + ", ".join(MATCHERS) + "."),
+    tolerance: int = typer.Option(1, min=0, help="Frames of slack around the true references (thesis: 1)."),
+    min_confidence: Optional[float] = typer.Option(None, help="Lost threshold for modes with a lost state "
+                                                   "(default: each mode's own)."),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the figures as JSON here."),
+    plot_out: Optional[Path] = typer.Option(None, "--plot", help="Write all modes' PR curves to this PNG "
+                                            "(needs matplotlib: the plot extra)."),
+    save_similarity: Optional[Path] = typer.Option(None, help="Also save the (Q, R) similarity matrix (.npy)."),
+    model: Optional[Path] = typer.Option(None, help="With --map: the map's model, if not where it was."),
+    batch_size: int = typer.Option(8, min=1, help="Frames per model run."),
+    threads: int = typer.Option(0, min=0, help=_THREADS_HELP),
+) -> None:
+    """Measure matchers against ground truth: recall@1/5/10, the precision-recall curve with AUC (thesis
+    eq. 5.1) and AP (eq. 5.2), precision at 100% recall, recall at 100% precision, median error in frames,
+    the share of frames reported lost, and matching time per frame. All modes run on one similarity matrix:
+    from --map and --queries, from --features pixels with --refs and --queries, or from --similarity."""
+    from vpr_edge import report
+    from vpr_edge.evaluate import evaluate_mode
+
+    with _user_errors():
+        # --- everything that can be checked before the work ---
+        sources = [similarity is not None, map_path is not None, features == FeaturesOpt.pixels]
+        if sum(sources) != 1:
+            raise VprError("give one source: --similarity S.npy, or --map MAP --queries Q, or --features "
+                           "pixels --refs R --queries Q")
+        if similarity is None and queries is None:
+            raise VprError("--queries is needed with --map or --features pixels")
+        if features == FeaturesOpt.pixels and refs is None:
+            raise VprError("--features pixels needs --refs (the reference folder)")
+        chosen = [m.strip() for m in modes.split(",") if m.strip()]
+        matchers = {name: get_matcher(name) for name in chosen}
+        if not matchers:
+            raise VprError("--modes names no matcher")
+        for target in (json_out, plot_out, save_similarity):
+            if target:
+                check_writable(target)
+        if plot_out:
+            report.require_matplotlib()
+        truth, gt_shape = _load_truth(gt, gt_positions, radius)
+        truth_src = gt or gt_positions[0]
+
+        # --- the similarity matrix ---
+        encode_ms = float("nan")
+        if similarity is not None:
+            sim = _load_similarity(similarity)
+        else:
+            frames, count = open_stream(queries)
+            if count is not None and count != len(truth):
+                raise VprError(f"{queries}: {count} frames but the ground truth {truth_src} has {len(truth)} rows")
+            kept: list[int] = []
+
+            def skip(frame: Frame) -> None:
+                typer.echo(f"vpr-edge: warning: {frame.error}; frame skipped (and its ground-truth row)", err=True)
+
+            t0 = time.perf_counter()
+            if features == FeaturesOpt.pixels:
+                from vpr_edge.pixels import pixel_descriptor, sad_similarity
+
+                ref_desc = np.stack([pixel_descriptor(load_image(f)) for f in list_images(refs)])
+                t0 = time.perf_counter()
+                qd = []
+                for frame in frames:
+                    if frame.image is None:
+                        skip(frame)
+                        continue
+                    kept.append(frame.index)
+                    qd.append(pixel_descriptor(frame.image))
+                sim = sad_similarity(np.stack(qd), ref_desc).astype(np.float64) if qd else np.zeros((0, 0))
+            else:
+                place_map = PlaceMap.load(map_path)
+                extractor = FeatureExtractor(place_map.model_path(model), threads)
+                place_map.check_model(extractor, map_path)
+                enc = []
+                for frame, e in encode_frames(frames, place_map, extractor, batch_size, skip):
+                    kept.append(frame.index)
+                    enc.append(e)
+                sim = (np.stack(enc) @ place_map.encodings.T).astype(np.float64) if enc else np.zeros((0, 0))
+            if not kept:
+                raise VprError(f"{queries}: none of its frames could be decoded")
+            encode_ms = 1e3 * (time.perf_counter() - t0) / len(kept)
+            if max(kept) >= len(truth):
+                raise VprError(f"{queries}: {max(kept) + 1} frames but the ground truth {truth_src} has "
+                               f"{len(truth)} rows")
+            truth = truth[kept]
+        if len(truth) != sim.shape[0]:
+            raise VprError(f"{truth_src}: ground truth has {len(truth)} rows but there are {sim.shape[0]} queries")
+        if gt_shape is not None and gt_shape[1] != sim.shape[1]:
+            raise VprError(f"{truth_src}: ground-truth matrix has {gt_shape[1]} references, the similarity "
+                           f"matrix {sim.shape[1]}")
+        if truth.max() >= sim.shape[1]:
+            raise VprError(f"{truth_src}: names reference {int(truth.max())} but there are only "
+                           f"{sim.shape[1]} references")
+        if save_similarity:
+            with atomic_output(save_similarity) as tmp, open(tmp, "wb") as f:
+                np.save(f, sim.astype(np.float32), allow_pickle=False)
+
+        # --- the matchers ---
+        reports = {name: evaluate_mode(m, sim, truth, tolerance, min_confidence) for name, m in matchers.items()}
+        n_mapped = int((truth >= 0).any(axis=1).sum())
+        typer.echo(f"{sim.shape[0]} queries ({n_mapped} of mapped places), {sim.shape[1]} references; "
+                   f"correct within {tolerance} frame(s); encoding "
+                   f"{'-' if encode_ms != encode_ms else f'{encode_ms:.1f}'} ms/frame")
+        typer.echo(report.table(reports))
+        if json_out:
+            report.write_json(json_out, sim.shape[0], sim.shape[1], reports)
+        if plot_out:
+            report.plot(plot_out, reports, f"{queries or similarity} ({sim.shape[0]} queries, {sim.shape[1]} refs)")
 
 
 @app.command("info")

@@ -1,53 +1,62 @@
-"""Ground truth and match accuracy for sequence pairs."""
+"""Evaluation of matchers on one similarity matrix against ground truth (pure arrays in, a report out)."""
 from __future__ import annotations
 
-import csv
-import os
+import time
+from dataclasses import dataclass
 
 import numpy as np
 
-from vpr_edge.errors import VprError
+from vpr_edge.matchers import Matcher
+from vpr_edge import metrics
+
+RECALL_KS: tuple[int, ...] = (1, 5, 10)
 
 
-def load_ground_truth(path: str | os.PathLike[str]) -> list[np.ndarray]:
-    """CSV with header ``query,references``: per query index its correct reference indices (space-separated).
-    Returns a list indexed by query of int arrays."""
-    try:
-        with open(path, newline="") as f:
-            rows = list(csv.reader(f))
-    except OSError as e:
-        raise VprError(f"{path}: cannot read ground truth ({e.strerror})") from None
-    out: dict[int, np.ndarray] = {}
-    for n, row in enumerate(rows[1:], start=2):
-        try:
-            out[int(row[0])] = np.array([int(v) for v in row[1].split()], dtype=np.int64)
-        except (IndexError, ValueError):
-            raise VprError(f"{path}: line {n}: expected 'query,ref ref ...'") from None
-    if sorted(out) != list(range(len(out))):
-        raise VprError(f"{path}: query indices must run 0..{len(out) - 1} without gaps")
-    return [out[i] for i in range(len(out))]
+@dataclass(frozen=True)
+class ModeReport:
+    """One matcher's figures. ``lost_unmapped``/``lost_mapped``: share of frames of unmapped / mapped places
+    whose score is below the matcher's lost threshold (NaN where it has none or no such frames)."""
+
+    recall: dict[int, float]
+    auc: float
+    ap: float
+    precision_at_full_recall: float
+    recall_at_full_precision: float
+    median_error: float
+    lost_unmapped: float
+    lost_mapped: float
+    match_ms: float
+    curve: metrics.PRCurve
+
+    def as_json(self) -> dict:
+        """The keys of ``evaluate --json`` (NaN as null)."""
+        def num(v: float) -> float | None:
+            return None if np.isnan(v) else round(float(v), 6)
+        return {f"recall_at_{k}": num(v) for k, v in self.recall.items()} | {
+            "auc": num(self.auc), "ap": num(self.ap),
+            "precision_at_full_recall": num(self.precision_at_full_recall),
+            "recall_at_full_precision": num(self.recall_at_full_precision),
+            "median_error": num(self.median_error)}
 
 
-def window_centres(truth: list[np.ndarray], margin: int, n_refs: int) -> np.ndarray:
-    """The true reference per query when each ground-truth set is that reference +-``margin``, clipped to
-    [0, n_refs): recovered from the side of the window that was not clipped. (Q,) int."""
-    centres = np.empty(len(truth), np.int64)
-    for q, refs in enumerate(truth):
-        lo, hi = int(refs.min()), int(refs.max())
-        if lo == 0 and hi < n_refs - 1:
-            centres[q] = hi - margin
-        elif hi == n_refs - 1 and lo > 0:
-            centres[q] = lo + margin
-        else:
-            centres[q] = (lo + hi) // 2
-    return centres
+def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, tolerance: int = 1,
+                  min_confidence: float | None = None) -> ModeReport:
+    """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics)."""
+    t0 = time.perf_counter()
+    result = matcher.run(sim, k=max(RECALL_KS))
+    ms = 1e3 * (time.perf_counter() - t0) / len(sim)
+    mapped = (truth >= 0).any(axis=1)
+    correct = metrics.correct_candidates(result.ranked, truth, tolerance)
+    curve = metrics.pr_curve(result.scores, correct[:, 0], int(mapped.sum()))
+    err = metrics.localisation_error(result.refs, truth)
+    threshold = matcher.min_confidence if min_confidence is None else min_confidence
+    lost = result.scores < threshold if threshold is not None else np.zeros(len(sim), bool)
 
+    def share(mask: np.ndarray) -> float:
+        return float(lost[mask].mean()) if threshold is not None and mask.any() else float("nan")
 
-def fraction_within(pred: np.ndarray, truth: np.ndarray, tolerance: int) -> float:
-    """Share of queries whose predicted reference is within ``tolerance`` frames of the true one."""
-    return float(np.mean(np.abs(np.asarray(pred) - np.asarray(truth)) <= tolerance))
-
-
-def fraction_in_sets(pred: np.ndarray, truth: list[np.ndarray]) -> float:
-    """Share of queries whose predicted reference is one of its listed correct references."""
-    return float(np.mean([p in t for p, t in zip(pred, truth)]))
+    return ModeReport({k: metrics.recall_at_k(correct, mapped, k) for k in RECALL_KS},
+                      metrics.auc_trapezoid(curve), metrics.average_precision(curve),
+                      metrics.precision_at_full_recall(curve), metrics.recall_at_full_precision(curve),
+                      float(np.nanmedian(err)) if mapped.any() else float("nan"),
+                      share(~mapped), share(mapped), ms, curve)

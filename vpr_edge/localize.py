@@ -1,35 +1,35 @@
-"""Localise a stream of frames against a map: streaming DTW, offline DTW or best single match."""
+"""Localise a stream of frames against a map with any registered matcher (online: a result per frame as
+it arrives; offline: results after the last frame)."""
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
 from vpr_edge.extract import FeatureExtractor
 from vpr_edge.images import Frame
 from vpr_edge.mapfile import PlaceMap
-from vpr_edge.match import StreamingDTW, best_match, dtw_align
-
-Mode = Literal["stream", "dtw", "single"]
-MODES: tuple[str, ...] = ("stream", "dtw", "single")
+from vpr_edge.matchers import Matcher
 
 
 @dataclass(frozen=True)
 class Match:
-    """One output line: the query frame, the matched reference and a score (higher = more confident)."""
+    """One output line: the query frame, the matched reference (index -1 and name '' when lost) and a
+    score (higher = more confident)."""
 
     frame_index: int
     frame: str
     ref_index: int
     ref: str
     score: float
+    lost: bool
 
 
-def _encoded(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExtractor, batch_size: int,
-             on_skip: Callable[[Frame], None]) -> Iterator[tuple[Frame, np.ndarray]]:
-    """Yield (frame, encoding (D,)) for each decodable frame, ``batch_size`` frames per model run."""
+def encode_frames(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExtractor, batch_size: int,
+                  on_skip: Callable[[Frame], None]) -> Iterator[tuple[Frame, np.ndarray]]:
+    """Yield (frame, encoding (D,)) for each decodable frame, ``batch_size`` frames per model run;
+    undecodable frames go to ``on_skip``."""
     pending: list[Frame] = []
 
     def flush() -> Iterator[tuple[Frame, np.ndarray]]:
@@ -48,33 +48,28 @@ def _encoded(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExt
         yield from flush()
 
 
-def localize(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExtractor, mode: Mode = "stream",
-             variant: str = "similarity", decay: float = 0.9, batch_size: int = 1, open_ends: bool = False,
+def localize(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExtractor, matcher: Matcher,
+             batch_size: int = 1, min_confidence: float | None = None,
              on_skip: Callable[[Frame], None] = lambda f: None) -> Iterator[Match]:
-    """Match every decodable frame to a reference of ``place_map``.
-
-    ``stream``: streaming DTW, one result per frame as it arrives, bounded memory. ``single``: best single
-    match per frame. ``dtw``: offline DTW (``variant`` 'similarity' or 'distance'; ``open_ends`` for a query
-    covering part of the route) over the whole sequence, results after the last frame. Undecodable frames
-    are passed to ``on_skip`` and left out.
-    """
+    """Match every decodable frame to a reference of ``place_map`` with ``matcher``; a frame whose score is
+    below ``min_confidence`` (default: the matcher's own; None and no default: never) is reported lost."""
     refs = place_map.encodings
-    encoded = _encoded(frames, place_map, extractor, batch_size, on_skip)
-    if mode == "stream":
-        dtw = StreamingDTW(len(refs), decay)
+    encoded = encode_frames(frames, place_map, extractor, batch_size, on_skip)
+    threshold = matcher.min_confidence if min_confidence is None else min_confidence
+
+    def line(frame: Frame, ref: int, score: float) -> Match:
+        lost = threshold is not None and score < threshold
+        return Match(frame.index, frame.name, -1 if lost else ref, "" if lost else place_map.names[ref], score,
+                     lost)
+
+    if matcher.online:
+        online = matcher.stream(len(refs))
         for frame, enc in encoded:
-            ref, score = dtw.update(refs @ enc)
-            yield Match(frame.index, frame.name, ref, place_map.names[ref], score)
-    elif mode == "single":
-        for frame, enc in encoded:
-            ref, score = best_match((refs @ enc)[None])
-            yield Match(frame.index, frame.name, int(ref[0]), place_map.names[int(ref[0])], float(score[0]))
-    elif mode == "dtw":
-        pairs = list(encoded)
-        if not pairs:
-            return
-        result = dtw_align(np.stack([e for _, e in pairs]) @ refs.T, variant, open_ends)  # type: ignore[arg-type]
-        for (frame, _), ref, score in zip(pairs, result.matches, result.scores):
-            yield Match(frame.index, frame.name, int(ref), place_map.names[int(ref)], float(score))
-    else:
-        raise ValueError(f"unknown mode {mode!r}; choose from {MODES}")
+            ref, score = online.update(refs @ enc)
+            yield line(frame, ref, score)
+        return
+    pairs = list(encoded)
+    if pairs:
+        result = matcher.run(np.stack([e for _, e in pairs]) @ refs.T, k=1)
+        for (frame, _), ref, score in zip(pairs, result.refs, result.scores):
+            yield line(frame, int(ref), float(score))

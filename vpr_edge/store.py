@@ -1,11 +1,13 @@
 """Array files: ``.npz`` arrays plus a JSON metadata entry, written atomically, read without pickle."""
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import tempfile
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +15,41 @@ import numpy as np
 from vpr_edge.errors import VprError
 
 META_KEY = "__meta__"
+
+
+def check_writable(path: str | os.PathLike[str]) -> None:
+    """Raise VprError unless ``path`` can be written as a file: its folder exists and is writable, and it
+    is not itself a folder. Called before any work, so that bad output paths fail at once."""
+    path = Path(path)
+    folder = path.parent
+    if path.is_dir():
+        raise VprError(f"{path}: is a folder, expected a file name to write")
+    if not folder.is_dir():
+        raise VprError(f"{path}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise VprError(f"{path}: folder {folder} is not writable")
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; when the block ends without error, fsync it, give it the
+    umask's mode and rename it over ``path``. On error the temporary file is removed and ``path`` is left
+    as it was."""
+    path = Path(path)
+    check_writable(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta: dict) -> None:
@@ -27,19 +64,8 @@ def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
     if any(a.dtype == object for a in payload.values()):
         raise ValueError("object arrays cannot be stored without pickle")
     payload[META_KEY] = np.array(json.dumps(meta, sort_keys=True))
-    folder = path.parent
-    if not folder.is_dir():
-        raise VprError(f"{path}: folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **payload)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_output(path) as tmp, open(tmp, "wb") as f:
+        np.savez(f, **payload)
 
 
 def read_npz(path: str | os.PathLike[str], kind: str, schema: int) -> tuple[dict[str, np.ndarray], dict]:

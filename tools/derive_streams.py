@@ -1,0 +1,60 @@
+#!/usr/bin/env python3
+"""Write the query streams a vehicle produces, derived from a frame-aligned dataset pair, with ground truth.
+
+    python tools/derive_streams.py --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
+
+DATASET holds ref/ and query/ whose i-th files show the same place. OUT gets ref/ (the first --map-places
+references: the map's places), and per stream kind (aligned, speed2, speed3, stop-and-go, variable, partial,
+detour) a folder of frames OUT/KIND/ and its ground truth OUT/KIND.csv (true place, empty = unmapped).
+Frames are hard links to the dataset's files where the file system allows. Then, for instance:
+
+    vpr-edge build-map OUT/ref --out OUT/map.npz
+    vpr-edge evaluate --map OUT/map.npz --queries OUT/speed2 --gt OUT/speed2.csv
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import numpy as np  # noqa: E402
+
+from vpr_edge.errors import VprError  # noqa: E402
+from vpr_edge.images import list_images  # noqa: E402
+from vpr_edge.streams import KINDS, derive_stream, write_stream  # noqa: E402
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--dataset", type=Path, required=True)
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--map-places", type=int, default=None,
+                   help="places in the map (default: two thirds of the references; the rest are detour places)")
+    p.add_argument("--kinds", default=",".join(KINDS))
+    p.add_argument("--seed", type=int, default=0)
+    a = p.parse_args()
+    try:
+        refs, queries = list_images(a.dataset / "ref"), list_images(a.dataset / "query")
+        if len(refs) != len(queries):
+            raise VprError(f"{a.dataset}: ref/ and query/ differ in length ({len(refs)} vs {len(queries)})")
+        n_mapped = a.map_places or (2 * len(refs)) // 3
+        if not 0 < n_mapped <= len(refs):
+            raise VprError(f"--map-places must be in 1..{len(refs)}")
+        write_stream(a.out / "ref", refs, np.arange(n_mapped), n_mapped)
+        os.remove(a.out / "ref.csv")
+        for kind in a.kinds.split(","):
+            places = derive_stream(kind, n_mapped, len(refs), a.seed)
+            write_stream(a.out / kind, queries, places, n_mapped)
+            print(f"{kind:12s} {len(places):6d} frames, {int((places >= n_mapped).sum()):5d} of unmapped places")
+    except VprError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(f"map places: {n_mapped} of {len(refs)} (folder {a.out / 'ref'})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

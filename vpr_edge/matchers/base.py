@@ -1,0 +1,115 @@
+"""The matcher contract: a similarity matrix or a stream of similarity rows in, one reference per frame out.
+
+Conventions: ``sim`` is (Q, R), query frames by rows, reference places by columns, higher = more alike.
+Every matcher answers, per query frame, its best reference, a score (higher = more confident; what ranks
+frames for a precision-recall curve and what ``--min-confidence`` thresholds into a lost state) and a
+ranked list of candidate references (best first, for recall@K).
+
+An *online* matcher sees one row at a time, past frames only: ``update(row) -> (ref, score)``, then
+``ranking()`` gives its per-reference preference for that frame. Running it over a matrix row by row is its
+offline form, so every matcher, online or not, can be evaluated with ``run(sim)``.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+
+class OnlineMatcher(Protocol):
+    """A matcher fed one frame at a time, with memory bounded independently of the stream's length."""
+
+    def update(self, sim_row: np.ndarray) -> tuple[int, float]:
+        """Similarities (R,) of the new frame to every reference -> (best reference, score)."""
+
+    def ranking(self) -> np.ndarray:
+        """Per-reference preference (R,) after the last update (higher = better); ties broken by index."""
+
+    def reset(self) -> None:
+        """Forget the stream."""
+
+
+@dataclass(frozen=True)
+class Result:
+    """Per query frame: ``refs`` (Q,) int best reference, ``scores`` (Q,) float confidence (higher = more
+    confident), ``ranked`` (Q, k) int candidate references, best first (``ranked[:, 0] == refs``)."""
+
+    refs: np.ndarray
+    scores: np.ndarray
+    ranked: np.ndarray
+
+
+def top_k(pref: np.ndarray, k: int) -> np.ndarray:
+    """The ``k`` highest entries of each row of ``pref`` (..., R), best first -> (..., min(k, R)) int.
+    Ties go to the lower index."""
+    k = min(k, pref.shape[-1])
+    part = np.argpartition(-pref, k - 1, axis=-1)[..., :k]
+    vals = np.take_along_axis(pref, part, -1)
+    order = np.lexsort((part, -vals), axis=-1)
+    return np.take_along_axis(part, order, -1)
+
+
+def lead_with(refs: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """Candidates (Q, k) reordered so that each row starts with its answer ``refs`` (Q,), the others after
+    it in their order (the last one dropped if the answer was not among them)."""
+    marked = np.where(cand == refs[:, None], -1, cand)
+    order = np.argsort(marked == -1, axis=1, kind="stable")
+    rest = np.take_along_axis(marked, order, 1)
+    return np.concatenate([refs[:, None], rest[:, : cand.shape[1] - 1]], axis=1)
+
+
+def run_online(matcher: OnlineMatcher, sim: np.ndarray, k: int = 10) -> Result:
+    """Feed the rows of ``sim`` (Q, R) to an online matcher in order; collect its answers and top-k."""
+    q, r = sim.shape
+    refs = np.empty(q, np.int64)
+    scores = np.empty(q, np.float64)
+    ranked = np.empty((q, min(k, r)), np.int64)
+    for i in range(q):
+        refs[i], scores[i] = matcher.update(sim[i])
+        ranked[i] = top_k(matcher.ranking(), k)
+    return Result(refs, scores, lead_with(refs, ranked))
+
+
+@dataclass(frozen=True)
+class Matcher:
+    """A registered matcher: a name, a one-line summary, and either ``start(n_refs, **params)`` making an
+    online matcher or ``align(sim, k, **params)`` computing a Result offline. ``params`` are its preset
+    keyword arguments; ``with_params`` overrides some of them. ``min_confidence``: the default score below
+    which a frame is reported lost (None: the matcher has no lost state)."""
+
+    name: str
+    summary: str
+    start: Callable[..., OnlineMatcher] | None = None
+    align: Callable[..., Result] | None = None
+    params: dict[str, Any] = field(default_factory=dict)
+    min_confidence: float | None = None
+
+    @property
+    def online(self) -> bool:
+        """True if it can run on a live stream (past frames only)."""
+        return self.start is not None
+
+    def with_params(self, **overrides: Any) -> "Matcher":
+        """The same matcher with some parameters changed; unknown names raise ValueError."""
+        unknown = set(overrides) - set(self.params)
+        if unknown:
+            raise ValueError(f"matcher {self.name!r} has no parameter(s) {', '.join(sorted(unknown))}")
+        return Matcher(self.name, self.summary, self.start, self.align, self.params | overrides,
+                       self.min_confidence)
+
+    def stream(self, n_refs: int) -> OnlineMatcher:
+        """A fresh online matcher over ``n_refs`` references."""
+        if self.start is None:
+            raise ValueError(f"matcher {self.name!r} is offline only")
+        return self.start(n_refs, **self.params)
+
+    def run(self, sim: np.ndarray, k: int = 10) -> Result:
+        """Match every row of ``sim`` (Q, R); online matchers see the rows in order, past frames only."""
+        sim = np.asarray(sim)
+        if sim.ndim != 2 or 0 in sim.shape:
+            raise ValueError(f"similarity matrix must be 2-D and non-empty, got shape {sim.shape}")
+        if self.align is not None:
+            return self.align(sim, k, **self.params)
+        return run_online(self.stream(sim.shape[1]), sim, k)

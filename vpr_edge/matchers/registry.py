@@ -1,0 +1,44 @@
+"""Every matcher by name: ``localize``, ``evaluate``, the tools and the tests read this table.
+
+Adding a matcher is one module and one line here. Presets of one implementation (the DTW variants) are
+entries with other parameters, as hloc names its configurations.
+"""
+from __future__ import annotations
+
+from vpr_edge.matchers.base import Matcher
+from vpr_edge.matchers.dtw import dtw_match
+from vpr_edge.matchers.road import RoadMatcher
+from vpr_edge.matchers.seqslam import SeqSLAMOnline, seqslam_match
+from vpr_edge.matchers.single import BestMatch
+from vpr_edge.matchers.stream_dtw import StreamingDTW
+
+STREAM_MIN_CONFIDENCE = 1.0
+_DTW = {"variant": "distance", "open_ends": False, "max_step": 4, "rival_window": 5}
+_SEQSLAM = {"ds": 10, "vmin": 0.5, "vmax": 3.0, "r_window": 10, "match_window": 10}
+
+MATCHERS: dict[str, Matcher] = {m.name: m for m in (
+    Matcher("stream", "trajectories over (position, speed) with contrast-normalised similarities: any speed "
+            "0-4 places/frame, lock-on anywhere, lost state (online, default)", start=RoadMatcher,
+            params={"vmax": 4.0, "grid": 2, "decay": 0.9, "bias": 1.0, "turn": 1.0, "memory": 50.0},
+            min_confidence=STREAM_MIN_CONFIDENCE),
+    Matcher("single", "best single match per frame, no sequence information (online)", start=BestMatch),
+    Matcher("stream-dtw", "decayed streaming DTW over 1 - cos (online; the first streaming matcher, kept "
+            "as a baseline)", start=StreamingDTW, params={"decay": 0.9}),
+    Matcher("dtw", "offline DTW, fixed ends (0,0)->(Q-1,R-1), distance form", align=dtw_match, params=_DTW),
+    Matcher("dtw-thesis", "offline DTW, fixed ends, similarity form (the thesis's)", align=dtw_match,
+            params=_DTW | {"variant": "similarity"}),
+    Matcher("dtw-open", "offline subsequence DTW, open ends, 0-4 references per frame, distance form",
+            align=dtw_match, params=_DTW | {"open_ends": True}),
+    Matcher("seqslam", "SeqSLAM (Milford & Wyeth 2012), window centred on each frame (offline)",
+            align=seqslam_match, params=_SEQSLAM),
+    Matcher("seqslam-online", "SeqSLAM over the past ds frames only (online)", start=SeqSLAMOnline,
+            params=_SEQSLAM),
+)}
+
+
+def get_matcher(name: str) -> Matcher:
+    """The registered matcher ``name``; ValueError listing the names if there is none."""
+    try:
+        return MATCHERS[name]
+    except KeyError:
+        raise ValueError(f"unknown matcher {name!r}; choose from {', '.join(MATCHERS)}") from None

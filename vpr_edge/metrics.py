@@ -1,0 +1,97 @@
+"""Place-recognition metrics over matcher results: recall@K, the precision-recall curve, AUC (thesis eq. 5.1),
+AP (eq. 5.2), precision at full recall, recall at full precision, localisation error.
+
+Ground truth is a padded int array ``truth`` (Q, T): per query its correct references, -1 as padding; a
+query with no correct reference (a place not in the map) has a row of -1. A candidate is correct if it is
+within ``tolerance`` references of one of its query's correct references.
+
+The PR curve follows VPR practice (VPR_Tutorial's createPR): every query answers its best reference with a
+score; at a threshold t the answers with score >= t are accepted; precision = correct accepted / accepted,
+recall = correct accepted / queries whose place is in the map. An accepted answer for an unmapped place is a
+false match. One point per distinct score (tied scores are accepted together).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def correct_candidates(ranked: np.ndarray, truth: np.ndarray, tolerance: int = 0) -> np.ndarray:
+    """(Q, k) candidates and (Q, T) padded truth -> (Q, k) bool: candidate within ``tolerance`` of a truth."""
+    ranked = np.asarray(ranked)
+    if ranked.ndim == 1:
+        ranked = ranked[:, None]
+    valid = truth >= 0                                                        # (Q, T)
+    near = np.abs(ranked[:, :, None] - truth[:, None, :]) <= tolerance        # (Q, k, T)
+    return (near & valid[:, None, :]).any(axis=2) & (ranked >= 0)
+
+
+def recall_at_k(correct: np.ndarray, mapped: np.ndarray, k: int) -> float:
+    """Share of mapped queries with a correct candidate among their first ``k`` (NaN if none is mapped)."""
+    if not mapped.any():
+        return float("nan")
+    return float(correct[mapped, :k].any(axis=1).mean())
+
+
+@dataclass(frozen=True)
+class PRCurve:
+    """Points of the precision-recall curve, one per distinct score threshold, thresholds descending."""
+
+    precision: np.ndarray
+    recall: np.ndarray
+    thresholds: np.ndarray
+
+
+def pr_curve(scores: np.ndarray, correct: np.ndarray, n_mapped: int) -> PRCurve:
+    """Scores (Q,) of the answers, whether each is correct (Q,) bool, and the number of mapped queries."""
+    scores = np.asarray(scores, np.float64)
+    order = np.argsort(-scores, kind="stable")
+    s, c = scores[order], np.asarray(correct, bool)[order]
+    tp = np.cumsum(c)
+    accepted = np.arange(1, len(s) + 1)
+    last = np.r_[s[1:] != s[:-1], True]                   # the last index of each group of tied scores
+    tp, accepted = tp[last], accepted[last]
+    recall = tp / n_mapped if n_mapped else np.zeros(len(tp))
+    return PRCurve(tp / accepted, recall, s[last])
+
+
+def auc_trapezoid(curve: PRCurve) -> float:
+    """Thesis eq. 5.1: sum over consecutive distinct recalls r_i < r_i+1 of
+    (r_i+1 - r_i) * (min precision at r_i + max precision at r_i+1) / 2."""
+    r = curve.recall
+    levels = np.unique(r)
+    if len(levels) < 2:
+        return 0.0
+    idx = np.searchsorted(levels, r)
+    p_min = np.full(len(levels), np.inf)
+    p_max = np.full(len(levels), -np.inf)
+    np.minimum.at(p_min, idx, curve.precision)
+    np.maximum.at(p_max, idx, curve.precision)
+    return float(np.sum(np.diff(levels) * (p_min[:-1] + p_max[1:]) / 2.0))
+
+
+def average_precision(curve: PRCurve) -> float:
+    """Thesis eq. 5.2: AP = sum over thresholds of (R_n - R_n-1) * P_n, with R_0 = 0."""
+    return float(np.sum(np.diff(np.r_[0.0, curve.recall]) * curve.precision))
+
+
+def precision_at_full_recall(curve: PRCurve) -> float:
+    """Precision at the first threshold reaching recall 1; 0 if recall 1 is never reached."""
+    full = np.flatnonzero(curve.recall >= 1.0 - 1e-12)
+    return float(curve.precision[full[0]]) if len(full) else 0.0
+
+
+def recall_at_full_precision(curve: PRCurve) -> float:
+    """Highest recall among thresholds with precision 1; 0 if the most confident answer is already wrong."""
+    exact = curve.precision >= 1.0 - 1e-12
+    return float(curve.recall[exact].max()) if exact.any() else 0.0
+
+
+def localisation_error(refs: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Per query: |answer - nearest correct reference| in references (Q,) float; NaN for unmapped queries."""
+    valid = truth >= 0
+    dist = np.where(valid, np.abs(np.asarray(refs)[:, None] - truth), np.iinfo(np.int64).max)
+    err = dist.min(axis=1).astype(np.float64)
+    err[~valid.any(axis=1)] = np.nan
+    return err

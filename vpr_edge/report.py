@@ -1,0 +1,65 @@
+"""Evaluation reports: the stdout table, the ``--json`` file and the ``--plot`` PR-curve figure."""
+from __future__ import annotations
+
+import json
+import os
+
+from vpr_edge.errors import VprError
+from vpr_edge.evaluate import ModeReport
+from vpr_edge.store import atomic_output
+
+_COLUMNS = ("R@1", "R@5", "R@10", "AUC", "AP", "P@R=1", "R@P=1", "med.err", "lost-off", "lost-on", "ms/frame")
+
+
+def table(reports: dict[str, ModeReport]) -> str:
+    """A fixed-width table, one row per mode. lost-off / lost-on: share of frames of unmapped / mapped
+    places reported lost ('-' where the mode has no lost state or there are no such frames)."""
+    def cell(v: float, fmt: str = "{:.3f}") -> str:
+        return "-" if v != v else fmt.format(v)
+
+    width = max([len(m) for m in reports] + [4])
+    lines = [f"{'mode':<{width}} " + " ".join(f"{c:>8s}" for c in _COLUMNS)]
+    for name, r in reports.items():
+        vals = [*r.recall.values(), r.auc, r.ap, r.precision_at_full_recall, r.recall_at_full_precision]
+        cells = [cell(v) for v in vals] + [cell(r.median_error, "{:.1f}"), cell(r.lost_unmapped),
+                                           cell(r.lost_mapped), cell(r.match_ms, "{:.2f}")]
+        lines.append(f"{name:<{width}} " + " ".join(f"{c:>8s}" for c in cells))
+    return "\n".join(lines)
+
+
+def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, reports: dict[str, ModeReport]) -> None:
+    """``{"n_queries", "n_refs", "modes": {MODE: {recall_at_1, ..., median_error}}}``, written atomically."""
+    doc = {"n_queries": n_queries, "n_refs": n_refs, "modes": {m: r.as_json() for m, r in reports.items()}}
+    with atomic_output(path) as tmp:
+        tmp.write_text(json.dumps(doc, indent=1) + "\n")
+
+
+def require_matplotlib() -> None:
+    """Raise VprError unless matplotlib can be imported (checked before any work)."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise VprError("--plot needs matplotlib: pip install 'vpr-edge[plot]'") from None
+
+
+def plot(path: str | os.PathLike[str], reports: dict[str, ModeReport], title: str) -> None:
+    """All modes' PR curves in one labelled PNG, written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=120)
+    for name, r in reports.items():
+        ax.plot(r.curve.recall, r.curve.precision, label=f"{name} (AUC {r.auc:.3f}, R@1 {r.recall[1]:.3f})")
+    ax.set_xlabel("recall")
+    ax.set_ylabel("precision")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.02)
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower left")
+    fig.tight_layout()
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)

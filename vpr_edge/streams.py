@@ -1,0 +1,91 @@
+"""Query streams a vehicle produces, derived from a frame-aligned reference/query pair, with ground truth.
+
+The shared datasets line up query frame i with reference place i, so "reference = frame index" is perfect on
+them. These functions derive other streams from such a pair: the map holds places [0, n_mapped) and the
+query frames of places [n_mapped, n_places) serve as unmapped places for detours. Each derived stream is a
+list of source query indices (which frame to show) and, per frame, its true place (-1 = not in the map).
+"""
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from vpr_edge.errors import VprError
+
+KINDS: tuple[str, ...] = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
+
+
+def derive_stream(kind: str, n_mapped: int, n_places: int, seed: int = 0) -> np.ndarray:
+    """Source place index per frame of the derived stream (F,) int; values >= n_mapped are unmapped places.
+
+    aligned: 1 place/frame over the map; speed2/speed3: every 2nd/3rd place; stop-and-go: runs at 1
+    place/frame broken by stops of 5-20 repeated frames; variable: speed drifting smoothly in [0.5, 3]
+    places/frame; partial: the middle half of the map; detour: the first 40% of the map, then up to 30%
+    of n_mapped frames of unmapped places, then re-entering at 60% of the map to its end.
+    """
+    rng = np.random.default_rng(seed)
+    if kind == "aligned":
+        return np.arange(n_mapped)
+    if kind in ("speed2", "speed3"):
+        return np.arange(0, n_mapped, int(kind[-1]))
+    if kind == "stop-and-go":
+        out: list[int] = []
+        place = 0
+        while place < n_mapped:
+            run = int(rng.integers(10, 31))
+            out.extend(range(place, min(place + run, n_mapped)))
+            place += run
+            if place < n_mapped:
+                out.extend([place - 1] * int(rng.integers(5, 21)))
+        return np.array(out)
+    if kind == "variable":
+        pos, speed, out = 0.0, 1.0, []
+        while pos < n_mapped:
+            out.append(int(pos))
+            speed = float(np.clip(speed + rng.normal(0, 0.25), 0.5, 3.0))
+            pos += speed
+        return np.array(out)
+    if kind == "partial":
+        return np.arange(n_mapped // 4, (3 * n_mapped) // 4)
+    if kind == "detour":
+        n_off = min(n_places - n_mapped, max(1, (3 * n_mapped) // 10))
+        if n_places <= n_mapped:
+            raise VprError("a detour needs places outside the map (n_mapped < number of places)")
+        return np.concatenate([np.arange(0, (2 * n_mapped) // 5), np.arange(n_mapped, n_mapped + n_off),
+                               np.arange((3 * n_mapped) // 5, n_mapped)])
+    raise VprError(f"unknown stream kind {kind!r}; choose from {', '.join(KINDS)}")
+
+
+def write_ground_truth(path: str | os.PathLike[str], truth: Sequence[Sequence[int]]) -> None:
+    """Write the project's ground-truth CSV (``query,references``; empty = place not in the map)
+    atomically."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "w", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(["query", "references"])
+        for q, refs in enumerate(truth):
+            w.writerow([q, " ".join(str(int(r)) for r in refs)])
+    os.replace(tmp, path)
+
+
+def write_stream(out: str | os.PathLike[str], sources: Sequence[Path], places: np.ndarray, n_mapped: int) -> None:
+    """Write frames ``sources[places[i]]`` as ``out/NNNNNNN.ext`` (hard links where possible) and
+    ``out.csv``, their ground truth (the true place, or empty for an unmapped one)."""
+    out = Path(out)
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    for i, p in enumerate(places):
+        src = sources[int(p)]
+        dst = out / f"{i:07d}{src.suffix}"
+        try:
+            os.link(src, dst)
+        except OSError:
+            shutil.copyfile(src, dst)
+    write_ground_truth(out.with_suffix(".csv"), [[int(p)] if p < n_mapped else [] for p in places])
