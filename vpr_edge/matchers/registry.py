@@ -12,7 +12,7 @@ from vpr_edge.matchers.seqslam import SeqSLAMOnline, seqslam_match
 from vpr_edge.matchers.single import BestMatch
 from vpr_edge.matchers.stream_dtw import StreamingDTW
 
-STREAM_MIN_CONFIDENCE = 1.0
+STREAM_MIN_CONFIDENCE = 5.0
 _DTW = {"variant": "distance", "open_ends": False, "max_step": 4, "rival_window": 5}
 _SEQSLAM = {"ds": 10, "vmin": 0.5, "vmax": 3.0, "r_window": 10, "match_window": 10}
 

@@ -1,0 +1,125 @@
+"""`vpr-edge evaluate` end to end: real frames, a similarity matrix without a model, pixels, bad input."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from test_cli import assert_one_line_error, run
+from vpr_edge.streams import write_ground_truth
+
+JSON_KEYS = {"recall_at_1", "recall_at_5", "recall_at_10", "auc", "ap", "precision_at_full_recall",
+             "recall_at_full_precision", "median_error"}
+
+
+@pytest.fixture(scope="module")
+def eval_map(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Path:
+    out = tmp_path_factory.mktemp("evalmap") / "m.map.npz"
+    assert run("build-map", small_refs, "-o", out, "--components", "8", "--pca-dim", "32").returncode == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def aligned_gt(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("gt") / "gt.csv"
+    write_ground_truth(path, [[i] for i in range(24)])
+    return path
+
+
+def planted_similarity(tmp_path: Path, q: int = 40, r: int = 60) -> tuple[Path, Path]:
+    rng = np.random.default_rng(0)
+    places = np.arange(q) + 10
+    sim = 0.3 * rng.normal(size=(q, r))
+    sim[np.arange(q), places] += 1.0
+    np.save(tmp_path / "s.npy", sim)
+    write_ground_truth(tmp_path / "gt.csv", [[p] for p in places])
+    return tmp_path / "s.npy", tmp_path / "gt.csv"
+
+
+def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_queries: Path,
+                                        aligned_gt: Path) -> None:
+    js, png, sim = tmp_path / "r.json", tmp_path / "pr.png", tmp_path / "s.npy"
+    proc = run("evaluate", "--map", eval_map, "--queries", small_queries, "--gt", aligned_gt, "--json", js,
+               "--plot", png, "--save-similarity", sim, "--modes", "single,stream,dtw,seqslam-online")
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(js.read_text())
+    assert set(doc) == {"n_queries", "n_refs", "modes"} and doc["n_queries"] == 24 and doc["n_refs"] == 24
+    assert set(doc["modes"]) == {"single", "stream", "dtw", "seqslam-online"}
+    assert all(set(m) == JSON_KEYS for m in doc["modes"].values())
+    assert doc["modes"]["dtw"]["recall_at_1"] > 0.9            # aligned sequences: fixed-end DTW is right
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    assert np.load(sim).shape == (24, 24)
+    assert "R@1" in proc.stdout and "seqslam-online" in proc.stdout
+
+
+def test_evaluate_similarity_needs_no_model_nor_torch(tmp_path: Path) -> None:
+    s, gt = planted_similarity(tmp_path)
+    code = ("import sys, runpy; sys.argv = ['vpr-edge', 'evaluate', '--similarity', %r, '--gt', %r, '--json', %r]\n"
+            "try:\n    runpy.run_module('vpr_edge.cli', run_name='__main__')\nexcept SystemExit as e:\n"
+            "    assert not e.code, e.code\n"
+            "bad = [m for m in ('torch', 'onnx', 'sklearn', 'vpr_edge_export') if m in sys.modules]\n"
+            "assert not bad, bad\n") % (str(s), str(gt), str(tmp_path / "r.json"))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["n_queries"] == 40 and doc["n_refs"] == 60
+    assert doc["modes"]["single"]["recall_at_1"] > 0.7 and doc["modes"]["stream"]["recall_at_1"] > 0.8
+
+
+def test_evaluate_gt_matrix_and_positions(tmp_path: Path) -> None:
+    s, _ = planted_similarity(tmp_path)
+    m = np.zeros((40, 60), bool)
+    m[np.arange(40), np.arange(40) + 10] = True
+    np.save(tmp_path / "gt.npy", m)
+    (tmp_path / "r.csv").write_text("x,y\n" + "".join(f"{5 * i},0\n" for i in range(60)))
+    (tmp_path / "q.csv").write_text("x,y\n" + "".join(f"{5 * (i + 10) + 1},0\n" for i in range(40)))
+    a = run("evaluate", "--similarity", s, "--gt", tmp_path / "gt.npy", "--modes", "single", "--json", tmp_path / "a.json")
+    b = run("evaluate", "--similarity", s, "--gt-positions", tmp_path / "r.csv", tmp_path / "q.csv", "--radius", "2",
+            "--modes", "single", "--json", tmp_path / "b.json")
+    assert a.returncode == 0 and b.returncode == 0, a.stderr + b.stderr
+    assert (json.loads((tmp_path / "a.json").read_text()) == json.loads((tmp_path / "b.json").read_text()))
+
+
+def test_evaluate_pixels_front_end(tmp_path: Path, small_refs: Path, small_queries: Path, aligned_gt: Path) -> None:
+    proc = run("evaluate", "--features", "pixels", "--refs", small_refs, "--queries", small_queries, "--gt",
+               aligned_gt, "--modes", "single,seqslam", "--json", tmp_path / "p.json")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads((tmp_path / "p.json").read_text())["n_refs"] == 24
+
+
+def test_evaluate_bad_input(tmp_path: Path, eval_map: Path, small_queries: Path, aligned_gt: Path) -> None:
+    s, gt = planted_similarity(tmp_path)
+    short = tmp_path / "short.csv"
+    write_ground_truth(short, [[i] for i in range(10)])
+    np.save(tmp_path / "one_d.npy", np.zeros(5))
+    nan = np.load(s)
+    nan[3, 4] = np.nan
+    np.save(tmp_path / "nan.npy", nan)
+    fake = tmp_path / "fake"
+    (fake / "matplotlib").mkdir(parents=True)
+    (fake / "matplotlib" / "__init__.py").write_text("raise ImportError('no matplotlib here')\n")
+    existing = tmp_path / "keep.json"
+    existing.write_text("{}")
+    cases = [
+        (["--similarity", s, "--gt", short], "short.csv"),
+        (["--similarity", tmp_path / "one_d.npy", "--gt", gt], "2-D"),
+        (["--similarity", tmp_path / "nan.npy", "--gt", gt], "NaN"),
+        (["--map", eval_map, "--queries", small_queries, "--gt", gt], "40 rows"),
+        (["--similarity", s, "--gt", gt, "--modes", "single,nope"], "nope"),
+        (["--similarity", s], "ground truth"),
+        (["--similarity", s, "--gt", gt, "--map", eval_map], "one source"),
+        (["--similarity", s, "--gt", gt, "--json", tmp_path], "is a folder"),
+        (["--similarity", s, "--gt", gt, "--json", tmp_path / "no" / "r.json"], "does not exist"),
+    ]
+    for args, needle in cases:
+        assert_one_line_error(run("evaluate", *args), needle)
+    # --plot without matplotlib: one line, before any work, and nothing written
+    proc = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "evaluate", "--similarity", str(s), "--gt", str(gt),
+                           "--plot", str(tmp_path / "pr.png"), "--json", str(existing)], capture_output=True,
+                          text=True, timeout=300, env={"PYTHONPATH": str(fake), "PATH": "/usr/bin:/bin"})
+    assert_one_line_error(proc, "matplotlib")
+    assert proc.returncode == 2 and existing.read_text() == "{}" and not (tmp_path / "pr.png").exists()

@@ -1,0 +1,63 @@
+"""Ground truth from the project's CSV, a boolean matrix and positions; derived vehicle streams."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vpr_edge import groundtruth
+from vpr_edge.errors import VprError
+from vpr_edge.streams import KINDS, derive_stream
+
+
+def test_csv_with_unmapped_rows(tmp_path) -> None:
+    p = tmp_path / "gt.csv"
+    p.write_text("query,references\n0,0 1\n1,\n2,4\n")
+    np.testing.assert_array_equal(groundtruth.load_csv(p), [[0, 1], [-1, -1], [4, -1]])
+    p.write_text("query,references\n0,1\n2,3\n")
+    with pytest.raises(VprError, match="without gaps"):
+        groundtruth.load_csv(p)
+    p.write_text("a,b\n")
+    with pytest.raises(VprError, match="header"):
+        groundtruth.load_csv(p)
+
+
+def test_matrix(tmp_path) -> None:
+    m = np.zeros((3, 5), bool)
+    m[0, [1, 2]] = m[2, 4] = True
+    np.save(tmp_path / "gt.npy", m)
+    np.testing.assert_array_equal(groundtruth.load_matrix(tmp_path / "gt.npy"), [[1, 2], [-1, -1], [4, -1]])
+    np.save(tmp_path / "bad.npy", np.zeros(3))
+    with pytest.raises(VprError, match="2-D"):
+        groundtruth.load_matrix(tmp_path / "bad.npy")
+
+
+def test_positions_metric_and_geographic(tmp_path) -> None:
+    (tmp_path / "r.csv").write_text("x,y\n0,0\n10,0\n20,0\n")
+    (tmp_path / "q.csv").write_text("x,y\n9,0\n100,0\n")
+    np.testing.assert_array_equal(groundtruth.from_positions(tmp_path / "r.csv", tmp_path / "q.csv", 5),
+                                  [[1], [-1]])
+    # 0.0001 degrees of latitude is about 11.1 m
+    (tmp_path / "rg.csv").write_text("lat,lon\n52.0,13.0\n52.0001,13.0\n52.001,13.0\n")
+    (tmp_path / "qg.csv").write_text("lat,lon\n52.00005,13.0\n")
+    np.testing.assert_array_equal(groundtruth.from_positions(tmp_path / "rg.csv", tmp_path / "qg.csv", 6),
+                                  [[0, 1]])
+    with pytest.raises(VprError, match="same columns"):
+        groundtruth.from_positions(tmp_path / "r.csv", tmp_path / "qg.csv", 5)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_derived_streams(kind: str) -> None:
+    places = derive_stream(kind, 300, 450, seed=1)
+    mapped = places[places < 300]
+    assert len(places) > 50 and places.min() >= 0 and places.max() < 450
+    steps = np.diff(mapped)
+    if kind == "detour":
+        assert (places >= 300).sum() == 90 and places[-1] == 299
+    else:
+        assert (places < 300).all()
+    if kind == "speed3":
+        assert set(steps) == {3}
+    if kind == "stop-and-go":
+        assert (steps == 0).sum() > 20 and set(steps) <= {0, 1}
+    if kind == "variable":
+        assert 0 <= steps.min() and steps.max() <= 3 and len(set(steps)) >= 3

@@ -1,0 +1,181 @@
+"""The matcher registry and contract; SeqSLAM against plain loops; the road matcher and open-ends DTW on
+planted routes (speeds 0-3, a detour, a restart)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vpr_edge.matchers import MATCHERS, get_matcher
+from vpr_edge.matchers.contrast import local_contrast
+from vpr_edge.matchers.road import RoadMatcher
+from vpr_edge.matchers.seqslam import SeqSLAMOnline, enhanced_difference, seqslam_match, speeds
+
+
+def naive_contrast(sim: np.ndarray, window: int) -> np.ndarray:
+    out = np.empty_like(sim, dtype=float)
+    r = sim.shape[1]
+    for i in range(sim.shape[0]):
+        for j in range(r):
+            w = sim[i, max(0, j - window // 2): min(r, j + window // 2 + 1)]
+            out[i, j] = (sim[i, j] - w.mean()) / np.sqrt(w.var() + 1e-12)
+    return out
+
+
+def naive_seqslam(sim, ds, vmin, vmax, r_window, match_window, online):
+    d = -naive_contrast(sim, r_window)
+    q, r = d.shape
+    v = speeds(ds, vmin, vmax)
+    refs, scores = [], []
+    if not online:
+        d = d - d.min()
+    for n in range(q):
+        values, pos = [], []
+        for s in range(r):
+            best, best_pos = np.inf, 0
+            for vel in v:
+                total = 0.0
+                if online:
+                    frames = range(max(0, n - ds), n + 1)
+                    for x in frames:
+                        row = d[x] - d[x].min()
+                        total += row[max(s - int(np.floor((n - x) * vel + 1e-9)), 0)]
+                    p = s
+                else:
+                    length = min(ds + 1, q)
+                    x0 = min(max(n - ds // 2, 0), q - length)
+                    for k in range(length):
+                        total += d[x0 + k, min(s + int(np.floor(k * vel + 1e-9)), r - 1)]
+                    p = min(s + int(np.floor((n - x0) * vel + 1e-9)), r - 1)
+                if total < best:
+                    best, best_pos = total, p
+            values.append(best)
+            pos.append(best_pos)
+        values = np.array(values)
+        s = int(np.argmin(values))
+        far = np.abs(np.arange(r) - s) > match_window // 2
+        refs.append(pos[s])
+        scores.append(1 - values[s] / values[far].min())
+    return np.array(refs), np.array(scores)
+
+
+def planted(rng: np.random.Generator, n_refs: int, places: np.ndarray, noise: float = 0.35) -> np.ndarray:
+    """Similarity rows (F, R) for a vehicle at ``places`` (-1 = off the map): a bump at the true place over
+    smooth noise, as cosine similarities of encodings behave."""
+    sim = noise * rng.normal(size=(len(places), n_refs))
+    on = places >= 0
+    sim[np.flatnonzero(on), places[on]] += 1.0
+    return sim
+
+
+def test_local_contrast_matches_loop() -> None:
+    sim = np.random.default_rng(0).normal(size=(4, 23))
+    for w in (2, 5, 10):
+        np.testing.assert_allclose(local_contrast(sim, w), naive_contrast(sim, w), atol=1e-9)
+
+
+@pytest.mark.parametrize("online", [False, True])
+def test_seqslam_matches_plain_loops(online: bool) -> None:
+    rng = np.random.default_rng(1)
+    places = np.clip(np.round(np.cumsum(rng.uniform(0.5, 2.0, 16))).astype(int), 0, 39)
+    sim = planted(rng, 40, places, noise=0.3)
+    params = {"ds": 4, "vmin": 0.5, "vmax": 2.0, "r_window": 6, "match_window": 6}
+    want_refs, want_scores = naive_seqslam(sim, online=online, **params)
+    if online:
+        m = SeqSLAMOnline(40, **params)
+        got = np.array([m.update(row) for row in sim])
+        got_refs, got_scores = got[:, 0].astype(int), got[:, 1]
+    else:
+        res = seqslam_match(sim, **params)
+        got_refs, got_scores = res.refs, res.scores
+    np.testing.assert_array_equal(got_refs, want_refs)
+    np.testing.assert_allclose(got_scores, want_scores, atol=1e-9)
+    assert np.mean(np.abs(got_refs - places) <= 1) > 0.7
+
+
+def test_seqslam_difference_is_non_negative() -> None:
+    d = enhanced_difference(np.random.default_rng(2).normal(size=(5, 30)))
+    assert d.min() == 0.0
+
+
+def route(speed_runs: list[tuple[float, int]], start: float = 0.0) -> np.ndarray:
+    pos, out = start, []
+    for speed, frames in speed_runs:
+        for _ in range(frames):
+            out.append(int(pos))
+            pos += speed
+    return np.array(out)
+
+
+@pytest.mark.parametrize("speed", [0.0, 0.5, 1.0, 2.0, 3.0])
+def test_road_matcher_follows_any_speed(speed: float) -> None:
+    rng = np.random.default_rng(int(speed * 10))
+    places = route([(1.0, 15), (speed, 60)], start=100)
+    sim = planted(rng, 600, places)
+    res = get_matcher("stream").run(sim)
+    settled = slice(25, None)
+    assert np.mean(np.abs(res.refs[settled] - places[settled]) <= 1) > 0.95
+
+
+def test_road_matcher_detour_lost_and_restart() -> None:
+    rng = np.random.default_rng(9)
+    places = np.concatenate([route([(1.0, 40), (2.0, 30)], start=50), np.full(40, -1),
+                             route([(1.5, 40)], start=400)])
+    sim = planted(rng, 600, places)
+    matcher = get_matcher("stream")
+    res = matcher.run(sim)
+    first, second, off = slice(10, 70), slice(125, 150), slice(80, 110)
+    assert np.mean(np.abs(res.refs[first] - places[first]) <= 1) > 0.95
+    assert np.mean(np.abs(res.refs[second] - places[second]) <= 1) > 0.95      # re-locked elsewhere
+    assert np.mean(res.scores[off] < matcher.min_confidence) > 0.9              # lost while off the map
+    assert np.mean(res.scores[first] < matcher.min_confidence) < 0.05
+    # reset forgets: a fresh start at another place locks on as quickly as the first time
+    online = matcher.stream(600)
+    for row in sim[:60]:
+        online.update(row)
+    online.reset()
+    again = [online.update(row)[0] for row in sim[125:]]
+    assert np.mean(np.abs(np.array(again[10:]) - places[135:]) <= 1) > 0.95
+
+
+def test_road_matcher_state_is_bounded() -> None:
+    m = RoadMatcher(50)
+    rng = np.random.default_rng(0)
+    before = m.h.nbytes
+    for _ in range(300):
+        m.update(rng.normal(size=50))
+    assert m.h.nbytes == before == 9 * 2 * 50 * 8
+    with pytest.raises(ValueError):
+        m.update(np.zeros(49))
+
+
+@pytest.mark.parametrize("speed", [2.0, 3.0])
+def test_open_ends_dtw_follows_fast_vehicle(speed: float) -> None:
+    rng = np.random.default_rng(int(speed))
+    places = route([(speed, 40)], start=60)
+    sim = planted(rng, 400, places, noise=0.5)
+    res = get_matcher("dtw-open").run(sim)
+    assert np.mean(np.abs(res.refs - places) <= 1) >= 0.85     # the first frames fix the start
+    fixed = get_matcher("dtw").run(sim)
+    assert np.mean(np.abs(fixed.refs - places) <= 1) < 0.5     # fixed ends cannot: the route is partial
+
+
+@pytest.mark.parametrize("name", list(MATCHERS))
+def test_every_matcher_keeps_the_contract(name: str) -> None:
+    rng = np.random.default_rng(4)
+    places = route([(1.0, 30)], start=0)
+    sim = planted(rng, 30, places, noise=0.2)
+    res = MATCHERS[name].run(sim, k=5)
+    assert res.refs.shape == (30,) and res.scores.shape == (30,) and res.ranked.shape == (30, 5)
+    np.testing.assert_array_equal(res.ranked[:, 0], res.refs)
+    assert all(len(set(row)) == 5 for row in res.ranked) or name.startswith("seqslam")
+    assert np.isfinite(res.scores).all()
+    assert np.mean(np.abs(res.refs[10:] - places[10:]) <= 1) > 0.7
+    with pytest.raises(ValueError):
+        MATCHERS[name].run(np.zeros(5))
+    with pytest.raises(ValueError):
+        get_matcher(name).with_params(no_such_parameter=1)
+
+
+def test_unknown_matcher() -> None:
+    with pytest.raises(ValueError, match="choose from"):
+        get_matcher("nope")

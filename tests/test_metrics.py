@@ -1,0 +1,75 @@
+"""Metrics against cases worked by hand and against scikit-learn where the definitions coincide."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vpr_edge import metrics
+from vpr_edge.groundtruth import pad
+
+
+def curve_of(scores, correct, n_mapped):
+    return metrics.pr_curve(np.array(scores, float), np.array(correct, bool), n_mapped)
+
+
+def test_pr_curve_by_hand() -> None:
+    # ranked: 0.9 ok, 0.8 wrong, 0.7 ok, 0.6 ok; 4 mapped queries
+    c = curve_of([0.7, 0.9, 0.6, 0.8], [True, True, True, False], 4)
+    np.testing.assert_allclose(c.precision, [1, 1 / 2, 2 / 3, 3 / 4])
+    np.testing.assert_allclose(c.recall, [1 / 4, 1 / 4, 2 / 4, 3 / 4])
+    np.testing.assert_allclose(c.thresholds, [0.9, 0.8, 0.7, 0.6])
+    # eq. 5.1: recalls 1/4, 1/2, 3/4; min p at 1/4 = 1/2, max p at 1/2 = 2/3, at 3/4 = 3/4
+    want = 0.25 * (0.5 + 2 / 3) / 2 + 0.25 * (2 / 3 + 3 / 4) / 2
+    assert metrics.auc_trapezoid(c) == pytest.approx(want)
+    # eq. 5.2: sum of (R_n - R_n-1) P_n
+    assert metrics.average_precision(c) == pytest.approx(0.25 * 1 + 0 + 0.25 * 2 / 3 + 0.25 * 3 / 4)
+    assert metrics.precision_at_full_recall(c) == 0.0            # recall 1 never reached
+    assert metrics.recall_at_full_precision(c) == 0.25
+
+
+def test_ties_are_accepted_together() -> None:
+    c = curve_of([0.5, 0.5, 0.9], [True, False, True], 3)
+    np.testing.assert_allclose(c.precision, [1, 2 / 3])
+    np.testing.assert_allclose(c.recall, [1 / 3, 2 / 3])
+    # a tie between a right and a wrong answer cannot give precision 1 at recall 2/3
+    assert metrics.recall_at_full_precision(c) == pytest.approx(1 / 3)
+
+
+def test_full_recall_and_precision() -> None:
+    c = curve_of([0.9, 0.8, 0.7], [True, True, True], 3)
+    assert metrics.precision_at_full_recall(c) == 1.0 and metrics.recall_at_full_precision(c) == 1.0
+    # an unmapped query answered with high confidence is a false match
+    c = curve_of([0.95, 0.9, 0.8], [False, True, True], 2)
+    assert metrics.precision_at_full_recall(c) == pytest.approx(2 / 3)
+    assert metrics.recall_at_full_precision(c) == 0.0
+
+
+def test_against_sklearn_where_definitions_coincide() -> None:
+    sk = pytest.importorskip("sklearn.metrics")
+    rng = np.random.default_rng(3)
+    scores = np.round(rng.uniform(size=200), 2)            # with ties
+    correct = rng.uniform(size=200) < scores               # better scores are right more often
+    n_mapped = int(correct.sum())                          # every mapped query's answer counted when right
+    c = metrics.pr_curve(scores, correct, n_mapped)
+    p, r, t = sk.precision_recall_curve(correct, scores)
+    # sklearn lists thresholds ascending with a final (1, 0) point; ours descend
+    keep = slice(None, -1)
+    np.testing.assert_allclose(c.precision, p[keep][::-1])
+    np.testing.assert_allclose(c.recall, r[keep][::-1])
+    np.testing.assert_allclose(c.thresholds, t[::-1])
+    assert metrics.average_precision(c) == pytest.approx(sk.average_precision_score(correct, scores))
+
+
+def test_recall_at_k_and_tolerance() -> None:
+    truth = pad([[5], [10, 11], [], [0]])
+    ranked = np.array([[6, 1, 2], [3, 9, 11], [4, 5, 6], [9, 8, 0]])
+    correct = metrics.correct_candidates(ranked, truth, tolerance=1)
+    np.testing.assert_array_equal(correct, [[1, 0, 0], [0, 1, 1], [0, 0, 0], [0, 0, 1]])
+    mapped = (truth >= 0).any(axis=1)
+    assert metrics.recall_at_k(correct, mapped, 1) == pytest.approx(1 / 3)
+    assert metrics.recall_at_k(correct, mapped, 2) == pytest.approx(2 / 3)
+    assert metrics.recall_at_k(correct, mapped, 3) == 1.0
+    assert metrics.correct_candidates(ranked, truth, 0)[0, 0] == 0
+    err = metrics.localisation_error(ranked[:, 0], truth)
+    np.testing.assert_array_equal(err[[0, 1, 3]], [1, 7, 9])
+    assert np.isnan(err[2])

@@ -1,0 +1,65 @@
+#!/usr/bin/env python3
+"""The README's results table: `vpr-edge evaluate` on every derived stream of a dataset, CNN map and pixels.
+
+    python tools/derive_streams.py --dataset ../shared/datasets/corridor --out out/corridor
+    vpr-edge build-map out/corridor/ref --out out/corridor/map.npz
+    python tools/eval_streams.py --streams out/corridor --modes single,stream,dtw,dtw-open,seqslam,seqslam-online
+
+For each stream OUT/KIND (with OUT/KIND.csv) it runs `vpr-edge evaluate --map OUT/map.npz` and
+`vpr-edge evaluate --features pixels --refs OUT/ref`, each writing OUT/eval/KIND.{map,pixels}.json, then prints
+Markdown tables of R@1 and AUC (rows: front end + mode; columns: streams) and the stream mode's lost shares.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+KINDS = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--streams", type=Path, required=True)
+    p.add_argument("--modes", default="single,stream,stream-dtw,dtw,dtw-open,seqslam,seqslam-online")
+    p.add_argument("--tolerance", default="1")
+    p.add_argument("--plot", default="aligned", help="stream whose PR curves go to OUT/eval/KIND.pr.png")
+    a = p.parse_args()
+    out = a.streams / "eval"
+    out.mkdir(exist_ok=True)
+    results: dict[tuple[str, str], dict] = {}
+    for kind in KINDS:
+        for front, source in (("map", ["--map", str(a.streams / "map.npz")]),
+                              ("pixels", ["--features", "pixels", "--refs", str(a.streams / "ref")])):
+            js = out / f"{kind}.{front}.json"
+            cmd = ["vpr-edge", "evaluate", *source, "--queries", str(a.streams / kind), "--gt",
+                   str(a.streams / f"{kind}.csv"), "--modes", a.modes, "--tolerance", a.tolerance, "--json", str(js)]
+            if kind == a.plot:
+                cmd += ["--plot", str(out / f"{kind}.{front}.pr.png")]
+            proc = subprocess.run(cmd, capture_output=True, text=True)
+            if proc.returncode:
+                print(proc.stderr, file=sys.stderr)
+                return proc.returncode
+            (out / f"{kind}.{front}.txt").write_text(proc.stdout)
+            results[kind, front] = json.loads(js.read_text())
+    for metric, key in (("R@1", "recall_at_1"), ("AUC", "auc")):
+        print(f"\n{metric} ({a.streams}, tolerance {a.tolerance})\n")
+        print("| front end / mode | " + " | ".join(KINDS) + " |")
+        print("|---|" + "---|" * len(KINDS))
+        for front in ("map", "pixels"):
+            for mode in a.modes.split(","):
+                vals = [results[k, front]["modes"][mode][key] for k in KINDS]
+                print(f"| {'IFV' if front == 'map' else 'pixels'} {mode} | " +
+                      " | ".join("-" if v is None else f"{v:.3f}" for v in vals) + " |")
+    print("\nstream mode, share of frames reported lost (unmapped places / mapped places), detour stream:")
+    for front in ("map", "pixels"):
+        txt = (out / f"detour.{front}.txt").read_text().splitlines()
+        row = next(line for line in txt if line.startswith("stream "))
+        print(f"  {front}: {row.split()[-3]} / {row.split()[-2]}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
