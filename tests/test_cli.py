@@ -54,14 +54,16 @@ def test_map_contents(small_map: Path, model_path: Path) -> None:
     assert pm.meta["codebook"] == {"fitted_on_refs": True, "n_components": 8, "pca_dim": 32, "seed": 0}
 
 
-@pytest.mark.parametrize("mode", ["stream", "dtw", "single", "dtw --variant distance --open-ends"])
+@pytest.mark.parametrize("mode", ["stream", "stream --min-confidence 0", "dtw", "single",
+                                  "dtw --variant distance --open-ends"])
 def test_localize_matches_real_frames(small_map: Path, small_queries: Path, mode: str) -> None:
     proc = run("localize", "--map", small_map, "--stream", small_queries, "--mode", *mode.split())
     assert proc.returncode == 0, proc.stderr
     rows = list(csv.DictReader(proc.stdout.splitlines()))
     assert [int(r["frame_index"]) for r in rows] == list(range(24))
     found = [r for r in rows if r["lost"] == "0"]
-    assert len(found) >= 12                        # the stream may report lost while it locks on
+    # the stream reports lost while it locks on (13 frames on this 24-place map at the default threshold)
+    assert len(found) >= (8 if mode == "stream" else 24)
     err = np.array([abs(int(r["ref_index"]) - int(r["frame_index"])) for r in found])
     assert np.mean(err <= 2) >= 0.75, err          # the Corridor ground truth is +-2 frames
     assert all(r["ref"] == f"{int(r['ref_index']):07d}.jpg" for r in found)
