@@ -14,7 +14,6 @@ Frames are hard links to the dataset's files where the file system allows. Then,
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -43,8 +42,7 @@ def main() -> int:
         n_mapped = a.map_places or (2 * len(refs)) // 3
         if not 0 < n_mapped <= len(refs):
             raise VprError(f"--map-places must be in 1..{len(refs)}")
-        write_stream(a.out / "ref", refs, np.arange(n_mapped), n_mapped)
-        os.remove(a.out / "ref.csv")
+        write_stream(a.out / "ref", refs, np.arange(n_mapped), n_mapped, with_truth=False)
         for kind in a.kinds.split(","):
             places = derive_stream(kind, n_mapped, len(refs), a.seed)
             write_stream(a.out / kind, queries, places, n_mapped)

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError
+from vpr_edge.store import atomic_output
 
 KINDS: tuple[str, ...] = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
 
@@ -64,19 +65,17 @@ def derive_stream(kind: str, n_mapped: int, n_places: int, seed: int = 0) -> np.
 def write_ground_truth(path: str | os.PathLike[str], truth: Sequence[Sequence[int]]) -> None:
     """Write the project's ground-truth CSV (``query,references``; empty = place not in the map)
     atomically."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "w", newline="") as f:
+    with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(["query", "references"])
         for q, refs in enumerate(truth):
             w.writerow([q, " ".join(str(int(r)) for r in refs)])
-    os.replace(tmp, path)
 
 
-def write_stream(out: str | os.PathLike[str], sources: Sequence[Path], places: np.ndarray, n_mapped: int) -> None:
-    """Write frames ``sources[places[i]]`` as ``out/NNNNNNN.ext`` (hard links where possible) and
-    ``out.csv``, their ground truth (the true place, or empty for an unmapped one)."""
+def write_stream(out: str | os.PathLike[str], sources: Sequence[Path], places: np.ndarray, n_mapped: int,
+                 with_truth: bool = True) -> None:
+    """Write frames ``sources[places[i]]`` as ``out/NNNNNNN.ext`` (hard links where possible) and, with
+    ``with_truth``, ``out.csv``: their ground truth (the true place, or empty for an unmapped one)."""
     out = Path(out)
     if out.exists():
         shutil.rmtree(out)
@@ -88,4 +87,5 @@ def write_stream(out: str | os.PathLike[str], sources: Sequence[Path], places: n
             os.link(src, dst)
         except OSError:
             shutil.copyfile(src, dst)
-    write_ground_truth(out.with_suffix(".csv"), [[int(p)] if p < n_mapped else [] for p in places])
+    if with_truth:
+        write_ground_truth(out.with_suffix(".csv"), [[int(p)] if p < n_mapped else [] for p in places])
