@@ -4,9 +4,10 @@ from __future__ import annotations
 import contextlib
 import csv
 import json
+import os
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from enum import Enum
 from pathlib import Path
 from typing import IO, Optional
@@ -14,18 +15,32 @@ from typing import IO, Optional
 import numpy as np
 import typer
 
+from vpr_edge import __version__
 from vpr_edge.codebook import Codebook
-from vpr_edge.errors import VprError
-from vpr_edge.extract import FeatureExtractor, default_model_path
+from vpr_edge.errors import VprError, warn
+from vpr_edge.extract import FeatureExtractor, resolve_model
 from vpr_edge.images import Frame, list_images, load_image, open_stream
-from vpr_edge.localize import encode_frames, localize
+from vpr_edge.localize import Match, encode_frames, localize
 from vpr_edge.mapfile import PlaceMap, build_map
 from vpr_edge.matchers import MATCHERS, Matcher, get_matcher
 from vpr_edge.store import atomic_output, check_writable
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
-                  help="Visual place recognition on a CPU: build a map of reference images, then localise "
-                       "a stream of frames against it (ONNX features, Improved Fisher Vectors, DTW).")
+                  rich_markup_mode=None, context_settings={"help_option_names": ["-h", "--help"],
+                                                           "max_content_width": 100})
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"vpr-edge {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="Print the version and exit.")) -> None:
+    """Visual place recognition on a CPU: build a map of reference images, then localise a stream of frames
+    against it (ONNX features, Improved Fisher Vectors, sequence matching)."""
 
 
 ModeOpt = Enum("ModeOpt", {name: name for name in MATCHERS}, type=str)  # type: ignore[misc]
@@ -54,12 +69,20 @@ def _user_errors() -> Iterator[None]:
     except (VprError, ValueError) as e:
         typer.echo(f"vpr-edge: error: {e}", err=True)
         raise typer.Exit(2) from None
+    except BrokenPipeError:  # the reader went away (``| head``): stop quietly, as Unix tools do
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        raise typer.Exit(1) from None
+    except OSError as e:  # disk full, permission lost mid-run: name the file and the reason
+        where = f"{e.filename}: " if e.filename else ""
+        typer.echo(f"vpr-edge: error: {where}{e.strerror or e}", err=True)
+        raise typer.Exit(2) from None
     except KeyboardInterrupt:
         typer.echo("vpr-edge: interrupted", err=True)
         raise typer.Exit(130) from None
 
 
-_MODEL_HELP = "ONNX feature model exported by vpr_edge_export (default: the bundled EfficientNet-Lite0 tap)."
+_MODEL_HELP = ("ONNX feature model exported by vpr_edge_export (default: $VPR_EDGE_MODEL if set, else the "
+               "bundled EfficientNet-Lite0 tap).")
 _THREADS_HELP = "onnxruntime intra-op threads (0 = one per core)."
 
 
@@ -70,12 +93,15 @@ def build_map_cmd(
     model: Optional[Path] = typer.Option(None, help=_MODEL_HELP),
     codebook: Optional[Path] = typer.Option(
         None, help="Reuse this codebook (.npz from --save-codebook) instead of fitting one on the references."),
-    components: int = typer.Option(128, min=1, help="GMM components M when fitting (thesis: 128)."),
+    components: Optional[int] = typer.Option(None, min=1, help="GMM components M when fitting (default 128, "
+                                                               "as the thesis)."),
     pca_dim: Optional[int] = typer.Option(None, min=1, help="Reduce descriptors to this many dims by PCA "
                                                             "before the GMM (default: no PCA)."),
-    whiten: bool = typer.Option(True, help="Whiten the PCA output (with --pca-dim)."),
+    whiten: Optional[bool] = typer.Option(None, "--whiten/--no-whiten", help="Whiten the PCA output "
+                                          "(default: whiten; with --pca-dim only)."),
     alpha: float = typer.Option(0.5, min=0.0, max=1.0, help="Signed power normalisation exponent (1 = off)."),
-    max_descriptors: int = typer.Option(100_000, min=1, help="Local descriptors sampled to fit the codebook."),
+    max_descriptors: Optional[int] = typer.Option(None, min=1, help="Local descriptors sampled to fit the "
+                                                                    "codebook (default 100000)."),
     seed: int = typer.Option(0, help="Random seed for sampling and GMM initialisation."),
     save_codebook: Optional[Path] = typer.Option(None, help="Also write the codebook to this .npz file."),
     batch_size: int = typer.Option(8, min=1, help="Images per model run."),
@@ -84,19 +110,38 @@ def build_map_cmd(
     """Build a map from a folder of reference images: extract features, fit the codebook (PCA + GMM) unless
     --codebook is given, encode every reference as an Improved Fisher Vector, and write one map file."""
     with _user_errors():
+        # --- everything that can be checked before the work ---
+        fit_options = {"--components": components, "--pca-dim": pca_dim, "--whiten/--no-whiten": whiten,
+                       "--max-descriptors": max_descriptors}
+        if codebook and any(v is not None for v in fit_options.values()):
+            given_opts = ", ".join(k for k, v in fit_options.items() if v is not None)
+            raise VprError(f"{given_opts}: options for fitting a codebook, but --codebook {codebook} is given")
+        if whiten is not None and pca_dim is None:
+            warn("--whiten/--no-whiten applies only with --pca-dim; ignored")
         for target in (out, save_codebook):
             if target:
                 check_writable(target)
-        extractor = FeatureExtractor(model or default_model_path(), threads)
+        if save_codebook and save_codebook.resolve() == out.resolve():
+            raise VprError(f"{out}: --out and --save-codebook name the same file")
+        files = list_images(refs)
+        if codebook is None:
+            _require_fit_extra()
+        extractor = FeatureExtractor(resolve_model(model), threads)
         given = None
         if codebook:
             given, cb_meta = Codebook.load(codebook)
             if cb_meta.get("model_sha256") not in (None, extractor.fingerprint):
                 raise VprError(f"{codebook}: codebook was fitted on features of another model "
                                f"(sha256 {cb_meta['model_sha256'][:12]}, this is {extractor.fingerprint[:12]})")
-        files = list_images(refs)
-        with typer.progressbar(length=len(files), label="extracting", file=sys.stderr) as bar:
-            place_map = build_map(files, extractor, given, components, pca_dim, whiten, alpha, max_descriptors,
+            if given.input_dim != extractor.dim:  # build_map checks too; here the message can name the file
+                raise VprError(f"{codebook}: codebook expects {given.input_dim}-dim descriptors but "
+                               f"{extractor.path} gives {extractor.dim}")
+
+        # --- the work ---
+        with typer.progressbar(length=len(files), label="extracting", file=sys.stderr,
+                               hidden=not sys.stderr.isatty()) as bar:
+            place_map = build_map(files, extractor, given, components or 128, pca_dim,
+                                  True if whiten is None else whiten, alpha, max_descriptors or 100_000,
                                   batch_size, seed, progress=bar.update)
         place_map.save(out)
         if save_codebook:
@@ -106,12 +151,46 @@ def build_map_cmd(
                    f"({'fitted on the references' if given is None else 'given'})", err=True)
 
 
-def _writer(fmt: str, stream: IO[str]):
+def _require_fit_extra() -> None:
+    """Fail before any work when fitting a codebook is needed and scikit-learn is not installed."""
+    try:
+        import sklearn.mixture  # noqa: F401
+        import vpr_edge_export.codebook_fit  # noqa: F401
+    except ImportError as e:
+        raise VprError(f"fitting a codebook needs scikit-learn ({e.name or e} is missing): "
+                       f"pip install 'vpr-edge[fit]', or pass --codebook FILE") from None
+
+
+@contextlib.contextmanager
+def _writing(where: str) -> Iterator[None]:
+    """A failed write (disk full, device gone) becomes one line naming ``where``; a closed pipe passes."""
+    try:
+        yield
+    except BrokenPipeError:
+        raise
+    except OSError as e:
+        raise VprError(f"{where}: cannot write results ({e.strerror or e})") from None
+
+
+def _results_writer(fmt: str, stream: IO[str], where: str) -> Callable[[Match], None]:
+    """Write the header now; return a function writing one result line and flushing it (a line per frame,
+    as it happens)."""
     if fmt == "csv":
         w = csv.writer(stream, lineterminator="\n")
-        w.writerow(["frame_index", "frame", "ref_index", "ref", "score", "lost"])
-        return lambda m: w.writerow([m.frame_index, m.frame, m.ref_index, m.ref, f"{m.score:.6f}", int(m.lost)])
-    return lambda m: stream.write(json.dumps(m.__dict__ | {"score": round(m.score, 6)}) + "\n")
+        with _writing(where):
+            w.writerow(["frame_index", "frame", "ref_index", "ref", "score", "lost"])
+
+        def line(m: Match) -> None:
+            w.writerow([m.frame_index, m.frame, m.ref_index, m.ref, f"{m.score:.6f}", int(m.lost)])
+    else:
+        def line(m: Match) -> None:
+            stream.write(json.dumps(m.__dict__ | {"score": round(m.score, 6)}) + "\n")
+
+    def write(m: Match) -> None:
+        with _writing(where):
+            line(m)
+            stream.flush()
+    return write
 
 
 def _configured(name: str, given: dict) -> Matcher:
@@ -123,16 +202,20 @@ def _configured(name: str, given: dict) -> Matcher:
     return matcher.with_params(**used)
 
 
-_MODE_HELP = "Matcher: " + "; ".join(f"{m.name}: {m.summary}" for m in MATCHERS.values()) + "."
+_MODE_HELP = ("Matcher. Online (a result per frame): " + ", ".join(n for n, m in MATCHERS.items() if m.online)
+              + ". Offline (results after the last frame): " + ", ".join(n for n, m in MATCHERS.items()
+                                                                         if not m.online)
+              + ". What each does: README, Matchers.")
 
 
 @app.command("localize")
 def localize_cmd(
     map_path: Path = typer.Option(..., "--map", "-m", help="Map file written by build-map."),
     stream: Path = typer.Option(..., "--stream", "-s", help="Folder of frames (file-name order) or a video file."),
-    model: Optional[Path] = typer.Option(None, help="ONNX feature model; must be the map's model (default: the "
-                                  "model file the map was built with if it still exists, else the bundled one)."),
-    mode: ModeOpt = typer.Option("stream", help=_MODE_HELP),
+    model: Optional[Path] = typer.Option(None, help="ONNX feature model; must be the map's model (default: "
+                                         "$VPR_EDGE_MODEL if set, else the file the map was built with if it "
+                                         "still exists, else the bundled one)."),
+    mode: ModeOpt = typer.Option("stream", metavar="MATCHER", help=_MODE_HELP),
     variant: Optional[VariantOpt] = typer.Option(None, help="DTW modes: distance (minimise summed 1 - cosine, "
                                                  "default) or similarity (maximise summed cosine, the thesis)."),
     open_ends: Optional[bool] = typer.Option(None, "--open-ends/--fixed-ends", help="DTW modes: let the path "
@@ -155,32 +238,34 @@ def localize_cmd(
     with _user_errors():
         if out:
             check_writable(out)
+        suffix_fmt = {".csv": "csv", ".jsonl": "jsonl", ".json": "jsonl"}.get(out.suffix.lower()) if out else None
+        if fmt and suffix_fmt and fmt.value != suffix_fmt:
+            raise VprError(f"{out}: --format {fmt.value} contradicts the file's {out.suffix} suffix")
         matcher = _configured(mode.value, {"variant": variant.value if variant else None, "open_ends": open_ends,
                                            "decay": decay})
         place_map = PlaceMap.load(map_path)
         extractor = FeatureExtractor(place_map.model_path(model), threads)
         place_map.check_model(extractor, map_path)
         frames, count = open_stream(stream)
-        chosen = fmt.value if fmt else ("jsonl" if out and out.suffix in (".jsonl", ".json") else "csv")
+        chosen = fmt.value if fmt else (suffix_fmt or "csv")
         skipped = 0
 
         def skip(frame: Frame) -> None:
             nonlocal skipped
             skipped += 1
-            typer.echo(f"\nvpr-edge: warning: {frame.error}; frame skipped", err=True)
+            typer.echo(f"\nvpr-edge: warning: {frame.error}; frame skipped", err=True)  # \n: off the bar
 
         with contextlib.ExitStack() as stack:
             if out:
                 sink = stack.enter_context(open(stack.enter_context(atomic_output(out)), "w", newline=""))
             else:
                 sink = sys.stdout
-            write = _writer(chosen, sink)
+            write = _results_writer(chosen, sink, str(out or "stdout"))
             written = 0
             with typer.progressbar(length=count or 0, label="localizing", file=sys.stderr,
-                                   hidden=count is None) as bar:
+                                   hidden=count is None or not sys.stderr.isatty()) as bar:
                 for match in localize(frames, place_map, extractor, matcher, batch_size, min_confidence, skip):
                     write(match)
-                    sink.flush()  # a line per frame, as it happens
                     written += 1
                     bar.update(1)
             if written == 0:

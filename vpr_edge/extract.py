@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import VprError, warn
 from vpr_edge.store import file_sha256
 
 MODEL_SCHEMA = 1
@@ -17,12 +17,28 @@ _REQUIRED = ("backbone", "tap", "input_width", "input_height", "mean", "std", "c
              "grid_height", "weights_sha256")
 
 
+BUNDLED_MODEL = Path(__file__).resolve().parent.parent / "models" / "efficientnet_lite0_stage5_320x240.onnx"
+
+
 def default_model_path() -> Path:
-    """The bundled default model: ``$VPR_EDGE_MODEL`` if set, else ``models/`` beside the package source."""
+    """The default model: ``$VPR_EDGE_MODEL`` if set, else the bundled one in ``models/``."""
+    return resolve_model(None)
+
+
+def resolve_model(given: Path | None, recorded: Path | None = None) -> Path:
+    """The model to run, by precedence: ``given`` (``--model``), then ``$VPR_EDGE_MODEL``, then ``recorded``
+    (the file a map was built with) if it still exists, then the bundled model. Raises VprError when
+    ``$VPR_EDGE_MODEL`` is set but names no file, rather than falling through to another model."""
+    if given is not None:
+        return Path(given)
     env = os.environ.get("VPR_EDGE_MODEL")
     if env:
+        if not Path(env).is_file():
+            raise VprError(f"{env}: model file not found (named by the VPR_EDGE_MODEL environment variable)")
         return Path(env)
-    return Path(__file__).resolve().parent.parent / "models" / "efficientnet_lite0_stage5_320x240.onnx"
+    if recorded is not None and recorded.name and recorded.is_file():
+        return recorded
+    return BUNDLED_MODEL
 
 
 class FeatureExtractor:
@@ -69,6 +85,9 @@ class FeatureExtractor:
 
     def preprocess(self, rgb: np.ndarray) -> np.ndarray:
         """RGB uint8 (H, W, 3) -> normalised float32 (3, input_height, input_width)."""
+        if 4 * rgb.shape[1] < self.size[0] or 4 * rgb.shape[0] < self.size[1]:
+            warn(f"{rgb.shape[1]}x{rgb.shape[0]} images are upsampled more than 4x per side to the model's "
+                 f"{self.size[0]}x{self.size[1]} input ({self.path.name}); a model with a smaller input suits them")
         interp = cv2.INTER_AREA if rgb.shape[1] > self.size[0] else cv2.INTER_LINEAR
         x = cv2.resize(rgb, self.size, interpolation=interp).astype(np.float32) * (1.0 / 255.0)
         x = (x - self._mean) / self._std

@@ -9,10 +9,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import VprError, warn
 
 IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm"})
 VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg"})
+MIN_SIDE = 8  # pixels: below this an image cannot describe a place (a 1x1 "image" is a broken file)
 
 
 def list_images(folder: str | os.PathLike[str]) -> list[Path]:
@@ -20,9 +21,16 @@ def list_images(folder: str | os.PathLike[str]) -> list[Path]:
     folder = Path(folder)
     if not folder.is_dir():
         raise VprError(f"{folder}: not a folder")
-    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+    try:
+        entries = sorted(p for p in folder.iterdir() if not p.name.startswith(".") and p.is_file())
+    except OSError as e:
+        raise VprError(f"{folder}: cannot list ({e.strerror or e})") from None
+    files = [p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES]
     if not files:
         raise VprError(f"{folder}: no images found (looked for {', '.join(sorted(IMAGE_SUFFIXES))})")
+    others = [p.name for p in entries if p.suffix.lower() not in IMAGE_SUFFIXES]
+    if others:
+        warn(f"{folder}: {len(others)} file(s) that are not images ignored (e.g. {others[0]})")
     return files
 
 
@@ -35,6 +43,9 @@ def load_image(path: str | os.PathLike[str]) -> np.ndarray:
     image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
     if image is None:
         raise VprError(f"{path}: cannot decode image (corrupt or unsupported format)")
+    if min(image.shape[:2]) < MIN_SIDE:
+        raise VprError(f"{path}: image is {image.shape[1]}x{image.shape[0]} pixels, too small to describe a "
+                       f"place (at least {MIN_SIDE}x{MIN_SIDE})")
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 
@@ -66,7 +77,11 @@ def _video_frames(path: Path) -> Iterator[Frame]:
             ok, bgr = cap.read()
             if not ok:
                 break
-            yield Frame(i, f"{path.name}#{i}", cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+            if min(bgr.shape[:2]) < MIN_SIDE:
+                yield Frame(i, f"{path.name}#{i}", None, f"{path}#{i}: frame is {bgr.shape[1]}x{bgr.shape[0]} "
+                                                          f"pixels, too small (at least {MIN_SIDE}x{MIN_SIDE})")
+            else:
+                yield Frame(i, f"{path.name}#{i}", cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
             i += 1
     finally:
         cap.release()

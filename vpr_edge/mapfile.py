@@ -13,7 +13,7 @@ from vpr_edge import __version__
 from vpr_edge.codebook import Codebook
 from vpr_edge.encode import fisher_vector
 from vpr_edge.errors import VprError
-from vpr_edge.extract import FeatureExtractor, default_model_path
+from vpr_edge.extract import FeatureExtractor, resolve_model
 from vpr_edge.images import load_image
 from vpr_edge.store import read_npz, write_npz
 
@@ -55,12 +55,9 @@ class PlaceMap:
         return cls(enc.astype(np.float32, copy=False), names, codebook, meta)
 
     def model_path(self, given: Path | None) -> Path:
-        """The model to localise with: ``given``, else the file the map was built with if it is still
-        there, else the bundled default."""
-        if given is not None:
-            return given
-        recorded = Path(self.meta.get("model_path") or "")
-        return recorded if recorded.name and recorded.is_file() else default_model_path()
+        """The model to localise with: ``given``, else ``$VPR_EDGE_MODEL``, else the file the map was built
+        with if it is still there, else the bundled default (see ``extract.resolve_model``)."""
+        return resolve_model(given, Path(self.meta.get("model_path") or ""))
 
     def check_model(self, extractor: FeatureExtractor, map_path: str | os.PathLike[str]) -> None:
         """Raise VprError unless ``extractor`` is the model the map was built with."""

@@ -26,8 +26,14 @@ def check_writable(path: str | os.PathLike[str]) -> None:
         raise VprError(f"{path}: is a folder, expected a file name to write")
     if not folder.is_dir():
         raise VprError(f"{path}: folder {folder} does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise VprError(f"{path}: folder {folder} is not writable")
+    if path.exists() and not path.is_file():
+        raise VprError(f"{path}: is not a regular file, expected a file name to write")
+    try:  # os.access is not enough: root passes it on read-only and virtual file systems
+        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise VprError(f"{path}: folder {folder} is not writable ({e.strerror or e})") from None
 
 
 @contextlib.contextmanager
@@ -75,24 +81,50 @@ def read_npz(path: str | os.PathLike[str], kind: str, schema: int) -> tuple[dict
     """
     path = Path(path)
     if not path.is_file():
-        raise VprError(f"{path}: no such file")
+        raise VprError(f"{path}: no such file" if not path.exists() else f"{path}: not a vpr-edge {kind} (not a file)")
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as e:
+        raise VprError(f"{path}: cannot read ({e.strerror or e})") from None
+    if head != b"PK\x03\x04":
+        raise VprError(f"{path}: not a vpr-edge {kind} ({_describe(head, path)}; expected an .npz archive)")
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
-        raise VprError(f"{path}: not a readable vpr-edge {kind} file ({e})") from None
+    except ValueError as e:
+        if "pickle" in str(e):
+            raise VprError(f"{path}: not a vpr-edge {kind} (holds pickled objects, which vpr-edge never "
+                           f"loads)") from None
+        raise VprError(f"{path}: not a vpr-edge {kind} (corrupt archive: {str(e).splitlines()[0][:80]})") from None
+    except (zipfile.BadZipFile, OSError, EOFError) as e:
+        raise VprError(f"{path}: not a vpr-edge {kind} (truncated or corrupt archive: "
+                       f"{str(e).splitlines()[0][:80]})") from None
     if META_KEY not in arrays:
-        raise VprError(f"{path}: not a vpr-edge {kind} file (no metadata)")
+        raise VprError(f"{path}: not a vpr-edge {kind} (an .npz archive without vpr-edge metadata)")
     try:
         meta = json.loads(str(arrays.pop(META_KEY)))
     except json.JSONDecodeError as e:
         raise VprError(f"{path}: corrupt metadata ({e})") from None
     if meta.get("kind") != kind:
-        raise VprError(f"{path}: is a {meta.get('kind')!r} file, expected a {kind!r} file")
+        raise VprError(f"{path}: not a vpr-edge {kind} (it is a vpr-edge {meta.get('kind')})")
     if meta.get("schema") != schema:
         raise VprError(f"{path}: {kind} schema version {meta.get('schema')} is not supported "
                        f"(this vpr-edge reads version {schema}); rebuild it")
     return arrays, meta
+
+
+def _describe(head: bytes, path: Path) -> str:
+    """A guess at what a foreign file is, from its first bytes, for error messages."""
+    if not head:
+        return "empty file"
+    if head.startswith(b"\x93NUM"):
+        return "a single .npy array"
+    if path.suffix.lower() == ".onnx" or head[:1] == b"\x08":
+        return "looks like an ONNX model"
+    if all(32 <= c < 127 or c in (9, 10, 13) for c in head):
+        return "a text file"
+    return "unknown binary format"
 
 
 def file_sha256(path: str | os.PathLike[str]) -> str:

@@ -1,0 +1,267 @@
+"""Bad input never costs work or data: every command against a table of bad inputs.
+
+For each case: exit code 2, exactly one ``vpr-edge: error:`` line on stderr naming the file and the problem
+(warnings may precede it), no traceback, and every file in the workspace byte-identical afterwards with no
+file added. Commands run in-process (typer's CliRunner) so the matrix stays fast; the cases that need a real
+process (a full disk behind stdout, timing of the early output check) run one.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from vpr_edge.cli import app
+from vpr_edge.extract import BUNDLED_MODEL
+from vpr_edge.store import read_npz, write_npz
+from vpr_edge.streams import write_ground_truth
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries: Path) -> Path:
+    """A workspace holding good and bad inputs of every kind, and outputs that already exist."""
+    w = tmp_path_factory.mktemp("ws")
+    shutil.copytree(small_refs, w / "refs")
+    shutil.copytree(small_queries, w / "queries")
+    res = CliRunner().invoke(app, ["build-map", str(w / "refs"), "-o", str(w / "good.npz"), "--components", "4",
+                                   "--save-codebook", str(w / "cb.npz")])
+    assert res.exit_code == 0, res.stderr
+    (w / "empty").mkdir()
+    (w / "a_folder.npz").mkdir()
+    (w / "notes.txt").write_text("frame_index,frame\n0,a.jpg\n")
+    (w / "empty.npz").write_bytes(b"")
+    (w / "old_results.csv").write_text("frame_index,frame,ref_index,ref,score,lost\n0,a.jpg,3,b.jpg,9.0,0\n")
+    (w / "old.npz").write_bytes(b"a previous map the user cares about")
+    shutil.copy(BUNDLED_MODEL, w / "model.onnx")
+    (w / "fake.onnx").write_bytes(b"\x08\x07 not really a model")
+    good = (w / "good.npz").read_bytes()
+    (w / "truncated.npz").write_bytes(good[: len(good) // 2])
+    arrays, meta = read_npz(w / "good.npz", "map", 1)
+    write_npz(w / "schema0.npz", arrays, meta | {"schema": 0})
+    np.savez(w / "pickled.npz", a=np.array([{"x": 1}], dtype=object))
+    np.save(w / "sim.npy", np.random.default_rng(0).random((24, 24)))
+    (w / "sim_bad.npy").write_bytes(b"\x93NUMPY garbage")
+    write_ground_truth(w / "gt.csv", [[i] for i in range(24)])
+    write_ground_truth(w / "gt_short.csv", [[i] for i in range(10)])
+    (w / "gt_bad.csv").write_text("query,references\n0,zero\n")
+
+    for name, edit in {"refs_corrupt": "garbage", "refs_tiny": "tiny"}.items():
+        shutil.copytree(small_refs, w / name)
+        target = w / name / "0000003.jpg"
+        if edit == "garbage":
+            target.write_bytes(b"\xff\xd8 not a jpeg")
+        else:
+            cv2.imwrite(str(target), np.zeros((1, 1, 3), np.uint8))
+    (w / "allbad").mkdir()
+    for i in range(3):
+        (w / "allbad" / f"{i:03d}.jpg").write_bytes(b"x")
+    (w / "garbage.mp4").write_bytes(os.urandom(2048))
+    return w
+
+
+@dataclass(frozen=True)
+class Case:
+    id: str
+    argv: str                 # {w} is the workspace
+    needles: tuple[str, ...]  # all must appear in the error line
+    env: tuple[tuple[str, str], ...] = ()
+    hide: tuple[str, ...] = ()  # modules made unimportable (a missing extra)
+
+
+BM = "build-map {w}/refs -o {w}/out.npz --components 4"
+LOC = "localize -m {w}/good.npz -s {w}/queries"
+EV = "evaluate --similarity {w}/sim.npy --gt {w}/gt.csv --modes single"
+
+CASES = [
+    # build-map: inputs
+    Case("bm-refs-missing", "build-map {w}/nope -o {w}/out.npz", ("nope", "not a folder")),
+    Case("bm-refs-empty", "build-map {w}/empty -o {w}/out.npz", ("empty", "no images")),
+    Case("bm-refs-is-file", "build-map {w}/notes.txt -o {w}/out.npz", ("notes.txt", "not a folder")),
+    Case("bm-ref-corrupt", "build-map {w}/refs_corrupt -o {w}/old.npz --components 4", ("0000003.jpg", "cannot decode")),
+    Case("bm-ref-1x1", "build-map {w}/refs_tiny -o {w}/old.npz --components 4", ("0000003.jpg", "1x1", "too small")),
+    # build-map: outputs (checked before any extraction)
+    Case("bm-out-proc", BM.replace("{w}/out.npz", "/proc/vpr-edge.npz"), ("/proc/vpr-edge.npz", "not writable")),
+    Case("bm-out-no-folder", BM.replace("{w}/out.npz", "{w}/nodir/m.npz"), ("nodir", "does not exist")),
+    Case("bm-out-is-folder", BM.replace("{w}/out.npz", "{w}/a_folder.npz"), ("a_folder.npz", "is a folder")),
+    Case("bm-codebook-out-is-folder", BM + " --save-codebook {w}/a_folder.npz", ("a_folder.npz", "is a folder")),
+    Case("bm-codebook-same-as-out", "build-map {w}/refs -o {w}/old.npz --save-codebook {w}/old.npz",
+         ("old.npz", "same file")),
+    # build-map: models, codebooks, extras, option combinations
+    Case("bm-model-missing", BM + " --model {w}/none.onnx", ("none.onnx", "not found")),
+    Case("bm-model-not-onnx", BM + " --model {w}/fake.onnx", ("fake.onnx", "not a loadable ONNX model")),
+    Case("bm-model-env-missing", BM, ("gone.onnx", "VPR_EDGE_MODEL"), env=(("VPR_EDGE_MODEL", "{w}/gone.onnx"),)),
+    Case("bm-model-env-not-model", BM, ("notes.txt", "not a loadable ONNX model"),
+         env=(("VPR_EDGE_MODEL", "{w}/notes.txt"),)),
+    Case("bm-codebook-missing", "build-map {w}/refs -o {w}/out.npz --codebook {w}/nocb.npz", ("nocb.npz", "no such file")),
+    Case("bm-codebook-is-map", "build-map {w}/refs -o {w}/out.npz --codebook {w}/good.npz",
+         ("good.npz", "not a vpr-edge codebook", "it is a vpr-edge map")),
+    Case("bm-codebook-text", "build-map {w}/refs -o {w}/out.npz --codebook {w}/notes.txt",
+         ("notes.txt", "not a vpr-edge codebook", "text file")),
+    Case("bm-codebook-and-fit-options", "build-map {w}/refs -o {w}/out.npz --codebook {w}/cb.npz --components 8",
+         ("--components", "cb.npz")),
+    Case("bm-no-sklearn", BM, ("scikit-learn", "vpr-edge[fit]"), hide=("sklearn",)),
+    # localize
+    Case("loc-map-missing", "localize -m {w}/none.npz -s {w}/queries", ("none.npz", "no such file")),
+    Case("loc-map-empty", "localize -m {w}/empty.npz -s {w}/queries", ("empty.npz", "not a vpr-edge map", "empty")),
+    Case("loc-map-text", "localize -m {w}/notes.txt -s {w}/queries", ("notes.txt", "not a vpr-edge map", "text")),
+    Case("loc-map-csv", "localize -m {w}/old_results.csv -s {w}/queries", ("old_results.csv", "not a vpr-edge map")),
+    Case("loc-map-onnx", "localize -m {w}/model.onnx -s {w}/queries", ("model.onnx", "not a vpr-edge map", "ONNX")),
+    Case("loc-map-npy", "localize -m {w}/sim.npy -s {w}/queries", ("sim.npy", "not a vpr-edge map", ".npy")),
+    Case("loc-map-folder", "localize -m {w}/a_folder.npz -s {w}/queries", ("a_folder.npz", "not a vpr-edge map")),
+    Case("loc-map-truncated", "localize -m {w}/truncated.npz -s {w}/queries", ("truncated.npz", "truncated or corrupt")),
+    Case("loc-map-pickled", "localize -m {w}/pickled.npz -s {w}/queries", ("pickled.npz", "pickled")),
+    Case("loc-map-codebook", "localize -m {w}/cb.npz -s {w}/queries", ("cb.npz", "it is a vpr-edge codebook")),
+    Case("loc-map-schema0", "localize -m {w}/schema0.npz -s {w}/queries", ("schema0.npz", "schema version 0")),
+    Case("loc-stream-missing", "localize -m {w}/good.npz -s {w}/nope", ("nope", "no such folder")),
+    Case("loc-stream-empty", "localize -m {w}/good.npz -s {w}/empty", ("empty", "no images")),
+    Case("loc-stream-text", "localize -m {w}/good.npz -s {w}/notes.txt", ("notes.txt", "not a folder of images")),
+    Case("loc-stream-garbage-video", "localize -m {w}/good.npz -s {w}/garbage.mp4 -o {w}/old_results.csv",
+         ("garbage.mp4",)),
+    Case("loc-stream-all-corrupt", "localize -m {w}/good.npz -s {w}/allbad -o {w}/old_results.csv",
+         ("allbad", "none of its frames")),
+    Case("loc-out-proc", LOC + " -o /proc/results.csv", ("/proc/results.csv", "not writable")),
+    Case("loc-out-no-folder", LOC + " -o {w}/nodir/r.csv", ("nodir", "does not exist")),
+    Case("loc-out-is-folder", LOC + " -o {w}/a_folder.npz", ("a_folder.npz", "is a folder")),
+    Case("loc-model-other", LOC + " --model {w}/fake.onnx", ("fake.onnx", "not a loadable ONNX model")),
+    Case("loc-model-env-missing", LOC, ("gone.onnx", "VPR_EDGE_MODEL"), env=(("VPR_EDGE_MODEL", "{w}/gone.onnx"),)),
+    Case("loc-format-contradicts-out", LOC + " --format jsonl -o {w}/old_results.csv", ("old_results.csv", "--format")),
+    # info
+    Case("info-missing", "info {w}/none.npz", ("none.npz", "no such file")),
+    Case("info-text", "info {w}/notes.txt", ("notes.txt", "not a vpr-edge map")),
+    Case("info-codebook", "info {w}/cb.npz", ("cb.npz", "it is a vpr-edge codebook")),
+    # evaluate
+    Case("ev-no-source", "evaluate --gt {w}/gt.csv", ("give one source",)),
+    Case("ev-two-sources", EV + " --map {w}/good.npz --queries {w}/queries", ("give one source",)),
+    Case("ev-two-truths", EV + " --gt-positions {w}/notes.txt {w}/notes.txt", ("ground truth",)),
+    Case("ev-sim-missing", "evaluate --similarity {w}/none.npy --gt {w}/gt.csv", ("none.npy",)),
+    Case("ev-sim-corrupt", "evaluate --similarity {w}/sim_bad.npy --gt {w}/gt.csv", ("sim_bad.npy", "not a readable")),
+    Case("ev-gt-missing", "evaluate --similarity {w}/sim.npy --gt {w}/nogt.csv", ("nogt.csv",)),
+    Case("ev-gt-malformed", "evaluate --similarity {w}/sim.npy --gt {w}/gt_bad.csv", ("gt_bad.csv",)),
+    Case("ev-gt-rows", "evaluate --similarity {w}/sim.npy --gt {w}/gt_short.csv", ("gt_short.csv", "rows")),
+    Case("ev-unknown-mode", EV.replace("single", "nosuch"), ("nosuch", "unknown matcher")),
+    Case("ev-json-is-folder", EV + " --json {w}/a_folder.npz", ("a_folder.npz", "is a folder")),
+    Case("ev-json-proc", EV + " --json /proc/r.json", ("/proc/r.json", "not writable")),
+    Case("ev-plot-no-matplotlib", EV + " --plot {w}/pr.png", ("--plot", "matplotlib"), hide=("matplotlib",)),
+    Case("ev-queries-vs-gt", "evaluate --map {w}/good.npz --queries {w}/queries --gt {w}/gt_short.csv",
+         ("queries", "24 frames", "gt_short.csv")),
+]
+
+
+def _snapshot(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): (hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir")
+            for p in sorted(folder.rglob("*"))}
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
+def test_bad_input(case: Case, ws: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    for key, value in case.env:
+        monkeypatch.setenv(key, value.format(w=ws))
+    for module in case.hide:
+        for name in [m for m in sys.modules if m == module or m.startswith(module + ".")]:
+            monkeypatch.delitem(sys.modules, name)
+        monkeypatch.setitem(sys.modules, module, None)  # import raises ImportError, as if not installed
+    before = _snapshot(ws)
+    res = CliRunner().invoke(app, case.argv.format(w=ws).split())
+    assert res.exit_code == 2, (res.exit_code, res.stderr, res.exception)
+    assert isinstance(res.exception, SystemExit), res.exception           # no traceback: a handled exit
+    assert "Traceback" not in res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip() and not ln.startswith("vpr-edge: warning:")]
+    assert len(lines) == 1 and lines[0].startswith("vpr-edge: error: "), res.stderr
+    for needle in case.needles:
+        assert needle.format(w=ws) in lines[0], (needle, lines[0])
+    assert _snapshot(ws) == before                                        # nothing changed, nothing added
+
+
+def _run(*args: str, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "vpr_edge.cli", *args], capture_output=True, text=True,
+                          timeout=300, **kw)
+
+
+def test_unwritable_out_fails_before_any_work() -> None:
+    t0 = time.perf_counter()
+    proc = _run("build-map", str(ROOT / "samples" / "corridor" / "ref"), "-o", "/proc/vpr-edge/m.npz")
+    elapsed = time.perf_counter() - t0
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines()[-1].startswith("vpr-edge: error: /proc/vpr-edge/m.npz")
+    assert elapsed < 2.0, elapsed                      # the whole process, not only the check
+
+
+def test_full_disk_behind_stdout(ws: Path) -> None:
+    if not Path("/dev/full").exists():
+        pytest.skip("no /dev/full here")
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "localize", "-m", str(ws / "good.npz"),
+                               "-s", str(ws / "queries")], stdout=full, stderr=subprocess.PIPE, text=True,
+                              timeout=300)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("vpr-edge: error:")]
+    assert errors == ["vpr-edge: error: stdout: cannot write results (No space left on device)"], proc.stderr
+
+
+def test_warnings_for_ignored_input(ws: Path, tmp_path: Path) -> None:
+    frames = tmp_path / "frames"
+    shutil.copytree(ws / "queries", frames)
+    (frames / "README.txt").write_text("not a frame")
+    (frames / "0000010.jpg").unlink()
+    cv2.imwrite(str(frames / "0000010.png"), np.zeros((2, 2, 3), np.uint8))
+    res = CliRunner().invoke(app, ["localize", "-m", str(ws / "good.npz"), "-s", str(frames), "--open-ends"])
+    assert res.exit_code == 0, res.stderr
+    warnings = [ln for ln in res.stderr.splitlines() if ln.startswith("vpr-edge: warning:")]
+    assert any("--open-ends does not apply to mode stream" in w for w in warnings), warnings
+    assert any("1 file(s) that are not images ignored (e.g. README.txt)" in w for w in warnings), warnings
+    assert any("0000010.png" in w and "2x2" in w and "frame skipped" in w for w in warnings), warnings
+    assert len(res.stdout.splitlines()) == 24                  # 23 frames + header
+
+
+def test_small_images_warned_once(tmp_path: Path, ws: Path) -> None:
+    frames = tmp_path / "small"
+    frames.mkdir()
+    for f in sorted((ws / "queries").iterdir())[:5]:
+        cv2.imwrite(str(frames / (f.stem + ".png")), cv2.resize(cv2.imread(str(f)), (40, 30)))
+    proc = _run("localize", "-m", str(ws / "good.npz"), "-s", str(frames), "--mode", "single")
+    assert proc.returncode == 0, proc.stderr
+    warned = [ln for ln in proc.stderr.splitlines() if "upsampled more than 4x" in ln]
+    assert len(warned) == 1 and "40x30" in warned[0], proc.stderr
+
+
+def test_help_and_version() -> None:
+    runner = CliRunner()
+    from vpr_edge import __version__
+
+    res = runner.invoke(app, ["--version"])
+    assert res.exit_code == 0 and res.stdout.strip() == f"vpr-edge {__version__}"
+    for cmd in ("build-map", "localize", "evaluate", "info"):
+        res = runner.invoke(app, [cmd, "-h"], terminal_width=80, env={"COLUMNS": "80"})
+        assert res.exit_code == 0 and "Usage:" in res.stdout, cmd
+        assert "…" not in res.stdout                                      # nothing cut off
+        assert max(map(len, res.stdout.splitlines())) <= 80, cmd
+
+
+def test_outputs_follow_the_umask(ws: Path, tmp_path: Path) -> None:
+    old = os.umask(0o027)
+    try:
+        res = CliRunner().invoke(app, ["localize", "-m", str(ws / "good.npz"), "-s", str(ws / "queries"),
+                                       "--mode", "single", "-o", str(tmp_path / "r.csv")])
+    finally:
+        os.umask(old)
+    assert res.exit_code == 0, res.stderr
+    assert (tmp_path / "r.csv").stat().st_mode & 0o777 == 0o640
+    assert (ws / "good.npz").stat().st_mode & 0o777 == 0o666 & ~old
+
+
+def test_vpr_edge_model_wins_over_the_recorded_model(ws: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("VPR_EDGE_MODEL", str(ws / "model.onnx"))      # the same model, another path: accepted
+    res = CliRunner().invoke(app, ["localize", "-m", str(ws / "good.npz"), "-s", str(ws / "queries")])
+    assert res.exit_code == 0 and len(res.stdout.splitlines()) == 25, res.stderr
