@@ -265,3 +265,27 @@ def test_vpr_edge_model_wins_over_the_recorded_model(ws: Path, monkeypatch: pyte
     monkeypatch.setenv("VPR_EDGE_MODEL", str(ws / "model.onnx"))      # the same model, another path: accepted
     res = CliRunner().invoke(app, ["localize", "-m", str(ws / "good.npz"), "-s", str(ws / "queries")])
     assert res.exit_code == 0 and len(res.stdout.splitlines()) == 25, res.stderr
+
+
+@pytest.mark.parametrize("failure, code", [(KeyboardInterrupt(), 130),
+                                           (OSError(5, "Input/output error", "/dev/video0"), 2)])
+def test_stream_failing_part_way_keeps_earlier_results(ws: Path, monkeypatch: pytest.MonkeyPatch,
+                                                       failure: BaseException, code: int) -> None:
+    """Ctrl-C or a camera that fails after some frames: the earlier results file stays as it was."""
+    import vpr_edge.cli as cli
+
+    real = cli.localize
+
+    def failing(*args, **kwargs):
+        for i, match in enumerate(real(*args, **kwargs)):
+            if i == 3:
+                raise failure
+            yield match
+
+    monkeypatch.setattr(cli, "localize", failing)
+    before = _snapshot(ws)
+    res = CliRunner().invoke(app, ["localize", "-m", str(ws / "good.npz"), "-s", str(ws / "queries"),
+                                   "-o", str(ws / "old_results.csv")])
+    assert res.exit_code == code and isinstance(res.exception, SystemExit), (res.exit_code, res.stderr)
+    assert len(res.stderr.strip().splitlines()) == 1 and "Traceback" not in res.stderr
+    assert _snapshot(ws) == before
