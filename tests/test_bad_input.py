@@ -272,17 +272,17 @@ def test_vpr_edge_model_wins_over_the_recorded_model(ws: Path, monkeypatch: pyte
 def test_stream_failing_part_way_keeps_earlier_results(ws: Path, monkeypatch: pytest.MonkeyPatch,
                                                        failure: BaseException, code: int) -> None:
     """Ctrl-C or a camera that fails after some frames: the earlier results file stays as it was."""
-    import vpr_edge.cli as cli
+    from vpr_edge.api import Localizer
 
-    real = cli.localize
+    real = Localizer.run
 
-    def failing(*args, **kwargs):
-        for i, match in enumerate(real(*args, **kwargs)):
+    def failing(self, *args, **kwargs):
+        for i, match in enumerate(real(self, *args, **kwargs)):
             if i == 3:
                 raise failure
             yield match
 
-    monkeypatch.setattr(cli, "localize", failing)
+    monkeypatch.setattr(Localizer, "run", failing)
     before = _snapshot(ws)
     res = CliRunner().invoke(app, ["localize", "-m", str(ws / "good.npz"), "-s", str(ws / "queries"),
                                    "-o", str(ws / "old_results.csv")])

@@ -137,6 +137,45 @@ def test_road_matcher_detour_lost_and_restart() -> None:
     assert np.mean(np.abs(np.array(again[10:]) - places[135:]) <= 1) > 0.95
 
 
+def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window):
+    """RoadMatcher written as plain loops over states, from its docstring."""
+    n_refs = sim.shape[1]
+    n_speeds, n_pos = int(round(vmax * grid)) + 1, n_refs * grid
+    h = np.zeros((n_speeds, n_pos))
+    mean, weight, stopped, out = np.zeros(n_refs), memory, False, []
+    for s in sim:
+        z = (s - s.mean()) / s.std()
+        zr = z - mean
+        if not stopped:
+            weight = (1 - 1 / memory) * weight + 1
+            mean = mean + (z - mean) / weight
+        new = np.zeros_like(h)
+        for v in range(n_speeds):
+            for p in range(n_pos):
+                prev = max((h[u, p - v] - turn * abs(v - u) for u in range(n_speeds)), default=0.0) if p >= v else 0.0
+                new[v, p] = max(0.0, max(0.0, decay * prev) + zr[p // grid] - bias)
+        h = new
+        v_best, p_best = np.unravel_index(np.argmax(h), h.shape)
+        stopped, ref, best = v_best == 0, p_best // grid, h[v_best, p_best]
+        rival = max([h[:, p].max() for p in range(n_pos) if abs(p // grid - ref) > rival_window], default=0.0)
+        out.append((ref, float(best >= lock) + 1 - (rival + 1) / (best + 1)))
+    return out
+
+
+@pytest.mark.parametrize("grid, vmax", [(1, 2.0), (2, 1.5)])
+def test_road_matcher_against_plain_loops(grid: int, vmax: float) -> None:
+    rng = np.random.default_rng(grid)
+    sim = planted(rng, 20, route([(1.0, 12), (0.0, 5), (0.5, 8)], start=1), noise=0.6)
+    params = {"vmax": vmax, "grid": grid, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 6.0, "lock": 3.0,
+              "rival_window": 2}
+    m = RoadMatcher(20, **params)
+    got = [m.update(row) for row in sim]
+    want = naive_road(sim, **params)
+    assert [r for r, _ in got] == [r for r, _ in want]
+    np.testing.assert_allclose([c for _, c in got], [c for _, c in want], atol=1e-9)
+    assert any(c >= 1 for _, c in got) and any(c < 1 for _, c in got)   # both locked and unlocked frames
+
+
 def test_road_matcher_state_is_bounded() -> None:
     m = RoadMatcher(50)
     rng = np.random.default_rng(0)

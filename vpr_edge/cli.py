@@ -20,10 +20,11 @@ from vpr_edge.codebook import Codebook
 from vpr_edge.errors import VprError, warn
 from vpr_edge.extract import FeatureExtractor, resolve_model
 from vpr_edge.images import Frame, list_images, load_image, open_stream
-from vpr_edge.localize import Match, encode_frames, localize
+from vpr_edge.api import Localizer, Match, encode_frames
 from vpr_edge.mapfile import PlaceMap, build_map
-from vpr_edge.matchers import MATCHERS, Matcher, get_matcher
+from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.store import atomic_output, check_writable
+from vpr_edge.threads import use_threads
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   rich_markup_mode=None, context_settings={"help_option_names": ["-h", "--help"],
@@ -83,7 +84,8 @@ def _user_errors() -> Iterator[None]:
 
 _MODEL_HELP = ("ONNX feature model exported by vpr_edge_export (default: $VPR_EDGE_MODEL if set, else the "
                "bundled EfficientNet-Lite0 tap).")
-_THREADS_HELP = "onnxruntime intra-op threads (0 = one per core)."
+_THREADS_HELP = ("Threads for onnxruntime and NumPy's BLAS together, so the two pools never oversubscribe "
+                 "the cores (0 = one per core).")
 
 
 @app.command("build-map")
@@ -126,7 +128,7 @@ def build_map_cmd(
         files = list_images(refs)
         if codebook is None:
             _require_fit_extra()
-        extractor = FeatureExtractor(resolve_model(model), threads)
+        extractor = FeatureExtractor(resolve_model(model), use_threads(threads))
         given = None
         if codebook:
             given, cb_meta = Codebook.load(codebook)
@@ -193,13 +195,12 @@ def _results_writer(fmt: str, stream: IO[str], where: str) -> Callable[[Match], 
     return write
 
 
-def _configured(name: str, given: dict) -> Matcher:
-    """The registered matcher with the options the user gave that it takes; a warning for each it ignores."""
+def _params_for(name: str, given: dict) -> dict:
+    """The options the user gave that matcher ``name`` takes; a warning for each it ignores."""
     matcher = get_matcher(name)
-    used = {k: v for k, v in given.items() if v is not None and k in matcher.params}
     for k in sorted(k for k, v in given.items() if v not in (None, False) and k not in matcher.params):
-        typer.echo(f"vpr-edge: warning: --{k.replace('_', '-')} does not apply to mode {name}; ignored", err=True)
-    return matcher.with_params(**used)
+        warn(f"--{k.replace('_', '-')} does not apply to mode {name}; ignored")
+    return {k: v for k, v in given.items() if v is not None and k in matcher.params}
 
 
 _MODE_HELP = ("Matcher. Online (a result per frame): " + ", ".join(n for n, m in MATCHERS.items() if m.online)
@@ -241,12 +242,11 @@ def localize_cmd(
         suffix_fmt = {".csv": "csv", ".jsonl": "jsonl", ".json": "jsonl"}.get(out.suffix.lower()) if out else None
         if fmt and suffix_fmt and fmt.value != suffix_fmt:
             raise VprError(f"{out}: --format {fmt.value} contradicts the file's {out.suffix} suffix")
-        matcher = _configured(mode.value, {"variant": variant.value if variant else None, "open_ends": open_ends,
-                                           "decay": decay})
-        place_map = PlaceMap.load(map_path)
-        extractor = FeatureExtractor(place_map.model_path(model), threads)
-        place_map.check_model(extractor, map_path)
+        params = _params_for(mode.value, {"variant": variant.value if variant else None, "open_ends": open_ends,
+                                          "decay": decay})
         frames, count = open_stream(stream)
+        localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
+                              min_confidence=min_confidence, threads=threads)
         chosen = fmt.value if fmt else (suffix_fmt or "csv")
         skipped = 0
 
@@ -264,7 +264,7 @@ def localize_cmd(
             written = 0
             with typer.progressbar(length=count or 0, label="localizing", file=sys.stderr,
                                    hidden=count is None or not sys.stderr.isatty()) as bar:
-                for match in localize(frames, place_map, extractor, matcher, batch_size, min_confidence, skip):
+                for match in localizer.run(frames, batch_size, skip):
                     write(match)
                     written += 1
                     bar.update(1)
@@ -362,6 +362,7 @@ def evaluate_cmd(
             report.require_matplotlib()
         truth, gt_shape = _load_truth(gt, gt_positions, radius)
         truth_src = gt or gt_positions[0]
+        use_threads(threads)
 
         # --- the similarity matrix ---
         encode_ms = float("nan")
@@ -391,14 +392,12 @@ def evaluate_cmd(
                     qd.append(pixel_descriptor(frame.image))
                 sim = sad_similarity(np.stack(qd), ref_desc).astype(np.float64) if qd else np.zeros((0, 0))
             else:
-                place_map = PlaceMap.load(map_path)
-                extractor = FeatureExtractor(place_map.model_path(model), threads)
-                place_map.check_model(extractor, map_path)
+                loc = Localizer(map_path, model=model, mode="single", threads=threads)
                 enc = []
-                for frame, e in encode_frames(frames, place_map, extractor, batch_size, skip):
+                for frame, e in encode_frames(frames, loc.map, loc.extractor, batch_size, skip):
                     kept.append(frame.index)
                     enc.append(e)
-                sim = (np.stack(enc) @ place_map.encodings.T).astype(np.float64) if enc else np.zeros((0, 0))
+                sim = loc.similarity(np.stack(enc)).astype(np.float64) if enc else np.zeros((0, 0))
             if not kept:
                 raise VprError(f"{queries}: none of its frames could be decoded")
             encode_ms = 1e3 * (time.perf_counter() - t0) / len(kept)

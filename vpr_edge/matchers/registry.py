@@ -12,15 +12,15 @@ from vpr_edge.matchers.seqslam import SeqSLAMOnline, seqslam_match
 from vpr_edge.matchers.single import BestMatch
 from vpr_edge.matchers.stream_dtw import StreamingDTW
 
-STREAM_MIN_CONFIDENCE = 5.0
 _DTW = {"variant": "distance", "open_ends": False, "max_step": 4, "rival_window": 5}
 _SEQSLAM = {"ds": 10, "vmin": 0.5, "vmax": 3.0, "r_window": 10, "match_window": 10}
 
 MATCHERS: dict[str, Matcher] = {m.name: m for m in (
     Matcher("stream", "trajectories over (position, speed) with contrast-normalised similarities: any speed "
             "0-4 places/frame, lock-on anywhere, lost state (online, default)", start=RoadMatcher,
-            params={"vmax": 4.0, "grid": 2, "decay": 0.9, "bias": 1.0, "turn": 1.0, "memory": 50.0},
-            min_confidence=STREAM_MIN_CONFIDENCE),
+            params={"vmax": 4.0, "grid": 2, "decay": 0.9, "bias": 1.0, "turn": 1.0, "memory": 50.0, "lock": 5.0,
+                    "rival_window": 10},
+            min_confidence=1.0),
     Matcher("single", "best single match per frame, no sequence information (online)", start=BestMatch),
     Matcher("stream-dtw", "decayed streaming DTW over 1 - cos (online; the first streaming matcher, kept "
             "as a baseline)", start=StreamingDTW, params={"decay": 0.9}),

@@ -1,0 +1,93 @@
+"""The embedding API: ``Localizer`` pushes frames through the same chain as ``vpr-edge localize``."""
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vpr_edge import Localizer
+from vpr_edge.errors import VprError
+from vpr_edge.images import load_image, open_stream
+
+
+@pytest.fixture(scope="module")
+def api_map(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Path:
+    out = tmp_path_factory.mktemp("api") / "m.npz"
+    proc = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "build-map", str(small_refs), "-o", str(out),
+                           "--components", "4"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+def test_push_matches_the_cli(api_map: Path, small_queries: Path) -> None:
+    loc = Localizer(api_map, threads=1)
+    files = sorted(small_queries.iterdir())
+    pushed = [loc.push(load_image(f), f.name) for f in files]
+    proc = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "localize", "-m", str(api_map), "-s",
+                           str(small_queries)], capture_output=True, text=True, timeout=600)
+    rows = list(csv.DictReader(proc.stdout.splitlines()))
+    assert [m.ref_index for m in pushed] == [int(r["ref_index"]) for r in rows]
+    np.testing.assert_allclose([m.score for m in pushed], [float(r["score"]) for r in rows], atol=1e-5)
+    assert [m.frame_index for m in pushed] == list(range(24)) and pushed[5].frame == files[5].name
+    # reset: a new drive starts from no hypothesis and gives the same answers again
+    loc.reset()
+    again = [loc.push(load_image(f)).ref_index for f in files]
+    assert again == [m.ref_index for m in pushed]
+
+
+def test_run_offline_mode_and_push_refused(api_map: Path, small_queries: Path) -> None:
+    loc = Localizer(api_map, mode="dtw")
+    frames, _ = open_stream(small_queries)
+    out = list(loc.run(frames, batch_size=8))
+    assert len(out) == 24 and np.mean([abs(m.ref_index - m.frame_index) <= 2 for m in out]) > 0.9
+    with pytest.raises(ValueError, match="offline"):
+        loc.push(np.zeros((120, 160, 3), np.uint8))
+
+
+def test_bad_frames_and_options(api_map: Path) -> None:
+    loc = Localizer(api_map, mode="single", min_confidence=2.0)          # cosine never reaches 2: all lost
+    m = loc.push(np.full((120, 160, 3), 128, np.uint8))
+    assert m.lost and m.ref_index == -1 and m.ref == ""
+    for bad in (np.zeros((120, 160), np.uint8), np.zeros((120, 160, 3), np.float32), np.zeros((4, 4, 3), np.uint8)):
+        with pytest.raises(VprError, match="RGB uint8"):
+            loc.push(bad)
+    with pytest.raises(ValueError, match="unknown matcher"):
+        Localizer(api_map, mode="nope")
+    with pytest.raises(ValueError, match="no parameter"):
+        Localizer(api_map, params={"nope": 1})
+    with pytest.raises(VprError, match="no such file"):
+        Localizer(api_map.with_name("missing.npz"))
+
+
+def test_constructed_and_pushed_from_threads(api_map: Path, small_queries: Path) -> None:
+    images = [load_image(f) for f in sorted(small_queries.iterdir())[:6]]
+    results: dict[int, list] = {}
+
+    def drive(i: int) -> None:
+        loc = Localizer(api_map, mode="single")
+        results[i] = [loc.push(im).ref_index for im in images]
+
+    threads = [threading.Thread(target=drive, args=(i,)) for i in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(results) == 3 and results[0] == results[1] == results[2]
+
+
+def test_threads_limit_blas() -> None:
+    pytest.importorskip("threadpoolctl")
+    from threadpoolctl import threadpool_info
+
+    from vpr_edge.threads import use_threads
+
+    code = ("from vpr_edge.threads import use_threads; from threadpoolctl import threadpool_info;"
+            "use_threads(1); print(sorted({p['num_threads'] for p in threadpool_info() if p['user_api'] == 'blas'}))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.stdout.strip() in ("[1]", "[]"), proc.stdout + proc.stderr
+    assert use_threads(0) >= 1 and threadpool_info is not None

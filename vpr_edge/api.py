@@ -1,0 +1,145 @@
+"""The per-frame chain, written once: preprocess -> features -> encode -> similarity -> matcher.
+
+``Localizer`` is what a robot's camera callback, the CLI and the tools use::
+
+    from vpr_edge import Localizer
+
+    loc = Localizer("route.map.npz", threads=2)        # opens the map and its model once
+    def on_frame(rgb):                                 # RGB uint8 (H, W, 3), e.g. from the camera driver
+        m = loc.push(rgb)
+        if not m.lost:
+            print(m.ref_index, m.ref, m.score)
+"""
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from vpr_edge.errors import VprError
+from vpr_edge.extract import FeatureExtractor
+from vpr_edge.images import MIN_SIDE, Frame
+from vpr_edge.mapfile import PlaceMap
+from vpr_edge.matchers import Matcher, get_matcher
+from vpr_edge.threads import use_threads
+
+
+@dataclass(frozen=True)
+class Match:
+    """One output line: the query frame, the matched reference (index -1 and name '' when lost) and a
+    score (higher = more confident)."""
+
+    frame_index: int
+    frame: str
+    ref_index: int
+    ref: str
+    score: float
+    lost: bool
+
+
+def encode_frames(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExtractor, batch_size: int,
+                  on_skip: Callable[[Frame], None]) -> Iterator[tuple[Frame, np.ndarray]]:
+    """Yield (frame, encoding (D,)) for each decodable frame, ``batch_size`` frames per model run;
+    undecodable frames go to ``on_skip``."""
+    pending: list[Frame] = []
+
+    def flush() -> Iterator[tuple[Frame, np.ndarray]]:
+        batch = np.stack([extractor.preprocess(f.image) for f in pending])
+        yield from zip(pending, place_map.encode(extractor.local_features(batch)))
+        pending.clear()
+
+    for frame in frames:
+        if frame.image is None:
+            on_skip(frame)
+            continue
+        pending.append(frame)
+        if len(pending) >= batch_size:
+            yield from flush()
+    if pending:
+        yield from flush()
+
+
+class Localizer:
+    """A map, its model and a matcher, ready for frames.
+
+    ``mode`` names a registered matcher (``vpr_edge.matchers.MATCHERS``), ``params`` overrides its
+    parameters, ``min_confidence`` its lost threshold (default: the matcher's own). ``threads`` > 0 sets
+    onnxruntime's threads and, process-wide, NumPy's BLAS pool to that count (0: one per core for both;
+    None: onnxruntime's default, BLAS untouched). Construction is thread-safe (nothing global but the
+    BLAS limit); ``push`` may be called from any thread, one frame at a time (a lock orders them).
+    Raises VprError for a bad map or model, ValueError for an unknown mode or parameter.
+    """
+
+    def __init__(self, map_path: str | os.PathLike[str], *, model: str | os.PathLike[str] | None = None,
+                 mode: str = "stream", params: dict | None = None, min_confidence: float | None = None,
+                 threads: int | None = None) -> None:
+        self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
+        self.map = PlaceMap.load(map_path)
+        ort_threads = 0 if threads is None else use_threads(threads)
+        self.extractor = FeatureExtractor(self.map.model_path(Path(model) if model else None), ort_threads)
+        self.map.check_model(self.extractor, map_path)
+        self.threshold = self.matcher.min_confidence if min_confidence is None else min_confidence
+        self._online = self.matcher.stream(len(self.map.names)) if self.matcher.online else None
+        self._lock = threading.Lock()
+        self._count = 0
+
+    @property
+    def names(self) -> list[str]:
+        """Reference image names, in map order (index = ``ref_index``)."""
+        return self.map.names
+
+    def encode(self, images: Sequence[np.ndarray]) -> np.ndarray:
+        """RGB uint8 images (H, W, 3) -> encodings (B, D) float32, comparable with the map's by dot product."""
+        batch = np.stack([self.extractor.preprocess(im) for im in images])
+        return self.map.encode(self.extractor.local_features(batch))
+
+    def similarity(self, encodings: np.ndarray) -> np.ndarray:
+        """Encodings (B, D) -> cosine similarities to every reference (B, R)."""
+        return encodings @ self.map.encodings.T
+
+    def _line(self, index: int, name: str, ref: int, score: float) -> Match:
+        lost = self.threshold is not None and score < self.threshold
+        return Match(index, name, -1 if lost else ref, "" if lost else self.map.names[ref], score, lost)
+
+    def push(self, rgb: np.ndarray, name: str = "") -> Match:
+        """Localise the next frame of the stream (RGB uint8 (H, W, 3)); online modes only."""
+        if self._online is None:
+            raise ValueError(f"mode {self.matcher.name} is offline (it needs the whole sequence): use run()")
+        image = np.asarray(rgb)
+        if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8 or min(image.shape[:2]) < MIN_SIDE:
+            raise VprError(f"frame must be RGB uint8 (H, W, 3) of at least {MIN_SIDE}x{MIN_SIDE} pixels, got "
+                           f"{image.dtype} {image.shape}")
+        enc = self.encode([image])[0]
+        with self._lock:
+            ref, score = self._online.update(self.map.encodings @ enc)
+            self._count += 1
+            return self._line(self._count - 1, name, ref, score)
+
+    def run(self, frames: Iterable[Frame], batch_size: int = 1,
+            on_skip: Callable[[Frame], None] = lambda f: None) -> Iterator[Match]:
+        """Localise a stream of frames (``images.open_stream``): online modes yield a match per frame as it
+        is encoded (``batch_size`` frames per model run); offline modes after the last frame. Undecodable
+        frames go to ``on_skip``."""
+        encoded = encode_frames(frames, self.map, self.extractor, batch_size, on_skip)
+        if self._online is not None:
+            for frame, enc in encoded:
+                with self._lock:
+                    ref, score = self._online.update(self.map.encodings @ enc)
+                yield self._line(frame.index, frame.name, ref, score)
+            return
+        pairs = list(encoded)
+        if pairs:
+            result = self.matcher.run(self.similarity(np.stack([e for _, e in pairs])), k=1)
+            for (frame, _), ref, score in zip(pairs, result.refs, result.scores):
+                yield self._line(frame.index, frame.name, int(ref), float(score))
+
+    def reset(self) -> None:
+        """Forget the stream (a new drive): the matcher starts again from no hypothesis."""
+        with self._lock:
+            if self._online is not None:
+                self._online.reset()
+            self._count = 0
