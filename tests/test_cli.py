@@ -138,7 +138,7 @@ def test_localize_bad_input(tmp_path: Path, small_map: Path, small_queries: Path
 
 
 def test_map_from_other_schema_version(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
-    arrays, meta = read_npz(small_map, "map", 1)
+    arrays, meta = read_npz(small_map, "map", 2)
     old = tmp_path / "old.npz"
     write_npz(old, arrays, meta | {"schema": 0})
     assert_one_line_error(run("localize", "-m", old, "-s", small_queries), "old.npz", "schema version 0")

@@ -172,7 +172,7 @@ def test_road_matcher_against_plain_loops(grid: int, vmax: float) -> None:
     got = [m.update(row) for row in sim]
     want = naive_road(sim, **params)
     assert [r for r, _ in got] == [r for r, _ in want]
-    np.testing.assert_allclose([c for _, c in got], [c for _, c in want], atol=1e-9)
+    np.testing.assert_allclose([c for _, c in got], [c for _, c in want], atol=1e-5)   # float32 state
     assert any(c >= 1 for _, c in got) and any(c < 1 for _, c in got)   # both locked and unlocked frames
 
 
@@ -182,7 +182,7 @@ def test_road_matcher_state_is_bounded() -> None:
     before = m.h.nbytes
     for _ in range(300):
         m.update(rng.normal(size=50))
-    assert m.h.nbytes == before == 9 * 2 * 50 * 8
+    assert m.h.nbytes == before == 9 * 2 * 50 * 4          # float32 (speeds x positions)
     with pytest.raises(ValueError):
         m.update(np.zeros(49))
 

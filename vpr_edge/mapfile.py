@@ -11,13 +11,15 @@ import numpy as np
 
 from vpr_edge import __version__
 from vpr_edge.codebook import Codebook
+from vpr_edge.compact import pack, unpack
 from vpr_edge.encode import fisher_vector
 from vpr_edge.errors import VprError
 from vpr_edge.extract import FeatureExtractor, resolve_model
 from vpr_edge.images import load_image
 from vpr_edge.store import read_npz, write_npz
 
-MAP_SCHEMA = 1
+MAP_SCHEMA = 2          # 2: encodings stored as int8 + per-row scale, float16 or float32 (meta "storage")
+READS_SCHEMAS = (1, 2)  # 1: float32 encodings
 Progress = Callable[[int], None]
 
 
@@ -36,19 +38,25 @@ class PlaceMap:
         """Power-normalisation exponent used for the reference encodings (queries must use the same)."""
         return float(self.meta["alpha"])
 
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the map atomically to ``path`` (a ``.npz`` file)."""
-        meta = self.meta | {"kind": "map", "schema": MAP_SCHEMA, "names": self.names,
+    def save(self, path: str | os.PathLike[str], storage: str = "int8") -> None:
+        """Write the map atomically to ``path`` (a ``.npz`` file), encodings stored as ``storage``
+        (``compact.STORAGES``: int8 with a per-row scale, float16, float32)."""
+        meta = self.meta | {"kind": "map", "schema": MAP_SCHEMA, "names": self.names, "storage": storage,
                             "n_refs": len(self.names), "dim": int(self.encodings.shape[1])}
-        write_npz(path, {"encodings": self.encodings} | self.codebook.to_arrays("codebook_"), meta)
+        write_npz(path, pack(self.encodings, storage) | self.codebook.to_arrays("codebook_"), meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> "PlaceMap":
         """Read a map, checking kind, schema version and internal consistency."""
-        arrays, meta = read_npz(path, "map", MAP_SCHEMA)
-        enc = arrays.get("encodings")
+        arrays, meta = read_npz(path, "map", READS_SCHEMAS)
+        try:
+            enc = unpack(arrays, meta.get("storage", "float32"))
+        except ValueError as e:
+            raise VprError(f"{path}: map is inconsistent ({e})") from None
+        if meta.get("storage", "float32") != "float32":   # rounding moved norms by ~1e-4: cosines need 1
+            enc /= np.maximum(np.linalg.norm(enc, axis=1, keepdims=True), 1e-12)
         names = meta.get("names")
-        if enc is None or enc.ndim != 2 or not isinstance(names, list) or len(names) != len(enc):
+        if not isinstance(names, list) or len(names) != len(enc):
             raise VprError(f"{path}: map is inconsistent (encodings and names disagree)")
         channels = int((meta.get("model") or {}).get("channels", -1))
         codebook = Codebook.from_arrays(arrays, channels, "codebook_", str(path))

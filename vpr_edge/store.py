@@ -74,8 +74,10 @@ def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
         np.savez(f, **payload)
 
 
-def read_npz(path: str | os.PathLike[str], kind: str, schema: int) -> tuple[dict[str, np.ndarray], dict]:
-    """Read a file written by :func:`write_npz`; check its ``kind`` and ``schema`` version.
+def read_npz(path: str | os.PathLike[str], kind: str, schema: int | tuple[int, ...]
+             ) -> tuple[dict[str, np.ndarray], dict]:
+    """Read a file written by :func:`write_npz`; check its ``kind`` and ``schema`` version (one, or the
+    versions this release reads).
 
     Raises VprError with a one-line reason naming ``path`` for a missing, corrupt or foreign file.
     """
@@ -108,9 +110,10 @@ def read_npz(path: str | os.PathLike[str], kind: str, schema: int) -> tuple[dict
         raise VprError(f"{path}: corrupt metadata ({e})") from None
     if meta.get("kind") != kind:
         raise VprError(f"{path}: not a vpr-edge {kind} (it is a vpr-edge {meta.get('kind')})")
-    if meta.get("schema") != schema:
+    readable = (schema,) if isinstance(schema, int) else tuple(schema)
+    if meta.get("schema") not in readable:
         raise VprError(f"{path}: {kind} schema version {meta.get('schema')} is not supported "
-                       f"(this vpr-edge reads version {schema}); rebuild it")
+                       f"(this vpr-edge reads version {', '.join(map(str, readable))}); rebuild it")
     return arrays, meta
 
 

@@ -1,0 +1,76 @@
+"""Compact storage of map encodings: int8 rows against a plain loop, round trips, old maps still read."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vpr_edge.compact import STORAGES, pack, quantise_rows, unpack
+from vpr_edge.mapfile import PlaceMap
+from vpr_edge.store import read_npz, write_npz
+
+
+def naive_quantise(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    q = np.zeros(x.shape, np.int8)
+    scale = np.ones(len(x), np.float32)
+    for i, row in enumerate(x):
+        peak = max(abs(float(v)) for v in row)
+        if peak > 0:
+            scale[i] = np.float32(peak / 127.0)
+        for j, v in enumerate(row):
+            q[i, j] = int(min(127, max(-127, round(float(np.float32(v) / scale[i])))))
+    return q, scale
+
+
+def test_quantise_rows_against_a_plain_loop() -> None:
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(6, 40)).astype(np.float32) * rng.uniform(0.01, 3, size=(6, 1)).astype(np.float32)
+    x[2] = 0.0
+    q, scale = quantise_rows(x)
+    nq, nscale = naive_quantise(x)
+    np.testing.assert_allclose(scale, nscale, rtol=1e-6)
+    assert np.abs(q.astype(int) - nq.astype(int)).max() <= 1      # ties may round either way
+    assert scale[2] == 1.0 and not q[2].any()
+    back = unpack(pack(x, "int8"), "int8")
+    assert np.abs(back - x).max() <= (np.abs(x).max(axis=1) / 254 + 1e-7).max()   # half a step per row
+
+
+@pytest.mark.parametrize("storage", STORAGES)
+def test_pack_round_trip_keeps_cosines(storage: str) -> None:
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(50, 512)).astype(np.float32)
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    q = rng.normal(size=(5, 512)).astype(np.float32)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    back = unpack(pack(x, storage), storage)
+    assert back.dtype == np.float32 and back.shape == x.shape
+    np.testing.assert_allclose(q @ back.T, q @ x.T, atol={"int8": 2e-3, "float16": 2e-4, "float32": 0}[storage])
+    with pytest.raises(ValueError):
+        unpack(pack(x, storage), "int8" if storage != "int8" else "float32")
+
+
+def test_map_storage_and_schema_1(tmp_path: Path, small_refs: Path) -> None:
+    from typer.testing import CliRunner
+
+    from vpr_edge.cli import app
+
+    runner = CliRunner()
+    sizes = {}
+    for storage in STORAGES:
+        out = tmp_path / f"{storage}.npz"
+        res = runner.invoke(app, ["build-map", str(small_refs), "-o", str(out), "--components", "4", "--storage",
+                                  storage])
+        assert res.exit_code == 0, res.stderr
+        arrays, _ = read_npz(out, "map", 2)
+        sizes[storage] = sum(arrays[k].nbytes for k in arrays if k.startswith("encodings"))
+    full = PlaceMap.load(tmp_path / "float32.npz")
+    small = PlaceMap.load(tmp_path / "int8.npz")
+    assert small.meta["storage"] == "int8" and small.encodings.dtype == np.float32
+    np.testing.assert_allclose(small.encodings, full.encodings, atol=np.abs(full.encodings).max() / 200)
+    assert sizes["int8"] < 0.26 * sizes["float32"] and sizes["float16"] == 0.5 * sizes["float32"]
+    # a schema-1 map (float32 encodings, no storage key) written by the previous release still loads
+    arrays, meta = read_npz(tmp_path / "float32.npz", "map", 2)
+    old = {k: v for k, v in meta.items() if k != "storage"} | {"schema": 1}
+    write_npz(tmp_path / "v1.npz", arrays, old)
+    np.testing.assert_array_equal(PlaceMap.load(tmp_path / "v1.npz").encodings, full.encodings)
