@@ -6,6 +6,8 @@ pickled and the runtime needs NumPy only.
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from vpr_edge.codebook import Codebook, Gmm, Pca
@@ -13,8 +15,8 @@ from vpr_edge.errors import VprError
 
 
 def fit_codebook(descriptors: np.ndarray, n_components: int = 128, pca_dim: int | None = None,
-                 whiten: bool = True, max_descriptors: int = 100_000, seed: int = 0,
-                 max_iter: int = 100) -> Codebook:
+                 whiten: bool = True, max_descriptors: int = 30_000, seed: int = 0,
+                 max_iter: int = 30) -> Codebook:
     """Fit PCA (if ``pca_dim``) and a diagonal GMM on local descriptors (..., D), sub-sampled at random to at
     most ``max_descriptors`` rows. Raises VprError if there are too few descriptors for the model asked for.
     """
@@ -41,7 +43,12 @@ def fit_codebook(descriptors: np.ndarray, n_components: int = 128, pca_dim: int 
         pca = Pca(model.mean_.astype(np.float64), model.components_.astype(np.float64),
                   np.maximum(scale, 1e-12).astype(np.float64))
         x = pca.project(x).astype(np.float64)
-    gm = GaussianMixture(n_components=n_components, covariance_type="diag", reg_covar=1e-6 * float(x.var()) + 1e-9,
-                         max_iter=max_iter, random_state=seed, init_params="k-means++").fit(x)
+    from sklearn.exceptions import ConvergenceWarning
+
+    with warnings.catch_warnings():  # stopping EM early is the chosen trade (README); not worth a warning
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        gm = GaussianMixture(n_components=n_components, covariance_type="diag",
+                             reg_covar=1e-6 * float(x.var()) + 1e-9, max_iter=max_iter, random_state=seed,
+                             init_params="k-means++").fit(x)
     gmm = Gmm(gm.weights_.astype(np.float64), gm.means_.astype(np.float64), gm.covariances_.astype(np.float64))
     return Codebook(gmm, pca, dim)

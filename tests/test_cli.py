@@ -51,7 +51,8 @@ def test_map_contents(small_map: Path, model_path: Path) -> None:
     assert pm.encodings.shape == (24, 2 * 8 * 32)
     np.testing.assert_allclose(np.linalg.norm(pm.encodings, axis=1), 1.0, rtol=1e-5)
     assert pm.names[0] == "0000000.jpg" and pm.meta["model"]["tap"] == "stage5"
-    assert pm.meta["codebook"] == {"fitted_on_refs": True, "n_components": 8, "pca_dim": 32, "seed": 0}
+    assert pm.meta["codebook"] == {"fitted_on_refs": True, "n_components": 8, "pca_dim": 32, "seed": 0,
+                                   "descriptors": 24 * 300, "em_iterations": 30}
 
 
 @pytest.mark.parametrize("mode", ["stream", "stream --min-confidence 0", "dtw", "single",

@@ -187,6 +187,32 @@ def test_road_matcher_state_is_bounded() -> None:
         m.update(np.zeros(49))
 
 
+def test_remove_hubs_against_plain_loops() -> None:
+    from vpr_edge.matchers.dtw import remove_hubs
+
+    rng = np.random.default_rng(5)
+    sim = rng.normal(size=(7, 9))
+    want = np.empty_like(sim)
+    for i, row in enumerate(sim):
+        want[i] = (row - row.mean()) / row.std()
+    for j in range(sim.shape[1]):
+        want[:, j] -= want[:, j].mean()
+    np.testing.assert_allclose(remove_hubs(sim), want, atol=1e-12)
+
+
+def test_open_ends_dtw_is_not_caught_by_a_hub() -> None:
+    """A reference alike to every query (stronger than the true matches): without hub removal the path
+    stands on it, with it (the dtw-open preset) the path follows the vehicle."""
+    rng = np.random.default_rng(6)
+    places = route([(1.0, 30), (2.0, 30)], start=40)
+    sim = planted(rng, 200, places, noise=0.3)
+    sim[:, 5] += 1.3
+    res = get_matcher("dtw-open").run(sim)
+    assert np.mean(np.abs(res.refs - places) <= 1) > 0.9
+    parked = get_matcher("dtw-open").with_params(hubs=False).run(sim)
+    assert np.mean(parked.refs == 5) > 0.9
+
+
 @pytest.mark.parametrize("speed", [2.0, 3.0])
 def test_open_ends_dtw_follows_fast_vehicle(speed: float) -> None:
     rng = np.random.default_rng(int(speed))

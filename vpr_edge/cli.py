@@ -21,7 +21,7 @@ from vpr_edge.errors import VprError, warn
 from vpr_edge.extract import FeatureExtractor, resolve_model
 from vpr_edge.images import Frame, list_images, load_image, open_stream
 from vpr_edge.api import Localizer, Match, encode_frames
-from vpr_edge.mapfile import PlaceMap, build_map
+from vpr_edge.mapfile import FIT_DESCRIPTORS, FIT_ITERATIONS, PlaceMap, build_map
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.store import atomic_output, check_writable
 from vpr_edge.threads import use_threads
@@ -109,7 +109,9 @@ def build_map_cmd(
                                           "(default: whiten; with --pca-dim only)."),
     alpha: float = typer.Option(0.5, min=0.0, max=1.0, help="Signed power normalisation exponent (1 = off)."),
     max_descriptors: Optional[int] = typer.Option(None, min=1, help="Local descriptors sampled to fit the "
-                                                                    "codebook (default 100000)."),
+                                                                    f"codebook (default {FIT_DESCRIPTORS})."),
+    fit_iterations: Optional[int] = typer.Option(None, min=1, help="EM iterations at most when fitting the "
+                                                                   f"GMM (default {FIT_ITERATIONS})."),
     seed: int = typer.Option(0, help="Random seed for sampling and GMM initialisation."),
     save_codebook: Optional[Path] = typer.Option(None, help="Also write the codebook to this .npz file."),
     storage: StorageOpt = typer.Option(StorageOpt.int8, help="How the map stores reference encodings: int8 "
@@ -123,7 +125,7 @@ def build_map_cmd(
     with _user_errors():
         # --- everything that can be checked before the work ---
         fit_options = {"--components": components, "--pca-dim": pca_dim, "--whiten/--no-whiten": whiten,
-                       "--max-descriptors": max_descriptors}
+                       "--max-descriptors": max_descriptors, "--fit-iterations": fit_iterations}
         if codebook and any(v is not None for v in fit_options.values()):
             given_opts = ", ".join(k for k, v in fit_options.items() if v is not None)
             raise VprError(f"{given_opts}: options for fitting a codebook, but --codebook {codebook} is given")
@@ -152,8 +154,8 @@ def build_map_cmd(
         with typer.progressbar(length=len(files), label="extracting", file=sys.stderr,
                                hidden=not sys.stderr.isatty()) as bar:
             place_map = build_map(files, extractor, given, components or 128, pca_dim,
-                                  True if whiten is None else whiten, alpha, max_descriptors or 100_000,
-                                  batch_size, seed, progress=bar.update)
+                                  True if whiten is None else whiten, alpha, max_descriptors or FIT_DESCRIPTORS,
+                                  batch_size, seed, fit_iterations or FIT_ITERATIONS, progress=bar.update)
         place_map.save(out, storage.value)
         if save_codebook:
             place_map.codebook.save(save_codebook, {"model_sha256": extractor.fingerprint})

@@ -18,6 +18,8 @@ from vpr_edge.extract import FeatureExtractor, resolve_model
 from vpr_edge.images import load_image
 from vpr_edge.store import read_npz, write_npz
 
+FIT_DESCRIPTORS = 30_000  # local descriptors sampled to fit the GMM   (README "Fitting the codebook":
+FIT_ITERATIONS = 30       # EM iterations at most                          as accurate as 100,000 / 100, ~10x faster)
 MAP_SCHEMA = 2          # 2: encodings stored as int8 + per-row scale, float16 or float32 (meta "storage")
 READS_SCHEMAS = (1, 2)  # 1: float32 encodings
 Progress = Callable[[int], None]
@@ -88,7 +90,8 @@ def _encode_all(local: np.ndarray, codebook: Codebook, alpha: float, chunk: int 
 
 def build_map(files: Sequence[Path], extractor: FeatureExtractor, codebook: Codebook | None = None,
               n_components: int = 128, pca_dim: int | None = None, whiten: bool = True, alpha: float = 0.5,
-              max_descriptors: int = 100_000, batch_size: int = 8, seed: int = 0,
+              max_descriptors: int = FIT_DESCRIPTORS, batch_size: int = 8, seed: int = 0,
+              fit_iterations: int = FIT_ITERATIONS,
               progress: Progress | None = None) -> PlaceMap:
     """Extract local features of every reference image in ``files`` (in that order; see ``list_images``), fit
     a codebook on a random sample of them unless one is given, and encode each reference. Local features are
@@ -113,7 +116,7 @@ def build_map(files: Sequence[Path], extractor: FeatureExtractor, codebook: Code
             flat = local.reshape(-1, extractor.dim)
             rng = np.random.default_rng(seed)
             rows = np.sort(rng.choice(len(flat), min(max_descriptors, len(flat)), replace=False))
-            codebook = fit_codebook(flat[rows], n_components, pca_dim, whiten, max_descriptors, seed)
+            codebook = fit_codebook(flat[rows], n_components, pca_dim, whiten, max_descriptors, seed, fit_iterations)
             del flat
         encodings = _encode_all(local, codebook, alpha)
         del local
@@ -124,7 +127,9 @@ def build_map(files: Sequence[Path], extractor: FeatureExtractor, codebook: Code
         "model_path": str(extractor.path.resolve()),
         "model_sha256": extractor.fingerprint,
         "codebook": {"fitted_on_refs": fitted, "n_components": codebook.gmm.n_components,
-                     "pca_dim": codebook.gmm.dim if codebook.pca is not None else None, "seed": seed},
+                     "pca_dim": codebook.gmm.dim if codebook.pca is not None else None, "seed": seed}
+                    | ({"descriptors": min(max_descriptors, len(files) * n_local), "em_iterations": fit_iterations}
+                       if fitted else {}),
         "refs_folder": str(Path(files[0]).parent),
         "vpr_edge_version": __version__,
     }

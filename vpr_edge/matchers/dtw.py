@@ -168,11 +168,22 @@ def through_values(sim: np.ndarray, variant: Variant = "distance", open_ends: bo
     return fwd + bwd - terms
 
 
+def remove_hubs(sim: np.ndarray) -> np.ndarray:
+    """(Q, R) -> each row z-scored over the references, then each reference's mean over the queries
+    subtracted. A hub (a reference alike to every query: fog, a plain wall) would otherwise win any path
+    that may stand still: on nordland-dev's pixels, reference 0's mean similarity to all queries (-0.806)
+    beats the true matches' mean (-0.885), and open-ends DTW parked on it for the whole stream."""
+    sim = np.asarray(sim, np.float64)
+    z = (sim - sim.mean(axis=1, keepdims=True)) / np.maximum(sim.std(axis=1, keepdims=True), 1e-12)
+    return z - z.mean(axis=0, keepdims=True)
+
+
 def dtw_match(sim: np.ndarray, k: int = 10, variant: Variant = "distance", open_ends: bool = False,
-              max_step: int = 4, rival_window: int = 5) -> Result:
+              max_step: int = 4, rival_window: int = 5, hubs: bool = False) -> Result:
     """Registry entry: the DTW path's reference per frame, the margin of the best path through it over the
-    best path avoiding +-``rival_window`` references around it, and references ranked by through-value."""
-    sim = np.asarray(sim)
+    best path avoiding +-``rival_window`` references around it, and references ranked by through-value.
+    ``hubs``: run on ``remove_hubs(sim)`` (offline, so the column means see the whole query sequence)."""
+    sim = remove_hubs(sim) if hubs else np.asarray(sim)
     refs = dtw_align(sim, variant, open_ends, max_step).matches
     pref = through_values(sim, variant, open_ends, max_step)
     if variant == "distance":

@@ -12,7 +12,7 @@ from vpr_edge.matchers.seqslam import SeqSLAMOnline, seqslam_match
 from vpr_edge.matchers.single import BestMatch
 from vpr_edge.matchers.stream_dtw import StreamingDTW
 
-_DTW = {"variant": "distance", "open_ends": False, "max_step": 4, "rival_window": 5}
+_DTW = {"variant": "distance", "open_ends": False, "max_step": 4, "rival_window": 5, "hubs": False}
 _SEQSLAM = {"ds": 10, "vmin": 0.5, "vmax": 3.0, "r_window": 10, "match_window": 10}
 
 MATCHERS: dict[str, Matcher] = {m.name: m for m in (
@@ -27,8 +27,9 @@ MATCHERS: dict[str, Matcher] = {m.name: m for m in (
     Matcher("dtw", "offline DTW, fixed ends (0,0)->(Q-1,R-1), distance form", align=dtw_match, params=_DTW),
     Matcher("dtw-thesis", "offline DTW, fixed ends, similarity form (the thesis's)", align=dtw_match,
             params=_DTW | {"variant": "similarity"}),
-    Matcher("dtw-open", "offline subsequence DTW, open ends, 0-4 references per frame, distance form",
-            align=dtw_match, params=_DTW | {"open_ends": True}),
+    Matcher("dtw-open", "offline subsequence DTW, open ends, 0-4 references per frame, distance form, "
+            "hubs removed (similarities z-scored per frame, each reference's mean subtracted)",
+            align=dtw_match, params=_DTW | {"open_ends": True, "hubs": True}),
     Matcher("seqslam", "SeqSLAM (Milford & Wyeth 2012), window centred on each frame (offline)",
             align=seqslam_match, params=_SEQSLAM),
     Matcher("seqslam-online", "SeqSLAM over the past ds frames only (online)", start=SeqSLAMOnline,
