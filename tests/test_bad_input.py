@@ -111,6 +111,8 @@ CASES = [
          ("notes.txt", "not a vpr-edge codebook", "text file")),
     Case("bm-codebook-and-fit-options", "build-map {w}/refs -o {w}/out.npz --codebook {w}/cb.npz --components 8",
          ("--components", "cb.npz")),
+    Case("bm-fit-iterations-and-codebook", "build-map {w}/refs -o {w}/out.npz --codebook {w}/cb.npz --fit-iterations 5",
+         ("--fit-iterations", "cb.npz")),
     Case("bm-no-sklearn", BM, ("scikit-learn", "vpr-edge[fit]"), hide=("sklearn",)),
     # localize
     Case("loc-map-missing", "localize -m {w}/none.npz -s {w}/queries", ("none.npz", "no such file")),
@@ -131,6 +133,10 @@ CASES = [
          ("garbage.mp4",)),
     Case("loc-stream-all-corrupt", "localize -m {w}/good.npz -s {w}/allbad -o {w}/old_results.csv",
          ("allbad", "none of its frames")),
+    Case("loc-camera-missing", "localize -m {w}/good.npz -s 7", ("7", "cannot open camera")),
+    Case("loc-device-missing", "localize -m {w}/good.npz -s /dev/video9", ("/dev/video9", "cannot open camera")),
+    Case("loc-rtsp-unreachable", "localize -m {w}/good.npz -s rtsp://127.0.0.1:9/none -o {w}/old_results.csv",
+         ("rtsp://127.0.0.1:9/none", "cannot open stream")),
     Case("loc-out-proc", LOC + " -o /proc/results.csv", ("/proc/results.csv", "not writable")),
     Case("loc-out-no-folder", LOC + " -o {w}/nodir/r.csv", ("nodir", "does not exist")),
     Case("loc-out-is-folder", LOC + " -o {w}/a_folder.npz", ("a_folder.npz", "is a folder")),
@@ -234,6 +240,17 @@ def test_small_images_warned_once(tmp_path: Path, ws: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     warned = [ln for ln in proc.stderr.splitlines() if "upsampled more than 4x" in ln]
     assert len(warned) == 1 and "40x30" in warned[0], proc.stderr
+
+
+def test_option_values_refused_by_the_parser() -> None:
+    """Values the option parser refuses (an unknown --storage, a negative count) get the parser's usage
+    message (three lines: usage, hint, error), exit code 2, no traceback."""
+    for argv in (["build-map", "x", "-o", "y.npz", "--storage", "int4"], ["localize", "-m", "m", "-s", "s",
+                                                                          "--mode", "nope"],
+                 ["build-map", "x", "-o", "y.npz", "--fit-iterations", "0"]):
+        res = CliRunner().invoke(app, argv)
+        assert res.exit_code == 2 and isinstance(res.exception, SystemExit), res.stderr
+        assert "Traceback" not in res.stderr and argv[-2] in res.stderr.splitlines()[-1]
 
 
 def test_help_and_version() -> None:

@@ -99,6 +99,21 @@ def test_video_stream(tmp_path: Path, small_map: Path, small_queries: Path) -> N
     assert len(proc.stdout.splitlines()) == 11
 
 
+def test_network_stream_url(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
+    """A URL source goes through OpenCV's network path (here file://, as rtsp:// or http:// would)."""
+    import cv2
+
+    video = tmp_path / "q.avi"
+    w = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (160, 120))
+    for f in sorted(small_queries.iterdir())[:6]:
+        w.write(cv2.imread(str(f)))
+    w.release()
+    proc = run("localize", "-m", small_map, "-s", f"file://{video}", "--mode", "single")
+    assert proc.returncode == 0, proc.stderr
+    rows = list(csv.DictReader(proc.stdout.splitlines()))
+    assert [r["frame"] for r in rows] == [f"q.avi#{i}" for i in range(6)]
+
+
 def test_corrupt_frame_is_reported_and_skipped(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
     frames = tmp_path / "frames"
     shutil.copytree(small_queries, frames)

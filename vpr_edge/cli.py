@@ -223,7 +223,8 @@ _MODE_HELP = ("Matcher. Online (a result per frame): " + ", ".join(n for n, m in
 @app.command("localize")
 def localize_cmd(
     map_path: Path = typer.Option(..., "--map", "-m", help="Map file written by build-map."),
-    stream: Path = typer.Option(..., "--stream", "-s", help="Folder of frames (file-name order) or a video file."),
+    stream: str = typer.Option(..., "--stream", "-s", metavar="SOURCE", help="Folder of frames (file-name order), a video file, "
+                                "a camera (0, 1, ... or /dev/video0) or a network stream (rtsp://...)."),
     model: Optional[Path] = typer.Option(None, help="ONNX feature model; must be the map's model (default: "
                                          "$VPR_EDGE_MODEL if set, else the file the map was built with if it "
                                          "still exists, else the bundled one)."),

@@ -67,10 +67,8 @@ def _folder_frames(files: list[Path]) -> Iterator[Frame]:
             yield Frame(i, f.name, None, str(e))
 
 
-def _video_frames(path: Path) -> Iterator[Frame]:
-    cap = cv2.VideoCapture(str(path))
-    if not cap.isOpened():
-        raise VprError(f"{path}: cannot open video")
+def _capture_frames(cap: cv2.VideoCapture, where: str, name: str) -> Iterator[Frame]:
+    """Frames from an opened OpenCV capture until it delivers none (end of file, camera stopped)."""
     try:
         i = 0
         while True:
@@ -78,23 +76,51 @@ def _video_frames(path: Path) -> Iterator[Frame]:
             if not ok:
                 break
             if min(bgr.shape[:2]) < MIN_SIDE:
-                yield Frame(i, f"{path.name}#{i}", None, f"{path}#{i}: frame is {bgr.shape[1]}x{bgr.shape[0]} "
-                                                          f"pixels, too small (at least {MIN_SIDE}x{MIN_SIDE})")
+                yield Frame(i, f"{name}#{i}", None, f"{where}#{i}: frame is {bgr.shape[1]}x{bgr.shape[0]} "
+                                                    f"pixels, too small (at least {MIN_SIDE}x{MIN_SIDE})")
             else:
-                yield Frame(i, f"{path.name}#{i}", cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+                yield Frame(i, f"{name}#{i}", cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
             i += 1
     finally:
         cap.release()
     if i == 0:
-        raise VprError(f"{path}: no frames could be decoded")
+        raise VprError(f"{where}: no frames could be decoded")
+
+
+def _video_frames(path: Path) -> Iterator[Frame]:
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        raise VprError(f"{path}: cannot open video")
+    yield from _capture_frames(cap, str(path), path.name)
+
+
+def _live(source: str) -> tuple[Iterator[Frame], None]:
+    """A camera (``0``, ``1``, ... or a device path ``/dev/video0``) or a network stream (``rtsp://...``,
+    ``http://...``), opened now so that a wrong source fails before any work."""
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)   # its backend probing warns per backend
+    try:
+        cap = cv2.VideoCapture(int(source) if source.isdigit() else source)
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+    if not cap.isOpened():
+        cap.release()
+        kind = "camera" if source.isdigit() or source.startswith("/dev/") else "stream"
+        raise VprError(f"{source}: cannot open {kind} (OpenCV found no device or could not connect)")
+    name = f"camera{source}" if source.isdigit() else Path(source.split("://")[-1]).name or "stream"
+    return _capture_frames(cap, source, name), None
 
 
 def open_stream(source: str | os.PathLike[str]) -> tuple[Iterator[Frame], int | None]:
-    """Frames from a folder of images (name order) or a video file, with the frame count if known.
+    """Frames from a folder of images (name order), a video file, a camera (``0``, ``/dev/video0``) or a
+    network stream (``rtsp://``, ``http(s)://``), with the frame count if known (None for live sources).
 
     Undecodable images come through as frames with ``image=None`` and an ``error`` so that the caller can
     report and skip them; a missing or empty source raises VprError at once.
     """
+    text = str(source)
+    if text.isdigit() and not Path(text).exists() or text.startswith("/dev/video") or "://" in text:
+        return _live(text)
     source = Path(source)
     if source.is_dir():
         files = list_images(source)
