@@ -22,3 +22,14 @@ def test_bench_matcher_reports_each_checkpoint() -> None:
     assert [r[0] for r in rows] == ["500", "2000"]
     assert all(float(r[-1]) > 0.8 for r in rows)          # synthetic route is followed
     assert all(float(r[4]) > 0 and float(r[5]) > 0 for r in rows)   # RSS columns are filled
+
+
+def test_bench_map_reports_each_size(tmp_path: Path, small_refs: Path) -> None:
+    m = tmp_path / "m.npz"
+    build = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "build-map", str(small_refs), "-o", str(m),
+                            "--components", "2"], capture_output=True, text=True, timeout=600)
+    assert build.returncode == 0, build.stderr
+    out = tool("bench_map.py", "--map", str(m), "--refs", "50,300")
+    rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
+    assert [(r[0], r[2]) for r in rows] == [("50", "mmap"), ("50", "ram"), ("300", "mmap"), ("300", "ram")]
+    assert all(float(r[3]) >= 0 and float(r[6]) >= 0 and float(r[1]) >= 0 for r in rows)   # columns filled

@@ -78,7 +78,7 @@ class Localizer:
                  mode: str = "stream", params: dict | None = None, min_confidence: float | None = None,
                  threads: int | None = None) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
-        self.map = PlaceMap.load(map_path)
+        self.map = PlaceMap.load(map_path, mmap=True)
         ort_threads = 0 if threads is None else use_threads(threads)
         self.extractor = FeatureExtractor(self.map.model_path(Path(model) if model else None), ort_threads)
         self.map.check_model(self.extractor, map_path)
@@ -99,7 +99,7 @@ class Localizer:
 
     def similarity(self, encodings: np.ndarray) -> np.ndarray:
         """Encodings (B, D) -> cosine similarities to every reference (B, R)."""
-        return encodings @ self.map.encodings.T
+        return self.map.similarity(encodings)
 
     def _line(self, index: int, name: str, ref: int, score: float) -> Match:
         lost = self.threshold is not None and score < self.threshold
@@ -115,7 +115,7 @@ class Localizer:
                            f"{image.dtype} {image.shape}")
         enc = self.encode([image])[0]
         with self._lock:
-            ref, score = self._online.update(self.map.encodings @ enc)
+            ref, score = self._online.update(self.map.similarity(enc)[0])
             self._count += 1
             return self._line(self._count - 1, name, ref, score)
 
@@ -128,7 +128,7 @@ class Localizer:
         if self._online is not None:
             for frame, enc in encoded:
                 with self._lock:
-                    ref, score = self._online.update(self.map.encodings @ enc)
+                    ref, score = self._online.update(self.map.similarity(enc)[0])
                 yield self._line(frame.index, frame.name, ref, score)
             return
         pairs = list(encoded)

@@ -159,7 +159,7 @@ def build_map_cmd(
         place_map.save(out, storage.value)
         if save_codebook:
             place_map.codebook.save(save_codebook, {"model_sha256": extractor.fingerprint})
-        typer.echo(f"wrote {out}: {len(place_map.names)} references, {place_map.encodings.shape[1]}-dim "
+        typer.echo(f"wrote {out}: {len(place_map.names)} references, {place_map.stored.shape[1]}-dim "
                    f"{storage.value} encodings, {place_map.codebook.gmm.n_components}-component codebook "
                    f"({'fitted on the references' if given is None else 'given'})", err=True)
 
@@ -446,10 +446,10 @@ def evaluate_cmd(
 def info_cmd(map_path: Path = typer.Argument(..., help="Map file written by build-map.")) -> None:
     """Describe a map: references, encoding size, codebook, model and settings (JSON on stdout)."""
     with _user_errors():
-        pm = PlaceMap.load(map_path)
+        pm = PlaceMap.load(map_path, mmap=True)
         meta = {k: v for k, v in pm.meta.items() if k not in ("names", "n_refs", "dim")}  # said once, below
         summary = {"references": len(pm.names), "first": pm.names[0], "last": pm.names[-1],
-                   "encoding_dims": int(pm.encodings.shape[1]), "size_mb": round(map_path.stat().st_size / 1e6, 2)}
+                   "encoding_dims": int(pm.stored.shape[1]), "size_mb": round(map_path.stat().st_size / 1e6, 2)}
         typer.echo(json.dumps(summary | meta, indent=1, sort_keys=True))
 
 

@@ -1,48 +1,90 @@
-"""Compact storage of encodings: float16, or int8 with one scale per row (symmetric, max-abs).
+"""Reference encodings as a map stores them: float16, float32, or int8 with one scale per row.
 
 Measured on both shared datasets (README, "Map size"): int8 rows change stream and single-frame R@1 by at
-most 0.005 against float32, at a quarter of the bytes; so it is build-map's default.
+most 0.005 against float32, at a quarter of the bytes; so it is build-map's default. Similarities are
+computed from what is stored, a block of references at a time, so that a memory-mapped map is read as it
+is used and never expanded whole into RAM.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 STORAGES = ("int8", "float16", "float32")
+_DTYPES = {"int8": np.int8, "float16": np.float16, "float32": np.float32}
+BLOCK_BYTES = 16 << 20  # float32 scratch per block of references in ``similarity``
 
 
 def quantise_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(R, D) float -> (int8 (R, D), scale float32 (R,)) with x ~= q * scale[:, None]; all-zero rows get
-    scale 1."""
+    """(R, D) float -> (int8 (R, D), scale float32 (R,)) with x ~= q * scale[:, None]: symmetric, max-abs
+    over the row, then the scale adjusted so that each dequantised row keeps the original row's L2 norm
+    (cosines against unit rows stay cosines). All-zero rows get scale 1."""
     x = np.asarray(x, np.float32)
     peak = np.abs(x).max(axis=1) if x.size else np.zeros(len(x), np.float32)
-    scale = np.where(peak > 0, peak / 127.0, 1.0).astype(np.float32)
-    q = np.clip(np.rint(x / scale[:, None]), -127, 127).astype(np.int8)
+    step = np.where(peak > 0, peak / 127.0, 1.0).astype(np.float32)
+    q = np.clip(np.rint(x / step[:, None]), -127, 127).astype(np.int8)
+    qn = np.linalg.norm(q.astype(np.float32), axis=1)
+    scale = np.where(qn > 0, np.linalg.norm(x, axis=1) / np.maximum(qn, 1e-30), 1.0).astype(np.float32)
     return q, scale
 
 
-def pack(encodings: np.ndarray, storage: str) -> dict[str, np.ndarray]:
-    """Map arrays for ``encodings`` (R, D) float32 stored as ``storage`` (one of STORAGES)."""
-    if storage == "int8":
-        q, scale = quantise_rows(encodings)
-        return {"encodings": q, "encodings_scale": scale}
-    if storage == "float16":
-        return {"encodings": encodings.astype(np.float16)}
-    if storage == "float32":
-        return {"encodings": encodings.astype(np.float32)}
-    raise ValueError(f"unknown storage {storage!r}; choose from {', '.join(STORAGES)}")
+@dataclass(frozen=True)
+class Encodings:
+    """``values`` (R, D) of dtype ``storage`` (an array, or a read-only memmap into the map file) and, for
+    int8, ``scale`` (R,): reference r is ``values[r] * scale[r]``."""
 
+    values: np.ndarray
+    storage: str
+    scale: np.ndarray | None = None
 
-def unpack(arrays: dict[str, np.ndarray], storage: str) -> np.ndarray:
-    """The (R, D) float32 encodings from map arrays written by :func:`pack`; ValueError if inconsistent."""
-    enc = arrays.get("encodings")
-    if enc is None or enc.ndim != 2:
-        raise ValueError("no 2-D encodings array")
-    expected = {"int8": np.int8, "float16": np.float16, "float32": np.float32}.get(storage)
-    if expected is None or enc.dtype != expected:
-        raise ValueError(f"encodings are {enc.dtype}, storage says {storage!r}")
-    if storage != "int8":
-        return enc.astype(np.float32, copy=False)
-    scale = arrays.get("encodings_scale")
-    if scale is None or scale.shape != (len(enc),):
-        raise ValueError("int8 encodings without one scale per row")
-    return enc.astype(np.float32) * scale.astype(np.float32)[:, None]
+    @classmethod
+    def pack(cls, x: np.ndarray, storage: str) -> "Encodings":
+        """Float encodings (R, D) stored as ``storage`` (one of STORAGES)."""
+        if storage not in STORAGES:
+            raise ValueError(f"unknown storage {storage!r}; choose from {', '.join(STORAGES)}")
+        if storage == "int8":
+            q, scale = quantise_rows(x)
+            return cls(q, storage, scale)
+        return cls(np.asarray(x).astype(_DTYPES[storage]), storage)
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], storage: str) -> "Encodings":
+        """Read back what :meth:`to_arrays` wrote; ValueError if the arrays do not fit ``storage``."""
+        values, scale = arrays.get("encodings"), arrays.get("encodings_scale")
+        if values is None or values.ndim != 2:
+            raise ValueError("no 2-D encodings array")
+        if storage not in STORAGES or values.dtype != _DTYPES[storage]:
+            raise ValueError(f"encodings are {values.dtype}, storage says {storage!r}")
+        if storage == "int8" and (scale is None or scale.shape != (len(values),)):
+            raise ValueError("int8 encodings without one scale per row")
+        return cls(values, storage, np.asarray(scale, np.float32) if storage == "int8" else None)
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Arrays for the map file."""
+        return {"encodings": self.values} | ({"encodings_scale": self.scale} if self.scale is not None else {})
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(R, D)."""
+        return tuple(self.values.shape)  # type: ignore[return-value]
+
+    def dense(self) -> np.ndarray:
+        """All references as float32 (R, D) in RAM."""
+        out = np.asarray(self.values, np.float32)
+        return out * self.scale[:, None] if self.scale is not None else out
+
+    def similarity(self, queries: np.ndarray) -> np.ndarray:
+        """Queries (B, D) -> dot products with every reference (B, R) float32, a block of references at a
+        time (about BLOCK_BYTES of float32 scratch), from the stored values."""
+        q = np.atleast_2d(np.asarray(queries, np.float32))
+        if self.storage == "float32" and not isinstance(self.values, np.memmap):
+            return q @ self.values.T
+        r, d = self.shape
+        out = np.empty((len(q), r), np.float32)
+        rows = max(1, BLOCK_BYTES // (4 * d))
+        for i in range(0, r, rows):
+            out[:, i:i + rows] = q @ np.asarray(self.values[i:i + rows], np.float32).T
+        if self.scale is not None:
+            out *= self.scale
+        return out

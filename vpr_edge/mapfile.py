@@ -11,7 +11,7 @@ import numpy as np
 
 from vpr_edge import __version__
 from vpr_edge.codebook import Codebook
-from vpr_edge.compact import pack, unpack
+from vpr_edge.compact import Encodings
 from vpr_edge.encode import fisher_vector
 from vpr_edge.errors import VprError
 from vpr_edge.extract import FeatureExtractor, resolve_model
@@ -27,13 +27,23 @@ Progress = Callable[[int], None]
 
 @dataclass(frozen=True)
 class PlaceMap:
-    """Reference encodings (R, D) float32 (L2-normalised IFVs), their image names, the codebook, and
-    metadata: model identity (``model_sha256``, ``model``), ``alpha``, and how the codebook was made."""
+    """Reference encodings as stored (``compact.Encodings``: L2-normalised IFVs, R x D), their image names,
+    the codebook, and metadata: model identity (``model_sha256``, ``model``), ``alpha``, and how the
+    codebook was made."""
 
-    encodings: np.ndarray
+    stored: Encodings
     names: list[str]
     codebook: Codebook
     meta: dict
+
+    @property
+    def encodings(self) -> np.ndarray:
+        """All reference encodings as float32 (R, D) in RAM (for analysis; matching uses ``similarity``)."""
+        return self.stored.dense()
+
+    def similarity(self, queries: np.ndarray) -> np.ndarray:
+        """Query encodings (B, D) -> cosine similarities to every reference (B, R) float32."""
+        return self.stored.similarity(queries)
 
     @property
     def alpha(self) -> float:
@@ -43,26 +53,28 @@ class PlaceMap:
     def save(self, path: str | os.PathLike[str], storage: str = "int8") -> None:
         """Write the map atomically to ``path`` (a ``.npz`` file), encodings stored as ``storage``
         (``compact.STORAGES``: int8 with a per-row scale, float16, float32)."""
+        stored = self.stored if self.stored.storage == storage else Encodings.pack(self.stored.dense(), storage)
         meta = self.meta | {"kind": "map", "schema": MAP_SCHEMA, "names": self.names, "storage": storage,
-                            "n_refs": len(self.names), "dim": int(self.encodings.shape[1])}
-        write_npz(path, pack(self.encodings, storage) | self.codebook.to_arrays("codebook_"), meta)
+                            "n_refs": len(self.names), "dim": int(stored.shape[1])}
+        write_npz(path, stored.to_arrays() | self.codebook.to_arrays("codebook_"), meta)
 
     @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> "PlaceMap":
-        """Read a map, checking kind, schema version and internal consistency."""
-        arrays, meta = read_npz(path, "map", READS_SCHEMAS)
+    def load(cls, path: str | os.PathLike[str], mmap: bool = False) -> "PlaceMap":
+        """Read a map, checking kind, schema version and internal consistency. With ``mmap`` the encodings
+        stay in the file, memory-mapped: opening reads headers and metadata only, and the operating system
+        pages references in as similarities touch them (a 100,000-place map opens in milliseconds)."""
+        arrays, meta = read_npz(path, "map", READS_SCHEMAS, mmap=mmap)
         try:
-            enc = unpack(arrays, meta.get("storage", "float32"))
+            stored = Encodings.from_arrays(arrays, meta.get("storage", "float32"))
         except ValueError as e:
             raise VprError(f"{path}: map is inconsistent ({e})") from None
-        if meta.get("storage", "float32") != "float32":   # rounding moved norms by ~1e-4: cosines need 1
-            enc /= np.maximum(np.linalg.norm(enc, axis=1, keepdims=True), 1e-12)
         names = meta.get("names")
-        if not isinstance(names, list) or len(names) != len(enc):
+        if not isinstance(names, list) or len(names) != stored.shape[0]:
             raise VprError(f"{path}: map is inconsistent (encodings and names disagree)")
         channels = int((meta.get("model") or {}).get("channels", -1))
-        codebook = Codebook.from_arrays(arrays, channels, "codebook_", str(path))
-        return cls(enc.astype(np.float32, copy=False), names, codebook, meta)
+        small = {k: np.array(v) for k, v in arrays.items() if k.startswith("codebook_")}  # into RAM
+        codebook = Codebook.from_arrays(small, channels, "codebook_", str(path))
+        return cls(stored, names, codebook, meta)
 
     def model_path(self, given: Path | None) -> Path:
         """The model to localise with: ``given``, else ``$VPR_EDGE_MODEL``, else the file the map was built
@@ -133,4 +145,4 @@ def build_map(files: Sequence[Path], extractor: FeatureExtractor, codebook: Code
         "refs_folder": str(Path(files[0]).parent),
         "vpr_edge_version": __version__,
     }
-    return PlaceMap(encodings, [f.name for f in files], codebook, meta)
+    return PlaceMap(Encodings.pack(encodings, "float32"), [f.name for f in files], codebook, meta)

@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import io
 import json
 import os
+import struct
 import tempfile
 import zipfile
 from collections.abc import Iterator
@@ -74,10 +76,41 @@ def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
         np.savez(f, **payload)
 
 
-def read_npz(path: str | os.PathLike[str], kind: str, schema: int | tuple[int, ...]
+def _mapped_members(path: Path, z: zipfile.ZipFile) -> dict[str, np.ndarray]:
+    """Every stored (uncompressed) ``.npy`` member of an open archive as a read-only np.memmap into the file:
+    opening costs the headers only, and the pages of an array are read when touched. Small members (the
+    metadata) are read whole. Raises ValueError for a compressed member or a pickled (object) array."""
+    out: dict[str, np.ndarray] = {}
+    with open(path, "rb") as f:
+        for info in z.infolist():
+            name = info.filename[:-4] if info.filename.endswith(".npy") else info.filename
+            if info.file_size < 4096:
+                out[name] = np.load(io.BytesIO(z.read(info)), allow_pickle=False)
+                continue
+            if info.compress_type != zipfile.ZIP_STORED:
+                raise ValueError(f"member {name} is compressed and cannot be memory-mapped")
+            f.seek(info.header_offset)
+            local = f.read(30)
+            if local[:4] != b"PK\x03\x04":
+                raise zipfile.BadZipFile(f"bad local header for {name}")
+            name_len, extra_len = struct.unpack("<HH", local[26:30])
+            f.seek(info.header_offset + 30 + name_len + extra_len)
+            version = np.lib.format.read_magic(f)
+            read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
+                np.lib.format.read_array_header_2_0
+            shape, fortran, dtype = read_header(f)
+            if dtype.hasobject:
+                raise ValueError("Object arrays cannot be loaded when allow_pickle=False")
+            out[name] = np.memmap(path, dtype=dtype, mode="r", offset=f.tell(), shape=shape,
+                                  order="F" if fortran else "C")
+    return out
+
+
+def read_npz(path: str | os.PathLike[str], kind: str, schema: int | tuple[int, ...], mmap: bool = False
              ) -> tuple[dict[str, np.ndarray], dict]:
     """Read a file written by :func:`write_npz`; check its ``kind`` and ``schema`` version (one, or the
-    versions this release reads).
+    versions this release reads). With ``mmap``, large arrays come back memory-mapped (read-only), so that
+    opening a large map reads its headers and metadata only.
 
     Raises VprError with a one-line reason naming ``path`` for a missing, corrupt or foreign file.
     """
@@ -92,8 +125,12 @@ def read_npz(path: str | os.PathLike[str], kind: str, schema: int | tuple[int, .
     if head != b"PK\x03\x04":
         raise VprError(f"{path}: not a vpr-edge {kind} ({_describe(head, path)}; expected an .npz archive)")
     try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
+        if mmap:
+            with zipfile.ZipFile(path) as z:
+                arrays = _mapped_members(path, z)
+        else:
+            with np.load(path, allow_pickle=False) as z:
+                arrays = {k: z[k] for k in z.files}
     except ValueError as e:
         if "pickle" in str(e):
             raise VprError(f"{path}: not a vpr-edge {kind} (holds pickled objects, which vpr-edge never "
