@@ -1,7 +1,6 @@
 """torch -> ONNX export of layer taps: the bundled model against torch on real images, other backbones."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -101,3 +100,23 @@ def test_deep_taps_build() -> None:
         model = BACKBONES[name].build(tap)
         with torch.no_grad():
             assert model(torch.zeros(1, 3, 64, 64)).shape[1] == k == BACKBONES[name].taps[tap]
+
+
+def test_quantize_keeps_features_and_marks_the_model(tmp_path: Path, model_path: Path, small_refs: Path,
+                                                     small_queries: Path) -> None:
+    pytest.importorskip("onnx")
+    from vpr_edge.images import load_image
+    from vpr_edge_export.quantize import main as quantize_main
+
+    out = tmp_path / "int8.onnx"
+    assert quantize_main(["--model", str(model_path), "--calibration", str(small_refs), "--images", "6",
+                          "--out", str(out)]) == 0
+    fp32, int8 = FeatureExtractor(model_path), FeatureExtractor(out)
+    assert int8.info["quantization"]["calibration_images"] == 6
+    assert int8.info["quantization"]["source_sha256"] == fp32.fingerprint
+    assert {k: v for k, v in int8.info.items() if k != "quantization"} == fp32.info
+    batch = np.stack([fp32.preprocess(load_image(f)) for f in sorted(small_queries.iterdir())[:3]])
+    x, y = (m.feature_maps(batch).reshape(3, -1) for m in (fp32, int8))
+    cos = (x * y).sum(1) / (np.linalg.norm(x, axis=1) * np.linalg.norm(y, axis=1))
+    assert cos.min() > 0.95, cos                          # U8U8 per channel: ~0.987 on Corridor
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["int8.onnx"]     # no temporary files left
