@@ -113,6 +113,11 @@ CASES = [
          ("--components", "cb.npz")),
     Case("bm-fit-iterations-and-codebook", "build-map {w}/refs -o {w}/out.npz --codebook {w}/cb.npz --fit-iterations 5",
          ("--fit-iterations", "cb.npz")),
+    Case("bm-append-missing-map", "build-map {w}/refs -o {w}/nomap.npz --append", ("nomap.npz", "no such file")),
+    Case("bm-append-not-a-map", "build-map {w}/refs -o {w}/notes.txt --append", ("notes.txt", "not a vpr-edge map")),
+    Case("bm-append-alpha", "build-map {w}/refs -o {w}/good.npz --append --alpha 0.3", ("good.npz", "--alpha")),
+    Case("bm-append-codebook", "build-map {w}/refs -o {w}/good.npz --append --codebook {w}/cb.npz",
+         ("cb.npz", "--append")),
     Case("bm-no-sklearn", BM, ("scikit-learn", "vpr-edge[fit]"), hide=("sklearn",)),
     # localize
     Case("loc-map-missing", "localize -m {w}/none.npz -s {w}/queries", ("none.npz", "no such file")),

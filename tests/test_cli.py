@@ -210,3 +210,30 @@ def test_runtime_imports_neither_torch_nor_sklearn(small_map: Path, small_querie
                           text=True, timeout=300)
     assert "HEAVY []" in proc.stderr, proc.stderr[-500:]
     assert len(proc.stdout.splitlines()) == 25
+
+
+def test_append_grows_the_map_with_its_codebook(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
+    first, second = tmp_path / "a", tmp_path / "b"
+    first.mkdir()
+    second.mkdir()
+    for i, f in enumerate(sorted(small_refs.iterdir())):
+        shutil.copy(f, (first if i < 14 else second) / f.name)
+    grown = tmp_path / "grown.npz"
+    assert run("build-map", first, "-o", grown, "--components", "4", "--storage", "float32").returncode == 0
+    before = PlaceMap.load(grown)
+    proc = run("build-map", second, "-o", grown, "--append")
+    assert proc.returncode == 0 and "(10 appended)" in proc.stderr and "float32" in proc.stderr, proc.stderr
+    after = PlaceMap.load(grown)
+    assert after.names == sorted(p.name for p in small_refs.iterdir())
+    np.testing.assert_array_equal(after.encodings[:14], before.encodings)          # old references untouched
+    np.testing.assert_array_equal(after.codebook.gmm.means, before.codebook.gmm.means)
+    assert after.meta["appended"] == [{"folder": str(second), "first_index": 14, "count": 10}]
+    # the same references in one go with the same codebook give the same encodings
+    cb = tmp_path / "cb.npz"
+    before.codebook.save(cb, {"model_sha256": before.meta["model_sha256"]})
+    whole = tmp_path / "whole.npz"
+    assert run("build-map", small_refs, "-o", whole, "--codebook", cb, "--storage", "float32").returncode == 0
+    np.testing.assert_allclose(PlaceMap.load(whole).encodings, after.encodings, atol=1e-6)
+    assert_one_line_error(run("build-map", second, "-o", grown, "--append", "--components", "8"), "--components")
+    assert_one_line_error(run("build-map", second, "-o", tmp_path / "none.npz", "--append"), "none.npz",
+                          "no such file")

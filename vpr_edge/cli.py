@@ -107,16 +107,21 @@ def build_map_cmd(
                                                             "before the GMM (default: no PCA)."),
     whiten: Optional[bool] = typer.Option(None, "--whiten/--no-whiten", help="Whiten the PCA output "
                                           "(default: whiten; with --pca-dim only)."),
-    alpha: float = typer.Option(0.5, min=0.0, max=1.0, help="Signed power normalisation exponent (1 = off)."),
+    alpha: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Signed power normalisation exponent "
+                                          "(default 0.5; 1 = off)."),
     max_descriptors: Optional[int] = typer.Option(None, min=1, help="Local descriptors sampled to fit the "
                                                                     f"codebook (default {FIT_DESCRIPTORS})."),
     fit_iterations: Optional[int] = typer.Option(None, min=1, help="EM iterations at most when fitting the "
                                                                    f"GMM (default {FIT_ITERATIONS})."),
     seed: int = typer.Option(0, help="Random seed for sampling and GMM initialisation."),
     save_codebook: Optional[Path] = typer.Option(None, help="Also write the codebook to this .npz file."),
-    storage: StorageOpt = typer.Option(StorageOpt.int8, help="How the map stores reference encodings: int8 "
-                                       "with a scale per row (a quarter of float32's bytes; R@1 within 0.005 "
-                                       "of float32 on both shared datasets), float16, or float32."),
+    storage: Optional[StorageOpt] = typer.Option(None, help="How the map stores reference encodings: int8 "
+                                                 "with a scale per row (default; a quarter of float32's bytes, "
+                                                 "R@1 within 0.005 of float32 on both shared datasets), float16 "
+                                                 "or float32. With --append: the map's own unless given."),
+    append: bool = typer.Option(False, "--append", help="Add REFS' images after the references of the map "
+                                "at --out, encoded with its model and codebook (the map is replaced "
+                                "atomically); the route grows without refitting."),
     batch_size: int = typer.Option(8, min=1, help="Images per model run."),
     threads: int = typer.Option(0, min=0, help=_THREADS_HELP),
 ) -> None:
@@ -126,9 +131,15 @@ def build_map_cmd(
         # --- everything that can be checked before the work ---
         fit_options = {"--components": components, "--pca-dim": pca_dim, "--whiten/--no-whiten": whiten,
                        "--max-descriptors": max_descriptors, "--fit-iterations": fit_iterations}
-        if codebook and any(v is not None for v in fit_options.values()):
+        fixed = f"--codebook {codebook}" if codebook else f"--append (the map {out} has its codebook)" if append \
+            else None
+        if append and codebook:
+            raise VprError(f"{codebook}: --append uses the codebook of the map at --out; drop --codebook")
+        if append and alpha is not None:
+            raise VprError(f"{out}: --append encodes with the map's own --alpha; drop --alpha")
+        if fixed and any(v is not None for v in fit_options.values()):
             given_opts = ", ".join(k for k, v in fit_options.items() if v is not None)
-            raise VprError(f"{given_opts}: options for fitting a codebook, but --codebook {codebook} is given")
+            raise VprError(f"{given_opts}: options for fitting a codebook, but {fixed} is given")
         if whiten is not None and pca_dim is None:
             warn("--whiten/--no-whiten applies only with --pca-dim; ignored")
         for target in (out, save_codebook):
@@ -137,11 +148,15 @@ def build_map_cmd(
         if save_codebook and save_codebook.resolve() == out.resolve():
             raise VprError(f"{out}: --out and --save-codebook name the same file")
         files = list_images(refs)
-        if codebook is None:
+        base = PlaceMap.load(out) if append else None
+        if codebook is None and base is None:
             _require_fit_extra()
-        extractor = FeatureExtractor(resolve_model(model), use_threads(threads))
+        extractor = FeatureExtractor(base.model_path(model) if base else resolve_model(model), use_threads(threads))
         given = None
-        if codebook:
+        if base is not None:
+            base.check_model(extractor, out)
+            given = base.codebook
+        elif codebook:
             given, cb_meta = Codebook.load(codebook)
             if cb_meta.get("model_sha256") not in (None, extractor.fingerprint):
                 raise VprError(f"{codebook}: codebook was fitted on features of another model "
@@ -154,14 +169,20 @@ def build_map_cmd(
         with typer.progressbar(length=len(files), label="extracting", file=sys.stderr,
                                hidden=not sys.stderr.isatty()) as bar:
             place_map = build_map(files, extractor, given, components or 128, pca_dim,
-                                  True if whiten is None else whiten, alpha, max_descriptors or FIT_DESCRIPTORS,
-                                  batch_size, seed, fit_iterations or FIT_ITERATIONS, progress=bar.update)
-        place_map.save(out, storage.value)
+                                  True if whiten is None else whiten,
+                                  base.alpha if base else 0.5 if alpha is None else alpha,
+                                  max_descriptors or FIT_DESCRIPTORS, batch_size, seed,
+                                  fit_iterations or FIT_ITERATIONS, progress=bar.update)
+        kept = storage.value if storage else base.stored.storage if base else "int8"
+        if base is not None:
+            place_map = base.extended(place_map)
+        place_map.save(out, kept)
         if save_codebook:
             place_map.codebook.save(save_codebook, {"model_sha256": extractor.fingerprint})
-        typer.echo(f"wrote {out}: {len(place_map.names)} references, {place_map.stored.shape[1]}-dim "
-                   f"{storage.value} encodings, {place_map.codebook.gmm.n_components}-component codebook "
-                   f"({'fitted on the references' if given is None else 'given'})", err=True)
+        how = "fitted on the references" if given is None else "the map's" if base else "given"
+        typer.echo(f"wrote {out}: {len(place_map.names)} references{f' ({len(files)} appended)' if base else ''}, "
+                   f"{place_map.stored.shape[1]}-dim {kept} encodings, {place_map.codebook.gmm.n_components}-"
+                   f"component codebook ({how})", err=True)
 
 
 def _require_fit_extra() -> None:

@@ -13,7 +13,7 @@ from vpr_edge import __version__
 from vpr_edge.codebook import Codebook
 from vpr_edge.compact import Encodings
 from vpr_edge.encode import fisher_vector
-from vpr_edge.errors import VprError
+from vpr_edge.errors import VprError, warn
 from vpr_edge.extract import FeatureExtractor, resolve_model
 from vpr_edge.images import load_image
 from vpr_edge.store import read_npz, write_npz
@@ -75,6 +75,21 @@ class PlaceMap:
         small = {k: np.array(v) for k, v in arrays.items() if k.startswith("codebook_")}  # into RAM
         codebook = Codebook.from_arrays(small, channels, "codebook_", str(path))
         return cls(stored, names, codebook, meta)
+
+    def extended(self, more: "PlaceMap") -> "PlaceMap":
+        """This map with ``more``'s references after its own (``more`` encoded with this map's codebook and
+        model; raises VprError otherwise). Loads this map's encodings into RAM to write the new file."""
+        if more.codebook is not self.codebook or more.meta.get("model_sha256") != self.meta.get("model_sha256"):
+            raise VprError("appended references must be encoded with the map's own model and codebook")
+        clash = sorted(set(self.names) & set(more.names))
+        if clash:
+            warn(f"{len(clash)} appended reference name(s) already in the map (e.g. {clash[0]}); results name "
+                 f"references by index too")
+        dense = np.concatenate([self.stored.dense(), more.stored.dense()])
+        appended = self.meta.get("appended", []) + [{"folder": more.meta.get("refs_folder"),
+                                                     "first_index": len(self.names), "count": len(more.names)}]
+        return PlaceMap(Encodings.pack(dense, "float32"), self.names + more.names, self.codebook,
+                        self.meta | {"appended": appended, "vpr_edge_version": more.meta.get("vpr_edge_version")})
 
     def model_path(self, given: Path | None) -> Path:
         """The model to localise with: ``given``, else ``$VPR_EDGE_MODEL``, else the file the map was built
