@@ -86,14 +86,19 @@ def test_localize_jsonl_file_and_reused_codebook(tmp_path: Path, small_map: Path
     assert len(lines) == 24 and set(lines[0]) == {"frame_index", "frame", "ref_index", "ref", "score", "lost"}
 
 
-def test_video_stream(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
+def write_video(path: Path, frames: Path, count: int) -> Path:
+    """The first ``count`` images of ``frames`` as an MJPG video at ``path``."""
     import cv2
 
-    video = tmp_path / "q.avi"
-    w = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (160, 120))
-    for f in sorted(small_queries.iterdir())[:10]:
+    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (160, 120))
+    for f in sorted(frames.iterdir())[:count]:
         w.write(cv2.imread(str(f)))
     w.release()
+    return path
+
+
+def test_video_stream(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
+    video = write_video(tmp_path / "q.avi", small_queries, 10)
     proc = run("localize", "-m", small_map, "-s", video)
     assert proc.returncode == 0, proc.stderr
     assert len(proc.stdout.splitlines()) == 11
@@ -101,13 +106,7 @@ def test_video_stream(tmp_path: Path, small_map: Path, small_queries: Path) -> N
 
 def test_network_stream_url(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
     """A URL source goes through OpenCV's network path (here file://, as rtsp:// or http:// would)."""
-    import cv2
-
-    video = tmp_path / "q.avi"
-    w = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (160, 120))
-    for f in sorted(small_queries.iterdir())[:6]:
-        w.write(cv2.imread(str(f)))
-    w.release()
+    video = write_video(tmp_path / "q.avi", small_queries, 6)
     proc = run("localize", "-m", small_map, "-s", f"file://{video}", "--mode", "single")
     assert proc.returncode == 0, proc.stderr
     rows = list(csv.DictReader(proc.stdout.splitlines()))

@@ -25,7 +25,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from vpr_edge.compact import Encodings  # noqa: E402
+from vpr_edge.compact import DTYPES, Encodings  # noqa: E402
 from vpr_edge.mapfile import PlaceMap  # noqa: E402
 
 PROBE = r"""
@@ -57,8 +57,7 @@ def synthetic_map(real: PlaceMap, refs: int, storage: str, out: Path, scratch: P
     """A map of ``refs`` random unit rows with ``real``'s codebook and metadata, written to ``out``."""
     d = real.stored.shape[1]
     rng = np.random.default_rng(refs)
-    values = np.lib.format.open_memmap(scratch / "values.npy", mode="w+", dtype=np.float32 if storage == "float32"
-                                       else np.int8 if storage == "int8" else np.float16, shape=(refs, d))
+    values = np.lib.format.open_memmap(scratch / "values.npy", mode="w+", dtype=DTYPES[storage], shape=(refs, d))
     scales = []
     for i in range(0, refs, 2048):
         block = rng.normal(size=(min(2048, refs - i), d)).astype(np.float32)

@@ -41,6 +41,12 @@ class Match:
     lost: bool
 
 
+def encode_images(images: Sequence[np.ndarray], place_map: PlaceMap, extractor: FeatureExtractor) -> np.ndarray:
+    """RGB uint8 images (H, W, 3) -> encodings (B, D) float32 comparable with the map's, in one model run."""
+    batch = np.stack([extractor.preprocess(im) for im in images])
+    return place_map.encode(extractor.local_features(batch))
+
+
 def encode_frames(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExtractor, batch_size: int,
                   on_skip: Callable[[Frame], None]) -> Iterator[tuple[Frame, np.ndarray]]:
     """Yield (frame, encoding (D,)) for each decodable frame, ``batch_size`` frames per model run;
@@ -48,8 +54,7 @@ def encode_frames(frames: Iterable[Frame], place_map: PlaceMap, extractor: Featu
     pending: list[Frame] = []
 
     def flush() -> Iterator[tuple[Frame, np.ndarray]]:
-        batch = np.stack([extractor.preprocess(f.image) for f in pending])
-        yield from zip(pending, place_map.encode(extractor.local_features(batch)))
+        yield from zip(pending, encode_images([f.image for f in pending], place_map, extractor))
         pending.clear()
 
     for frame in frames:
@@ -94,8 +99,7 @@ class Localizer:
 
     def encode(self, images: Sequence[np.ndarray]) -> np.ndarray:
         """RGB uint8 images (H, W, 3) -> encodings (B, D) float32, comparable with the map's by dot product."""
-        batch = np.stack([self.extractor.preprocess(im) for im in images])
-        return self.map.encode(self.extractor.local_features(batch))
+        return encode_images(images, self.map, self.extractor)
 
     def similarity(self, encodings: np.ndarray) -> np.ndarray:
         """Encodings (B, D) -> cosine similarities to every reference (B, R)."""

@@ -17,6 +17,7 @@ import typer
 
 from vpr_edge import __version__
 from vpr_edge.codebook import Codebook
+from vpr_edge.compact import STORAGES
 from vpr_edge.errors import VprError, warn
 from vpr_edge.extract import FeatureExtractor, resolve_model
 from vpr_edge.images import Frame, list_images, load_image, open_stream
@@ -45,6 +46,7 @@ def _main(version: bool = typer.Option(False, "--version", callback=_version, is
 
 
 ModeOpt = Enum("ModeOpt", {name: name for name in MATCHERS}, type=str)  # type: ignore[misc]
+StorageOpt = Enum("StorageOpt", {name: name for name in STORAGES}, type=str)  # type: ignore[misc]
 
 
 class VariantOpt(str, Enum):
@@ -56,11 +58,6 @@ class FeaturesOpt(str, Enum):
     map = "map"
     pixels = "pixels"
 
-
-class StorageOpt(str, Enum):
-    int8 = "int8"
-    float16 = "float16"
-    float32 = "float32"
 
 
 class FormatOpt(str, Enum):

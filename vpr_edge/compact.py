@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-STORAGES = ("int8", "float16", "float32")
-_DTYPES = {"int8": np.int8, "float16": np.float16, "float32": np.float32}
+DTYPES = {"int8": np.int8, "float16": np.float16, "float32": np.float32}  # storage name -> stored dtype
+STORAGES = tuple(DTYPES)
 BLOCK_BYTES = 16 << 20  # float32 scratch per block of references in ``similarity``
 
 
@@ -46,7 +46,7 @@ class Encodings:
         if storage == "int8":
             q, scale = quantise_rows(x)
             return cls(q, storage, scale)
-        return cls(np.asarray(x).astype(_DTYPES[storage]), storage)
+        return cls(np.asarray(x).astype(DTYPES[storage]), storage)
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], storage: str) -> "Encodings":
@@ -54,7 +54,7 @@ class Encodings:
         values, scale = arrays.get("encodings"), arrays.get("encodings_scale")
         if values is None or values.ndim != 2:
             raise ValueError("no 2-D encodings array")
-        if storage not in STORAGES or values.dtype != _DTYPES[storage]:
+        if storage not in STORAGES or values.dtype != DTYPES[storage]:
             raise ValueError(f"encodings are {values.dtype}, storage says {storage!r}")
         if storage == "int8" and (scale is None or scale.shape != (len(values),)):
             raise ValueError("int8 encodings without one scale per row")
