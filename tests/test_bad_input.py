@@ -23,6 +23,7 @@ from typer.testing import CliRunner
 
 from vpr_edge.cli import app
 from vpr_edge.extract import BUNDLED_MODEL
+from vpr_edge.mapfile import MAP_SCHEMA
 from vpr_edge.store import read_npz, write_npz
 from vpr_edge.streams import write_ground_truth
 
@@ -48,7 +49,7 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     (w / "fake.onnx").write_bytes(b"\x08\x07 not really a model")
     good = (w / "good.npz").read_bytes()
     (w / "truncated.npz").write_bytes(good[: len(good) // 2])
-    arrays, meta = read_npz(w / "good.npz", "map", 2)
+    arrays, meta = read_npz(w / "good.npz", "map", MAP_SCHEMA)
     write_npz(w / "schema0.npz", arrays, meta | {"schema": 0})
     np.savez(w / "pickled.npz", a=np.array([{"x": 1}], dtype=object))
     np.save(w / "sim.npy", np.random.default_rng(0).random((24, 24)))

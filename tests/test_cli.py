@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vpr_edge.mapfile import PlaceMap
+from vpr_edge.mapfile import MAP_SCHEMA, PlaceMap
 from vpr_edge.store import read_npz, write_npz
 
 
@@ -52,7 +52,8 @@ def test_map_contents(small_map: Path, model_path: Path) -> None:
     np.testing.assert_allclose(np.linalg.norm(pm.encodings, axis=1), 1.0, rtol=1e-5)
     assert pm.names[0] == "0000000.jpg" and pm.meta["model"]["tap"] == "stage5"
     assert pm.meta["codebook"] == {"fitted_on_refs": True, "n_components": 8, "pca_dim": 32, "seed": 0,
-                                   "descriptors": 24 * 300, "em_iterations": 30}
+                                   "descriptors": 24 * 300, "iterations": 30}
+    assert pm.features == {"name": "cnn", "params": {}} and pm.encoder.name == "ifv" and pm.svm is None
 
 
 @pytest.mark.parametrize("mode", ["stream", "stream --min-confidence 0", "dtw", "single",
@@ -153,7 +154,7 @@ def test_localize_bad_input(tmp_path: Path, small_map: Path, small_queries: Path
 
 
 def test_map_from_other_schema_version(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
-    arrays, meta = read_npz(small_map, "map", 2)
+    arrays, meta = read_npz(small_map, "map", MAP_SCHEMA)
     old = tmp_path / "old.npz"
     write_npz(old, arrays, meta | {"schema": 0})
     assert_one_line_error(run("localize", "-m", old, "-s", small_queries), "old.npz", "schema version 0")
@@ -225,11 +226,11 @@ def test_append_grows_the_map_with_its_codebook(tmp_path: Path, small_refs: Path
     after = PlaceMap.load(grown)
     assert after.names == sorted(p.name for p in small_refs.iterdir())
     np.testing.assert_array_equal(after.encodings[:14], before.encodings)          # old references untouched
-    np.testing.assert_array_equal(after.codebook.gmm.means, before.codebook.gmm.means)
+    np.testing.assert_array_equal(after.encoder.gmm.means, before.encoder.gmm.means)
     assert after.meta["appended"] == [{"folder": str(second), "first_index": 14, "count": 10}]
     # the same references in one go with the same codebook give the same encodings
     cb = tmp_path / "cb.npz"
-    before.codebook.save(cb, {"model_sha256": before.meta["model_sha256"]})
+    before.encoder.save(cb, {"model_sha256": before.meta["model_sha256"]})
     whole = tmp_path / "whole.npz"
     assert run("build-map", small_refs, "-o", whole, "--codebook", cb, "--storage", "float32").returncode == 0
     np.testing.assert_allclose(PlaceMap.load(whole).encodings, after.encodings, atol=1e-6)

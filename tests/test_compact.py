@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from vpr_edge.compact import STORAGES, Encodings, quantise_rows
-from vpr_edge.mapfile import PlaceMap
+from vpr_edge.mapfile import MAP_SCHEMA, PlaceMap
 from vpr_edge.store import read_npz, write_npz
 
 
@@ -85,7 +85,7 @@ def test_map_storage_and_schema_1(tmp_path: Path, small_refs: Path) -> None:
         res = runner.invoke(app, ["build-map", str(small_refs), "-o", str(out), "--components", "4", "--storage",
                                   storage])
         assert res.exit_code == 0, res.stderr
-        arrays, _ = read_npz(out, "map", 2)
+        arrays, _ = read_npz(out, "map", MAP_SCHEMA)
         sizes[storage] = sum(arrays[k].nbytes for k in arrays if k.startswith("encodings"))
     full = PlaceMap.load(tmp_path / "float32.npz")
     small = PlaceMap.load(tmp_path / "int8.npz")
@@ -95,8 +95,16 @@ def test_map_storage_and_schema_1(tmp_path: Path, small_refs: Path) -> None:
     assert isinstance(mapped.stored.values, np.memmap)
     np.testing.assert_array_equal(mapped.encodings, small.encodings)
     assert sizes["int8"] < 0.26 * sizes["float32"] and sizes["float16"] == 0.5 * sizes["float32"]
-    # a schema-1 map (float32 encodings, no storage key) written by the previous release still loads
-    arrays, meta = read_npz(tmp_path / "float32.npz", "map", 2)
-    old = {k: v for k, v in meta.items() if k != "storage"} | {"schema": 1}
-    write_npz(tmp_path / "v1.npz", arrays, old)
-    np.testing.assert_array_equal(PlaceMap.load(tmp_path / "v1.npz").encodings, full.encodings)
+    # schema-1 and -2 maps (IFV only: codebook_* arrays, alpha at the top level; schema 1: float32, no storage
+    # key) written by earlier releases still load, and encode queries as before
+    for name, storage in (("float32", None), ("int8", "int8")):
+        arrays, meta = read_npz(tmp_path / f"{name}.npz", "map", MAP_SCHEMA)
+        arrays = {k.replace("encoder_", "codebook_"): v for k, v in arrays.items()}
+        old = {k: v for k, v in meta.items() if k not in ("storage", "features", "encoding", "descriptor_dim")}
+        old |= {"schema": 2, "storage": storage} if storage else {"schema": 1}
+        write_npz(tmp_path / "old.npz", arrays | {}, old | {"alpha": meta["encoding"]["params"]["alpha"]})
+        back, now = PlaceMap.load(tmp_path / "old.npz"), PlaceMap.load(tmp_path / f"{name}.npz")
+        np.testing.assert_array_equal(back.encodings, now.encodings)
+        assert back.encoder.name == "ifv" and back.features["name"] == "cnn"
+        x = np.random.default_rng(0).random((2, 5, back.encoder.input_dim)).astype(np.float32)
+        np.testing.assert_array_equal(back.encode(x), now.encode(x))

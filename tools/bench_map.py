@@ -3,7 +3,7 @@
 
     python tools/bench_map.py --map samples.map.npz --refs 1000,10000,100000 [--storage int8] [--out /tmp/b]
 
-Each synthetic map copies the codebook and metadata of the given real map (so its encodings have the real
+Each synthetic map copies the encoder and metadata of the given real map (so its encodings have the real
 IFV size, 2 x components x channels) and fills R references with random unit rows, written through
 ``PlaceMap.save`` (the values are staged in a memory-mapped temporary file, never whole in RAM). Then, each
 in a fresh process so that RSS means something: open with ``PlaceMap.load(mmap=True)`` (what ``localize``
@@ -67,13 +67,13 @@ def synthetic_map(real: PlaceMap, refs: int, storage: str, out: Path, scratch: P
         if enc.scale is not None:
             scales.append(enc.scale)
     stored = Encodings(values, storage, np.concatenate(scales) if scales else None)
-    PlaceMap(stored, [f"{i:06d}.jpg" for i in range(refs)], real.codebook, dict(real.meta)).save(out, storage)
+    PlaceMap(stored, [f"{i:06d}.jpg" for i in range(refs)], real.encoder, dict(real.meta)).save(out, storage)
     del values
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--map", type=Path, required=True, help="a real map (its codebook sets the encoding size)")
+    p.add_argument("--map", type=Path, required=True, help="a real map (its encoder sets the encoding size)")
     p.add_argument("--refs", default="1000,10000,100000")
     p.add_argument("--storage", default="int8")
     p.add_argument("--out", type=Path, default=None, help="folder for the synthetic maps (default: a temp dir)")

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError
-from vpr_edge.extract import FeatureExtractor
+from vpr_edge.features import FrontEnd
 from vpr_edge.images import MIN_SIDE, Frame
 from vpr_edge.mapfile import PlaceMap
 from vpr_edge.matchers import Matcher, get_matcher
@@ -41,20 +41,19 @@ class Match:
     lost: bool
 
 
-def encode_images(images: Sequence[np.ndarray], place_map: PlaceMap, extractor: FeatureExtractor) -> np.ndarray:
-    """RGB uint8 images (H, W, 3) -> encodings (B, D) float32 comparable with the map's, in one model run."""
-    batch = np.stack([extractor.preprocess(im) for im in images])
-    return place_map.encode(extractor.local_features(batch))
+def encode_images(images: Sequence[np.ndarray], place_map: PlaceMap, front: FrontEnd) -> np.ndarray:
+    """RGB uint8 images (H, W, 3) -> encodings (B, D) float32 comparable with the map's (one model run)."""
+    return place_map.encode(*front.local(images))
 
 
-def encode_frames(frames: Iterable[Frame], place_map: PlaceMap, extractor: FeatureExtractor, batch_size: int,
+def encode_frames(frames: Iterable[Frame], place_map: PlaceMap, front: FrontEnd, batch_size: int,
                   on_skip: Callable[[Frame], None]) -> Iterator[tuple[Frame, np.ndarray]]:
     """Yield (frame, encoding (D,)) for each decodable frame, ``batch_size`` frames per model run;
     undecodable frames go to ``on_skip``."""
     pending: list[Frame] = []
 
     def flush() -> Iterator[tuple[Frame, np.ndarray]]:
-        yield from zip(pending, encode_images([f.image for f in pending], place_map, extractor))
+        yield from zip(pending, encode_images([f.image for f in pending], place_map, front))
         pending.clear()
 
     for frame in frames:
@@ -85,8 +84,9 @@ class Localizer:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
         self.map = PlaceMap.load(map_path, mmap=True)
         ort_threads = 0 if threads is None else use_threads(threads)
-        self.extractor = FeatureExtractor(self.map.model_path(Path(model) if model else None), ort_threads)
-        self.map.check_model(self.extractor, map_path)
+        self.front = self.map.front_end(map_path, Path(model) if model else None, ort_threads)
+        if self.matcher.scores == "svm" and self.map.svm is None:
+            raise VprError(f"{map_path}: mode svm needs a map built with build-map --svm")
         self.threshold = self.matcher.min_confidence if min_confidence is None else min_confidence
         self._online = self.matcher.stream(len(self.map.names)) if self.matcher.online else None
         self._lock = threading.Lock()
@@ -99,11 +99,12 @@ class Localizer:
 
     def encode(self, images: Sequence[np.ndarray]) -> np.ndarray:
         """RGB uint8 images (H, W, 3) -> encodings (B, D) float32, comparable with the map's by dot product."""
-        return encode_images(images, self.map, self.extractor)
+        return encode_images(images, self.map, self.front)
 
     def similarity(self, encodings: np.ndarray) -> np.ndarray:
-        """Encodings (B, D) -> cosine similarities to every reference (B, R)."""
-        return self.map.similarity(encodings)
+        """Encodings (B, D) -> what the matcher compares, (B, R): cosine similarities to every reference, or
+        for mode svm the places' decision values."""
+        return self.map.scores(encodings, self.matcher.scores)
 
     def _line(self, index: int, name: str, ref: int, score: float) -> Match:
         lost = self.threshold is not None and score < self.threshold
@@ -119,7 +120,7 @@ class Localizer:
                            f"{image.dtype} {image.shape}")
         enc = self.encode([image])[0]
         with self._lock:
-            ref, score = self._online.update(self.map.similarity(enc)[0])
+            ref, score = self._online.update(self.similarity(enc[None])[0])
             self._count += 1
             return self._line(self._count - 1, name, ref, score)
 
@@ -128,11 +129,11 @@ class Localizer:
         """Localise a stream of frames (``images.open_stream``): online modes yield a match per frame as it
         is encoded (``batch_size`` frames per model run); offline modes after the last frame. Undecodable
         frames go to ``on_skip``."""
-        encoded = encode_frames(frames, self.map, self.extractor, batch_size, on_skip)
+        encoded = encode_frames(frames, self.map, self.front, batch_size, on_skip)
         if self._online is not None:
             for frame, enc in encoded:
                 with self._lock:
-                    ref, score = self._online.update(self.map.similarity(enc)[0])
+                    ref, score = self._online.update(self.similarity(enc[None])[0])
                 yield self._line(frame.index, frame.name, ref, score)
             return
         pairs = list(encoded)

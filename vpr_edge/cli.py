@@ -16,10 +16,10 @@ import numpy as np
 import typer
 
 from vpr_edge import __version__
-from vpr_edge.codebook import Codebook
 from vpr_edge.compact import STORAGES
+from vpr_edge.encoders import ENCODERS
+from vpr_edge.features import FRONT_ENDS, make_front_end
 from vpr_edge.errors import VprError, warn
-from vpr_edge.extract import FeatureExtractor, resolve_model
 from vpr_edge.images import Frame, list_images, load_image, open_stream
 from vpr_edge.api import Localizer, Match, encode_frames
 from vpr_edge.mapfile import FIT_DESCRIPTORS, FIT_ITERATIONS, PlaceMap, build_map
@@ -47,6 +47,8 @@ def _main(version: bool = typer.Option(False, "--version", callback=_version, is
 
 ModeOpt = Enum("ModeOpt", {name: name for name in MATCHERS}, type=str)  # type: ignore[misc]
 StorageOpt = Enum("StorageOpt", {name: name for name in STORAGES}, type=str)  # type: ignore[misc]
+FrontOpt = Enum("FrontOpt", {name: name for name in FRONT_ENDS}, type=str)  # type: ignore[misc]
+EncodingOpt = Enum("EncodingOpt", {name: name for name in ENCODERS}, type=str)  # type: ignore[misc]
 
 
 class VariantOpt(str, Enum):
@@ -95,45 +97,60 @@ _THREADS_HELP = ("Threads for onnxruntime and NumPy's BLAS together, so the two 
 def build_map_cmd(
     refs: Path = typer.Argument(..., help="Folder of reference images, taken in file-name order."),
     out: Path = typer.Option(..., "--out", "-o", help="Map file to write (.npz); written atomically."),
-    model: Optional[Path] = typer.Option(None, help=_MODEL_HELP),
+    features: Optional[FrontOpt] = typer.Option(None, metavar="FRONT_END", help="Local descriptors: "
+                                                + ", ".join(FRONT_ENDS) + " (default cnn). README, Front ends."),
+    encoding: Optional[EncodingOpt] = typer.Option(None, metavar="ENCODING", help="How an image's local "
+                                                   "descriptors become one vector: " + ", ".join(ENCODERS)
+                                                   + " (default ifv, the thesis's). README, Encodings."),
+    model: Optional[Path] = typer.Option(None, help=_MODEL_HELP + " cnn only."),
     codebook: Optional[Path] = typer.Option(
         None, help="Reuse this codebook (.npz from --save-codebook) instead of fitting one on the references."),
-    components: Optional[int] = typer.Option(None, min=1, help="GMM components M when fitting (default 128, "
-                                                               "as the thesis)."),
+    components: Optional[int] = typer.Option(None, min=1, help="Codebook size when fitting: GMM components "
+                                             "(fv, ifv) or k-means centres (bow, vlad); default 128, as the thesis."),
     pca_dim: Optional[int] = typer.Option(None, min=1, help="Reduce descriptors to this many dims by PCA "
-                                                            "before the GMM (default: no PCA)."),
+                                                            "before the codebook (default: no PCA)."),
     whiten: Optional[bool] = typer.Option(None, "--whiten/--no-whiten", help="Whiten the PCA output "
                                           "(default: whiten; with --pca-dim only)."),
     alpha: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Signed power normalisation exponent "
-                                          "(default 0.5; 1 = off)."),
+                                          "of ifv and vlad (default 0.5; 1 = off)."),
+    tfidf: Optional[bool] = typer.Option(None, "--tfidf/--no-tfidf", help="bow: weight words by their inverse "
+                                         "document frequency over the references (default off)."),
     max_descriptors: Optional[int] = typer.Option(None, min=1, help="Local descriptors sampled to fit the "
                                                                     f"codebook (default {FIT_DESCRIPTORS})."),
-    fit_iterations: Optional[int] = typer.Option(None, min=1, help="EM iterations at most when fitting the "
-                                                                   f"GMM (default {FIT_ITERATIONS})."),
-    seed: int = typer.Option(0, help="Random seed for sampling and GMM initialisation."),
+    fit_iterations: Optional[int] = typer.Option(None, min=1, help="EM / k-means iterations at most when "
+                                                 f"fitting (default {FIT_ITERATIONS})."),
+    svm: bool = typer.Option(False, "--svm", help="Also train one linear SVM per place on the reference "
+                             "encodings (for localize/evaluate --mode svm; doubles the map's size)."),
+    seed: int = typer.Option(0, help="Random seed for sampling and fitting."),
     save_codebook: Optional[Path] = typer.Option(None, help="Also write the codebook to this .npz file."),
     storage: Optional[StorageOpt] = typer.Option(None, help="How the map stores reference encodings: int8 "
                                                  "with a scale per row (default; a quarter of float32's bytes, "
                                                  "R@1 within 0.005 of float32 on both shared datasets), float16 "
                                                  "or float32. With --append: the map's own unless given."),
     append: bool = typer.Option(False, "--append", help="Add REFS' images after the references of the map "
-                                "at --out, encoded with its model and codebook (the map is replaced "
+                                "at --out, described and encoded as its own (the map is replaced "
                                 "atomically); the route grows without refitting."),
     batch_size: int = typer.Option(8, min=1, help="Images per model run."),
     threads: int = typer.Option(0, min=0, help=_THREADS_HELP),
 ) -> None:
-    """Build a map from a folder of reference images: extract features, fit the codebook (PCA + GMM) unless
-    --codebook is given, encode every reference as an Improved Fisher Vector, and write one map file."""
+    """Build a map from a folder of reference images: describe each (a CNN tap by default, or a handcrafted
+    front end), fit the codebook unless --codebook is given, encode every reference (an Improved Fisher
+    Vector by default), optionally train an SVM per place, and write one map file."""
+    from vpr_edge.encoders import FitSettings, load_codebook
+    from vpr_edge.encoders.fit import require_sklearn
+
     with _user_errors():
         # --- everything that can be checked before the work ---
         fit_options = {"--components": components, "--pca-dim": pca_dim, "--whiten/--no-whiten": whiten,
-                       "--max-descriptors": max_descriptors, "--fit-iterations": fit_iterations}
+                       "--max-descriptors": max_descriptors, "--fit-iterations": fit_iterations, "--tfidf": tfidf}
         fixed = f"--codebook {codebook}" if codebook else f"--append (the map {out} has its codebook)" if append \
             else None
-        if append and codebook:
-            raise VprError(f"{codebook}: --append uses the codebook of the map at --out; drop --codebook")
-        if append and alpha is not None:
-            raise VprError(f"{out}: --append encodes with the map's own --alpha; drop --alpha")
+        if append:
+            given_opts = [o for o, v in (("--codebook", codebook), ("--alpha", alpha), ("--features", features),
+                                         ("--encoding", encoding), ("--svm", svm or None)) if v is not None]
+            if given_opts:
+                raise VprError(f"{codebook or out}: --append describes and encodes as the map does; drop "
+                               f"{', '.join(given_opts)}")
         if fixed and any(v is not None for v in fit_options.values()):
             given_opts = ", ".join(k for k, v in fit_options.items() if v is not None)
             raise VprError(f"{given_opts}: options for fitting a codebook, but {fixed} is given")
@@ -146,50 +163,59 @@ def build_map_cmd(
             raise VprError(f"{out}: --out and --save-codebook name the same file")
         files = list_images(refs)
         base = PlaceMap.load(out) if append else None
-        if codebook is None and base is None:
-            _require_fit_extra()
-        extractor = FeatureExtractor(base.model_path(model) if base else resolve_model(model), use_threads(threads))
-        given = None
+        given = cb_meta = None
+        if codebook:
+            given, cb_meta = load_codebook(codebook)
+            if encoding is not None and encoding.value != given.name:
+                raise VprError(f"{codebook}: codebook is for encoding {given.name}, not --encoding {encoding.value}")
+        enc_name = base.encoder.name if base else given.name if given else encoding.value if encoding else "ifv"
+        if not ENCODERS[enc_name].needs_fit:
+            for k, v in fit_options.items():
+                if v is not None:
+                    warn(f"{k} does not apply to encoding {enc_name}; ignored")
+        if tfidf is not None and enc_name != "bow" and ENCODERS[enc_name].needs_fit:
+            warn(f"--tfidf/--no-tfidf applies to encoding bow only; ignored")
+        if alpha is not None and enc_name not in ("ifv", "vlad"):
+            warn(f"--alpha does not apply to encoding {enc_name}; ignored")
+        if (given is None and base is None and ENCODERS[enc_name].needs_fit) or svm:
+            require_sklearn()
+        use = use_threads(threads)
+        front = base.front_end(out, model, use) if base else make_front_end(
+            features.value if features else (cb_meta or {}).get("features", {}).get("name", "cnn"), model, use)
         if base is not None:
-            base.check_model(extractor, out)
-            given = base.codebook
-        elif codebook:
-            given, cb_meta = Codebook.load(codebook)
-            if cb_meta.get("model_sha256") not in (None, extractor.fingerprint):
-                raise VprError(f"{codebook}: codebook was fitted on features of another model "
-                               f"(sha256 {cb_meta['model_sha256'][:12]}, this is {extractor.fingerprint[:12]})")
-            if given.input_dim != extractor.dim:  # build_map checks too; here the message can name the file
+            given = base.encoder
+        elif given is not None:
+            recorded = cb_meta.get("features_fingerprint") or cb_meta.get("model_sha256")
+            described = (cb_meta.get("features") or {}).get("name", "cnn")
+            if described != front.name or recorded not in (None, front.fingerprint):
+                raise VprError(f"{codebook}: codebook was fitted on {described} descriptors "
+                               f"({str(recorded)[:12]}), not on this {front.name} front end's "
+                               f"({front.fingerprint[:12]}){'; another model' if front.name == 'cnn' else ''}")
+            if given.input_dim != front.dim:  # build_map checks too; here the message can name the file
                 raise VprError(f"{codebook}: codebook expects {given.input_dim}-dim descriptors but "
-                               f"{extractor.path} gives {extractor.dim}")
+                               f"the {front.name} front end gives {front.dim}")
+            if alpha is not None:
+                given = given.with_alpha(alpha)
+        settings = FitSettings(components or 128, pca_dim, True if whiten is None else whiten,
+                               0.5 if alpha is None else alpha, max_descriptors or FIT_DESCRIPTORS,
+                               fit_iterations or FIT_ITERATIONS, seed, bool(tfidf))
 
         # --- the work ---
         with typer.progressbar(length=len(files), label="extracting", file=sys.stderr,
                                hidden=not sys.stderr.isatty()) as bar:
-            place_map = build_map(files, extractor, given, components or 128, pca_dim,
-                                  True if whiten is None else whiten,
-                                  base.alpha if base else 0.5 if alpha is None else alpha,
-                                  max_descriptors or FIT_DESCRIPTORS, batch_size, seed,
-                                  fit_iterations or FIT_ITERATIONS, progress=bar.update)
+            place_map = build_map(files, front, enc_name, given, settings, batch_size, svm, progress=bar.update)
         kept = storage.value if storage else base.stored.storage if base else "int8"
         if base is not None:
             place_map = base.extended(place_map)
         place_map.save(out, kept)
         if save_codebook:
-            place_map.codebook.save(save_codebook, {"model_sha256": extractor.fingerprint})
+            place_map.encoder.save(save_codebook, {k: place_map.meta.get(k) for k in
+                                                   ("features", "features_fingerprint", "model_sha256")})
         how = "fitted on the references" if given is None else "the map's" if base else "given"
+        book = f", {place_map.encoder.n_components}-entry codebook ({how})" if place_map.encoder.needs_fit else ""
         typer.echo(f"wrote {out}: {len(place_map.names)} references{f' ({len(files)} appended)' if base else ''}, "
-                   f"{place_map.stored.shape[1]}-dim {kept} encodings, {place_map.codebook.gmm.n_components}-"
-                   f"component codebook ({how})", err=True)
-
-
-def _require_fit_extra() -> None:
-    """Fail before any work when fitting a codebook is needed and scikit-learn is not installed."""
-    try:
-        import sklearn.mixture  # noqa: F401
-        import vpr_edge_export.codebook_fit  # noqa: F401
-    except ImportError as e:
-        raise VprError(f"fitting a codebook needs scikit-learn ({e.name or e} is missing): "
-                       f"pip install 'vpr-edge[fit]', or pass --codebook FILE") from None
+                   f"{place_map.stored.shape[1]}-dim {kept} {place_map.features['name']} + {place_map.encoder.name} "
+                   f"encodings{book}{', an SVM per place' if place_map.svm is not None else ''}", err=True)
 
 
 @contextlib.contextmanager
@@ -351,8 +377,9 @@ def evaluate_cmd(
                                      "(metres) or lat,lon (degrees); see --radius."),
     radius: float = typer.Option(25.0, min=0.0, help="With --gt-positions: references within this many "
                                                     "metres of a query are correct."),
-    modes: str = typer.Option(",".join(MATCHERS), help="Comma-separated matchers to run on the same "
-                              "similarity matrix: " + ", ".join(MATCHERS) + "."),
+    modes: Optional[str] = typer.Option(None, help="Comma-separated matchers to run on the same "
+                                        "similarity matrix: " + ", ".join(MATCHERS) + " (default: all that "
+                                        "apply; svm with a map built with --svm)."),
     tolerance: int = typer.Option(1, min=0, help="Frames of slack around the true references (thesis: 1)."),
     min_confidence: Optional[float] = typer.Option(None, help="Lost threshold for modes with a lost state "
                                                    "(default: each mode's own)."),
@@ -381,7 +408,8 @@ def evaluate_cmd(
             raise VprError("--queries is needed with --map or --features pixels")
         if features == FeaturesOpt.pixels and refs is None:
             raise VprError("--features pixels needs --refs (the reference folder)")
-        chosen = [m.strip() for m in modes.split(",") if m.strip()]
+        chosen = [m.strip() for m in modes.split(",") if m.strip()] if modes is not None else \
+            [n for n, m in MATCHERS.items() if m.scores == "cosine"]
         matchers = {name: get_matcher(name) for name in chosen}
         if not matchers:
             raise VprError("--modes names no matcher")
@@ -396,6 +424,9 @@ def evaluate_cmd(
 
         # --- the similarity matrix ---
         encode_ms = float("nan")
+        svm_sim = None
+        if "svm" in matchers and map_path is None:
+            raise VprError("mode svm needs --map (a map built with build-map --svm)")
         if similarity is not None:
             sim = _load_similarity(similarity)
         else:
@@ -423,11 +454,17 @@ def evaluate_cmd(
                 sim = sad_similarity(np.stack(qd), ref_desc).astype(np.float64) if qd else np.zeros((0, 0))
             else:
                 loc = Localizer(map_path, model=model, mode="single", threads=threads)
+                if modes is None and loc.map.svm is not None:
+                    matchers["svm"] = get_matcher("svm")
+                if "svm" in matchers and loc.map.svm is None:
+                    raise VprError(f"{map_path}: mode svm needs a map built with build-map --svm")
                 enc = []
-                for frame, e in encode_frames(frames, loc.map, loc.extractor, batch_size, skip):
+                for frame, e in encode_frames(frames, loc.map, loc.front, batch_size, skip):
                     kept.append(frame.index)
                     enc.append(e)
                 sim = loc.similarity(np.stack(enc)).astype(np.float64) if enc else np.zeros((0, 0))
+                if "svm" in matchers and enc:
+                    svm_sim = loc.map.scores(np.stack(enc), "svm").astype(np.float64)
             if not kept:
                 raise VprError(f"{queries}: none of its frames could be decoded")
             encode_ms = 1e3 * (time.perf_counter() - t0) / len(kept)
@@ -448,7 +485,9 @@ def evaluate_cmd(
                 np.save(f, sim.astype(np.float32), allow_pickle=False)
 
         # --- the matchers ---
-        reports = {name: evaluate_mode(m, sim, truth, tolerance, min_confidence) for name, m in matchers.items()}
+        sims = {"cosine": sim, "svm": svm_sim}
+        reports = {name: evaluate_mode(m, sims[m.scores], truth, tolerance, min_confidence)
+                   for name, m in matchers.items()}
         n_mapped = int((truth >= 0).any(axis=1).sum())
         typer.echo(f"{sim.shape[0]} queries ({n_mapped} of mapped places), {sim.shape[1]} references; "
                    f"correct within {tolerance} frame(s); encoding "

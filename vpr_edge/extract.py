@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Sequence
 from pathlib import Path
 
 import cv2
@@ -46,7 +46,11 @@ class FeatureExtractor:
 
     ``info`` is the model's metadata (backbone, tap, input size, mean/std, channels, weights hash);
     ``fingerprint`` is the SHA-256 of the ONNX file, which maps record to refuse a different model.
+    It is the ``cnn`` front end (``vpr_edge.features.FrontEnd``).
     """
+
+    name = "cnn"
+    binary = False
 
     def __init__(self, model_path: str | os.PathLike[str], threads: int = 0) -> None:
         import onnxruntime as ort
@@ -83,6 +87,19 @@ class FeatureExtractor:
         """Channels K of the tap: the dimension of each local descriptor."""
         return int(self.info["channels"])
 
+    @property
+    def n_local(self) -> int:
+        """N = grid width x grid height of the tap."""
+        return int(self.info["grid_width"]) * int(self.info["grid_height"])
+
+    def describe(self) -> dict:
+        """The front-end record of a map (the model's identity is recorded beside it, see ``mapfile``)."""
+        return {"name": self.name, "params": {}}
+
+    def local(self, images: Sequence[np.ndarray]) -> tuple[np.ndarray, None]:
+        """RGB uint8 images (H, W, 3) -> local descriptors (B, N, K) float32 in one model run (no mask)."""
+        return self.local_features(np.stack([self.preprocess(im) for im in images])), None
+
     def preprocess(self, rgb: np.ndarray) -> np.ndarray:
         """RGB uint8 (H, W, 3) -> normalised float32 (3, input_height, input_width)."""
         if 4 * rgb.shape[1] < self.size[0] or 4 * rgb.shape[0] < self.size[1]:
@@ -102,14 +119,3 @@ class FeatureExtractor:
         fmap = self.feature_maps(batch)
         b, k = fmap.shape[:2]
         return np.ascontiguousarray(fmap.reshape(b, k, -1).transpose(0, 2, 1))
-
-    def iter_local_features(self, images: Iterable[np.ndarray], batch_size: int = 8) -> Iterator[np.ndarray]:
-        """Yield (N, K) descriptors per RGB image, running the model ``batch_size`` images at a time."""
-        pending: list[np.ndarray] = []
-        for image in images:
-            pending.append(self.preprocess(image))
-            if len(pending) >= batch_size:
-                yield from self.local_features(np.stack(pending))
-                pending.clear()
-        if pending:
-            yield from self.local_features(np.stack(pending))

@@ -1,62 +1,100 @@
-"""The map: reference encodings plus everything needed to encode a query the same way, in one file."""
+"""The map: reference encodings plus everything needed to describe and encode a query the same way (front
+end, encoder, and for ``--mode svm`` the classifier), in one file."""
 from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from vpr_edge import __version__
-from vpr_edge.codebook import Codebook
 from vpr_edge.compact import Encodings
-from vpr_edge.encode import fisher_vector
+from vpr_edge.encoders import Encoder, FitSettings, encoder_from_arrays, fit_encoder
 from vpr_edge.errors import VprError, warn
-from vpr_edge.extract import FeatureExtractor, resolve_model
+from vpr_edge.extract import resolve_model
+from vpr_edge.features import FrontEnd, make_front_end
 from vpr_edge.images import load_image
 from vpr_edge.store import read_npz, write_npz
 
-FIT_DESCRIPTORS = 30_000  # local descriptors sampled to fit the GMM   (README "Fitting the codebook":
-FIT_ITERATIONS = 30       # EM iterations at most                          as accurate as 100,000 / 100, ~10x faster)
-MAP_SCHEMA = 2          # 2: encodings stored as int8 + per-row scale, float16 or float32 (meta "storage")
-READS_SCHEMAS = (1, 2)  # 1: float32 encodings
+FIT_DESCRIPTORS = FitSettings.max_descriptors  # local descriptors sampled to fit a codebook (README "Fitting
+FIT_ITERATIONS = FitSettings.iterations        # the codebook": as accurate as 100,000 / 100, ~10x faster)
+MAP_SCHEMA = 3          # 3: front end ("features") and encoder ("encoding", arrays encoder_*) recorded; SVM
+READS_SCHEMAS = (1, 2, 3)  # 2: IFV only, int8/float16/float32 encodings; 1: IFV, float32
+CNN = {"name": "cnn", "params": {}}
 Progress = Callable[[int], None]
 
 
 @dataclass(frozen=True)
+class Svm:
+    """One linear classifier per reference place: decision value of encoding q for place r is
+    ``weights[r] . q + bias[r]``. ``weights`` stored like the encodings (``compact.Encodings``)."""
+
+    weights: Encodings
+    bias: np.ndarray          # (R,) float32
+    meta: dict
+
+    def scores(self, queries: np.ndarray) -> np.ndarray:
+        """Encodings (B, D) -> decision values (B, R) float32."""
+        return self.weights.similarity(queries) + self.bias
+
+
+@dataclass(frozen=True)
 class PlaceMap:
-    """Reference encodings as stored (``compact.Encodings``: L2-normalised IFVs, R x D), their image names,
-    the codebook, and metadata: model identity (``model_sha256``, ``model``), ``alpha``, and how the
-    codebook was made."""
+    """Reference encodings as stored (``compact.Encodings``: unit rows, R x D), their image names, the
+    encoder (``vpr_edge.encoders``), metadata (``features``: the front end's record; ``model_*`` for cnn;
+    how the codebook was made) and, when built with ``--svm``, the per-place classifiers."""
 
     stored: Encodings
     names: list[str]
-    codebook: Codebook
+    encoder: Encoder
     meta: dict
+    svm: Svm | None = None
 
     @property
     def encodings(self) -> np.ndarray:
         """All reference encodings as float32 (R, D) in RAM (for analysis; matching uses ``similarity``)."""
         return self.stored.dense()
 
+    @property
+    def features(self) -> dict:
+        """The front end's record ({"name", "params"}); maps older than schema 3 are cnn."""
+        return self.meta.get("features") or CNN
+
     def similarity(self, queries: np.ndarray) -> np.ndarray:
         """Query encodings (B, D) -> cosine similarities to every reference (B, R) float32."""
+        if queries.shape[-1] != self.stored.shape[1]:
+            raise VprError(f"query encodings have {queries.shape[-1]} dims but the map's "
+                           f"{self.features['name']} + {self.encoder.name} encodings have {self.stored.shape[1]}")
         return self.stored.similarity(queries)
 
-    @property
-    def alpha(self) -> float:
-        """Power-normalisation exponent used for the reference encodings (queries must use the same)."""
-        return float(self.meta["alpha"])
+    def scores(self, queries: np.ndarray, kind: str = "cosine") -> np.ndarray:
+        """(B, R): ``cosine`` similarities, or ``svm`` decision values (VprError if the map has no SVM)."""
+        if kind == "cosine":
+            return self.similarity(queries)
+        if self.svm is None:
+            raise VprError("this map has no SVM (build it with build-map --svm)")
+        self.similarity(queries[:0])  # dimension check
+        return self.svm.scores(queries)
 
     def save(self, path: str | os.PathLike[str], storage: str = "int8") -> None:
-        """Write the map atomically to ``path`` (a ``.npz`` file), encodings stored as ``storage``
-        (``compact.STORAGES``: int8 with a per-row scale, float16, float32)."""
-        stored = self.stored if self.stored.storage == storage else Encodings.pack(self.stored.dense(), storage)
+        """Write the map atomically to ``path`` (a ``.npz`` file), encodings (and SVM weights) stored as
+        ``storage`` (``compact.STORAGES``: int8 with a per-row scale, float16, float32)."""
+        def packed(e: Encodings) -> Encodings:
+            return e if e.storage == storage else Encodings.pack(e.dense(), storage)
+
+        arrays = packed(self.stored).to_arrays() | {"encoder_" + k: v for k, v in self.encoder.to_arrays().items()}
         meta = self.meta | {"kind": "map", "schema": MAP_SCHEMA, "names": self.names, "storage": storage,
-                            "n_refs": len(self.names), "dim": int(stored.shape[1])}
-        write_npz(path, stored.to_arrays() | self.codebook.to_arrays("codebook_"), meta)
+                            "n_refs": len(self.names), "dim": int(self.stored.shape[1]), "features": self.features,
+                            "descriptor_dim": self.encoder.input_dim,
+                            "encoding": {"name": self.encoder.name, "params": self.encoder.params()}}
+        if self.svm is not None:
+            arrays |= {"svm_" + k: v for k, v in packed(self.svm.weights).to_arrays().items()}
+            arrays["svm_bias"] = self.svm.bias
+            meta["svm"] = self.svm.meta
+        write_npz(path, arrays, meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], mmap: bool = False) -> "PlaceMap":
@@ -64,100 +102,169 @@ class PlaceMap:
         stay in the file, memory-mapped: opening reads headers and metadata only, and the operating system
         pages references in as similarities touch them (a 100,000-place map opens in milliseconds)."""
         arrays, meta = read_npz(path, "map", READS_SCHEMAS, mmap=mmap)
+        storage = meta.get("storage", "float32")
         try:
-            stored = Encodings.from_arrays(arrays, meta.get("storage", "float32"))
+            stored = Encodings.from_arrays(arrays, storage)
         except ValueError as e:
             raise VprError(f"{path}: map is inconsistent ({e})") from None
         names = meta.get("names")
         if not isinstance(names, list) or len(names) != stored.shape[0]:
             raise VprError(f"{path}: map is inconsistent (encodings and names disagree)")
-        channels = int((meta.get("model") or {}).get("channels", -1))
-        small = {k: np.array(v) for k, v in arrays.items() if k.startswith("codebook_")}  # into RAM
-        codebook = Codebook.from_arrays(small, channels, "codebook_", str(path))
-        return cls(stored, names, codebook, meta)
+        if int(meta.get("schema", 0)) < 3:   # IFV maps: codebook_* arrays, alpha at the top level
+            spec, prefix = {"name": "ifv", "params": {"alpha": meta.get("alpha", 0.5)}}, "codebook_"
+            input_dim = int((meta.get("model") or {}).get("channels", -1))
+        else:
+            spec, prefix, input_dim = meta.get("encoding") or {}, "encoder_", int(meta.get("descriptor_dim", -1))
+        small = {k[len(prefix):]: np.array(v) for k, v in arrays.items() if k.startswith(prefix)}  # into RAM
+        encoder = encoder_from_arrays(spec, small, input_dim, str(path))
+        if encoder.dim != stored.shape[1]:
+            raise VprError(f"{path}: map is inconsistent ({encoder.name} gives {encoder.dim} dims, the encodings "
+                           f"have {stored.shape[1]})")
+        svm = None
+        if "svm_bias" in arrays:
+            try:
+                weights = Encodings.from_arrays({k[4:]: v for k, v in arrays.items() if k.startswith("svm_")},
+                                                storage)
+            except ValueError as e:
+                raise VprError(f"{path}: map's SVM is inconsistent ({e})") from None
+            bias = np.asarray(arrays["svm_bias"], np.float32)
+            if weights.shape != stored.shape or bias.shape != (stored.shape[0],):
+                raise VprError(f"{path}: map's SVM is inconsistent (one classifier per reference expected)")
+            svm = Svm(weights, bias, dict(meta.get("svm") or {}))
+        return cls(stored, names, encoder, meta, svm)
 
     def extended(self, more: "PlaceMap") -> "PlaceMap":
-        """This map with ``more``'s references after its own (``more`` encoded with this map's codebook and
-        model; raises VprError otherwise). Loads this map's encodings into RAM to write the new file."""
-        if more.codebook is not self.codebook or more.meta.get("model_sha256") != self.meta.get("model_sha256"):
-            raise VprError("appended references must be encoded with the map's own model and codebook")
+        """This map with ``more``'s references after its own (``more`` encoded with this map's front end,
+        encoder and model; raises VprError otherwise). Loads this map's encodings into RAM to write the new
+        file. An SVM is not carried over (its classifiers would need retraining on the whole route)."""
+        if more.encoder is not self.encoder or more.meta.get("features_fingerprint") != self.fingerprint:
+            raise VprError("appended references must be described and encoded with the map's own front end, "
+                           "model and codebook")
         clash = sorted(set(self.names) & set(more.names))
         if clash:
             warn(f"{len(clash)} appended reference name(s) already in the map (e.g. {clash[0]}); results name "
                  f"references by index too")
+        if self.svm is not None:
+            warn("the map's SVM is dropped by --append (rebuild with --svm to train it on the whole route)")
         dense = np.concatenate([self.stored.dense(), more.stored.dense()])
         appended = self.meta.get("appended", []) + [{"folder": more.meta.get("refs_folder"),
                                                      "first_index": len(self.names), "count": len(more.names)}]
-        return PlaceMap(Encodings.pack(dense, "float32"), self.names + more.names, self.codebook,
-                        self.meta | {"appended": appended, "vpr_edge_version": more.meta.get("vpr_edge_version")})
+        meta = {k: v for k, v in self.meta.items() if k != "svm"}
+        return PlaceMap(Encodings.pack(dense, "float32"), self.names + more.names, self.encoder,
+                        meta | {"appended": appended, "vpr_edge_version": more.meta.get("vpr_edge_version")})
+
+    @property
+    def fingerprint(self) -> str:
+        """What identifies the front end: the model file's SHA-256 for cnn, a hash of the parameters else."""
+        return str(self.meta.get("features_fingerprint") or self.meta.get("model_sha256"))
 
     def model_path(self, given: Path | None) -> Path:
         """The model to localise with: ``given``, else ``$VPR_EDGE_MODEL``, else the file the map was built
         with if it is still there, else the bundled default (see ``extract.resolve_model``)."""
         return resolve_model(given, Path(self.meta.get("model_path") or ""))
 
-    def check_model(self, extractor: FeatureExtractor, map_path: str | os.PathLike[str]) -> None:
-        """Raise VprError unless ``extractor`` is the model the map was built with."""
-        if extractor.fingerprint != self.meta.get("model_sha256"):
+    def front_end(self, map_path: str | os.PathLike[str], model: Path | None = None, threads: int = 0) -> FrontEnd:
+        """The front end this map's queries must go through (its model for cnn, checked: VprError naming
+        ``map_path`` if it is another model; ``model`` given to a handcrafted map is an error too)."""
+        name = self.features["name"]
+        if name != "cnn":
+            if model is not None:
+                raise VprError(f"{map_path}: map was built with the {name} front end, which takes no model; "
+                               f"drop --model")
+            return make_front_end(name, spec=self.features)
+        front = make_front_end("cnn", self.model_path(model), threads)
+        if front.fingerprint != self.meta.get("model_sha256"):
             m = self.meta.get("model", {})
+            info = getattr(front, "info", {})
             raise VprError(
                 f"{map_path}: map was built with model {m.get('backbone')}/{m.get('tap')} "
                 f"({self.meta.get('model_file')}, sha256 {str(self.meta.get('model_sha256'))[:12]}) but "
-                f"{extractor.path} is {extractor.info['backbone']}/{extractor.info['tap']} "
-                f"(sha256 {extractor.fingerprint[:12]}); pass --model with the map's model")
+                f"{getattr(front, 'path', '?')} is {info.get('backbone')}/{info.get('tap')} "
+                f"(sha256 {front.fingerprint[:12]}); pass --model with the map's model")
+        return front
 
-    def encode(self, local: np.ndarray) -> np.ndarray:
-        """Local descriptors (B, N, K) -> query encodings (B, D) compatible with this map."""
-        return fisher_vector(local, self.codebook, self.alpha)
-
-
-def _encode_all(local: np.ndarray, codebook: Codebook, alpha: float, chunk: int = 32) -> np.ndarray:
-    return np.concatenate([fisher_vector(local[i:i + chunk], codebook, alpha) for i in range(0, len(local), chunk)])
+    def encode(self, local: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Local descriptors (B, N, K) (mask (B, N) or None) -> query encodings (B, D) for this map."""
+        return self.encoder.transform(local, mask)
 
 
-def build_map(files: Sequence[Path], extractor: FeatureExtractor, codebook: Codebook | None = None,
-              n_components: int = 128, pca_dim: int | None = None, whiten: bool = True, alpha: float = 0.5,
-              max_descriptors: int = FIT_DESCRIPTORS, batch_size: int = 8, seed: int = 0,
-              fit_iterations: int = FIT_ITERATIONS,
+def front_end_meta(front: FrontEnd) -> dict:
+    """What a map records of its front end: its description, fingerprint, and for cnn the model's identity."""
+    meta: dict = {"features": front.describe(), "features_fingerprint": front.fingerprint}
+    path = getattr(front, "path", None)
+    if front.name == "cnn" and path is not None:
+        meta |= {"model": getattr(front, "info"), "model_file": path.name, "model_path": str(path.resolve()),
+                 "model_sha256": front.fingerprint}
+    return meta
+
+
+def batched(files: Sequence[Path], size: int) -> Iterator[list[np.ndarray]]:
+    """Decoded RGB images of ``files``, ``size`` at a time (VprError naming an unreadable file)."""
+    for i in range(0, len(files), size):
+        yield [load_image(f) for f in files[i:i + size]]
+
+
+def extract_all(files: Sequence[Path], front: FrontEnd, folder: Path, batch_size: int = 8,
+                progress: Progress | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Local descriptors of every image into memory-mapped files in ``folder``: (R, N, K) float32 and, for
+    front ends with a varying number of descriptors, the mask (R, N) bool (else None)."""
+    local = mask = None
+    row = 0
+    for images in batched(files, batch_size):
+        x, m = front.local(images)
+        if local is None:
+            local = np.lib.format.open_memmap(folder / "local.npy", mode="w+", dtype=np.float32,
+                                              shape=(len(files),) + x.shape[1:])
+            if m is not None:
+                mask = np.lib.format.open_memmap(folder / "mask.npy", mode="w+", dtype=bool,
+                                                 shape=(len(files), x.shape[1]))
+        local[row:row + len(x)] = x
+        if mask is not None:
+            mask[row:row + len(x)] = m
+        row += len(x)
+        if progress:
+            progress(len(x))
+    assert local is not None
+    return local, mask
+
+
+def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = "ifv", encoder: Encoder | None = None,
+              settings: FitSettings = FitSettings(), batch_size: int = 8, svm: bool = False,
               progress: Progress | None = None) -> PlaceMap:
-    """Extract local features of every reference image in ``files`` (in that order; see ``list_images``), fit
-    a codebook on a random sample of them unless one is given, and encode each reference. Local features are
+    """Describe every reference image in ``files`` (in that order; see ``list_images``) with ``front``, fit
+    the front end (LDB's bit selection) and the ``encoding`` codebook on them unless ``encoder`` is given,
+    encode each reference, and with ``svm`` train one linear classifier per place. Local descriptors are
     staged in a temporary memory-mapped file so that RAM does not grow with the number of references.
-    Raises VprError on an unreadable image."""
+    Raises VprError on an unreadable image or an encoder that does not fit the front end."""
     if not files:
         raise VprError("no reference images given")
-    if codebook is not None and codebook.input_dim != extractor.dim:
-        raise VprError(f"codebook expects {codebook.input_dim}-dim descriptors but the model gives {extractor.dim}")
-    n_local = int(extractor.info["grid_width"]) * int(extractor.info["grid_height"])
-    fitted = codebook is None
+    fitted = encoder is None
     with tempfile.TemporaryDirectory(prefix="vpr-edge-") as tmp:
-        local = np.lib.format.open_memmap(Path(tmp) / "local.npy", mode="w+", dtype=np.float32,
-                                          shape=(len(files), n_local, extractor.dim))
-        for i, feats in enumerate(extractor.iter_local_features((load_image(f) for f in files), batch_size)):
-            local[i] = feats
-            if progress:
-                progress(1)
-        if codebook is None:
-            from vpr_edge_export.codebook_fit import fit_codebook
-
-            flat = local.reshape(-1, extractor.dim)
-            rng = np.random.default_rng(seed)
-            rows = np.sort(rng.choice(len(flat), min(max_descriptors, len(flat)), replace=False))
-            codebook = fit_codebook(flat[rows], n_components, pca_dim, whiten, max_descriptors, seed, fit_iterations)
-            del flat
-        encodings = _encode_all(local, codebook, alpha)
-        del local
-    meta = {
-        "alpha": alpha,
-        "model": extractor.info,
-        "model_file": extractor.path.name,
-        "model_path": str(extractor.path.resolve()),
-        "model_sha256": extractor.fingerprint,
-        "codebook": {"fitted_on_refs": fitted, "n_components": codebook.gmm.n_components,
-                     "pca_dim": codebook.gmm.dim if codebook.pca is not None else None, "seed": seed}
-                    | ({"descriptors": min(max_descriptors, len(files) * n_local), "em_iterations": fit_iterations}
-                       if fitted else {}),
+        local, mask = extract_all(files, front, Path(tmp), batch_size, progress)
+        if getattr(front, "needs_fit", False):
+            front = front.fit(local, settings.seed)  # type: ignore[attr-defined]
+            local = front.select(local)              # type: ignore[attr-defined]
+        if encoder is None:
+            encoder = fit_encoder(encoding, local, mask, settings, front.n_local)
+        elif encoder.input_dim != front.dim:
+            raise VprError(f"codebook expects {encoder.input_dim}-dim descriptors but the {front.name} front end "
+                           f"gives {front.dim}")
+        encodings = encoder.transform_chunked(local, mask)
+        n_real = int(mask.sum()) if mask is not None else local.shape[0] * local.shape[1]
+        del local, mask
+    meta = front_end_meta(front) | {
+        "codebook": {"fitted_on_refs": fitted, "n_components": encoder.n_components,
+                     "pca_dim": int(encoder.pca.components.shape[0]) if encoder.pca is not None else None,
+                     "seed": settings.seed}
+                    | ({"descriptors": min(settings.max_descriptors, n_real), "iterations": settings.iterations}
+                       if fitted and encoder.needs_fit else {}),
         "refs_folder": str(Path(files[0]).parent),
         "vpr_edge_version": __version__,
     }
-    return PlaceMap(Encodings.pack(encodings, "float32"), [f.name for f in files], codebook, meta)
+    classifier = None
+    if svm:
+        from vpr_edge.matchers.svm import fit_svm
+
+        weights, bias, svm_meta = fit_svm(encodings, seed=settings.seed)
+        classifier = Svm(Encodings.pack(weights, "float32"), bias, svm_meta)
+    return PlaceMap(Encodings.pack(encodings, "float32"), [f.name for f in files], encoder, meta, classifier)

@@ -12,7 +12,7 @@ offline form, so every matcher, online or not, can be evaluated with ``run(sim)`
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -77,7 +77,8 @@ class Matcher:
     """A registered matcher: a name, a one-line summary, and either ``start(n_refs, **params)`` making an
     online matcher or ``align(sim, k, **params)`` computing a Result offline. ``params`` are its preset
     keyword arguments; ``with_params`` overrides some of them. ``min_confidence``: the default score below
-    which a frame is reported lost (None: the matcher has no lost state)."""
+    which a frame is reported lost (None: the matcher has no lost state). ``scores``: the (Q, R) matrix it
+    runs on: ``cosine`` similarities of encodings, or ``svm`` decision values (a map built with --svm)."""
 
     name: str
     summary: str
@@ -85,6 +86,7 @@ class Matcher:
     align: Callable[..., Result] | None = None
     params: dict[str, Any] = field(default_factory=dict)
     min_confidence: float | None = None
+    scores: str = "cosine"
 
     @property
     def online(self) -> bool:
@@ -96,8 +98,7 @@ class Matcher:
         unknown = set(overrides) - set(self.params)
         if unknown:
             raise ValueError(f"matcher {self.name!r} has no parameter(s) {', '.join(sorted(unknown))}")
-        return Matcher(self.name, self.summary, self.start, self.align, self.params | overrides,
-                       self.min_confidence)
+        return replace(self, params=self.params | overrides)
 
     def stream(self, n_refs: int) -> OnlineMatcher:
         """A fresh online matcher over ``n_refs`` references."""

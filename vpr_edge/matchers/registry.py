@@ -30,6 +30,8 @@ MATCHERS: dict[str, Matcher] = {m.name: m for m in (
     Matcher("dtw-open", "offline subsequence DTW, open ends, 0-4 references per frame, distance form, "
             "hubs removed (similarities z-scored per frame, each reference's mean subtracted)",
             align=dtw_match, params=_DTW | {"open_ends": True, "hubs": True}),
+    Matcher("svm", "one linear SVM per reference place, trained at build time (build-map --svm); the place with "
+            "the highest decision value (the thesis's classifier baseline, online)", start=BestMatch, scores="svm"),
     Matcher("seqslam", "SeqSLAM (Milford & Wyeth 2012), window centred on each frame (offline)",
             align=seqslam_match, params=_SEQSLAM),
     Matcher("seqslam-online", "SeqSLAM over the past ds frames only (online)", start=SeqSLAMOnline,

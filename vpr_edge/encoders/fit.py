@@ -1,0 +1,82 @@
+"""Fitting codebooks on reference descriptors with scikit-learn (build time only; imported lazily).
+
+scikit-learn's PCA, GaussianMixture (k-means++ initialisation, EM with covariance regularisation) and
+MiniBatchKMeans are well-tested; the fitted parameters are copied into plain arrays so that nothing is
+pickled and encoding needs NumPy alone.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from vpr_edge.encoders.base import FitSettings, Pca
+from vpr_edge.errors import VprError
+
+
+def require_sklearn() -> None:
+    """Raise VprError naming the missing extra unless scikit-learn imports."""
+    try:
+        import sklearn.cluster  # noqa: F401
+        import sklearn.mixture  # noqa: F401
+    except ImportError as e:
+        raise VprError(f"fitting a codebook needs scikit-learn ({e.name or e} is missing): "
+                       f"pip install 'vpr-edge[fit]', or pass --codebook FILE") from None
+
+
+def sample_descriptors(local: np.ndarray, mask: np.ndarray | None, limit: int, seed: int) -> np.ndarray:
+    """At most ``limit`` real descriptors drawn at random (no replacement) from ``local`` (R, N, K), a
+    memmap or an array -> (n, K) float64, rows in storage order."""
+    r, n, k = local.shape
+    real = np.flatnonzero(np.ones(r * n, bool) if mask is None else np.asarray(mask).reshape(-1))
+    rng = np.random.default_rng(seed)
+    rows = np.sort(rng.choice(real, min(limit, len(real)), replace=False))
+    return np.asarray(local.reshape(r * n, k)[rows], np.float64)
+
+
+def fit_pca(x: np.ndarray, s: FitSettings) -> tuple[Pca | None, np.ndarray]:
+    """PCA of ``x`` (n, D) to ``s.pca_dim`` dims (whitened if ``s.whiten``) and ``x`` projected; (None, x)
+    when ``s.pca_dim`` is None."""
+    if s.pca_dim is None:
+        return None, x
+    from sklearn.decomposition import PCA
+
+    if not 0 < s.pca_dim <= min(x.shape):
+        raise VprError(f"PCA dimension {s.pca_dim} must be between 1 and {min(x.shape)}")
+    model = PCA(n_components=s.pca_dim, whiten=s.whiten, random_state=s.seed).fit(x)
+    scale = np.sqrt(model.explained_variance_) if s.whiten else np.ones(s.pca_dim)
+    pca = Pca(model.mean_.astype(np.float64), model.components_.astype(np.float64),
+              np.maximum(scale, 1e-12).astype(np.float64))
+    return pca, pca.project(x).astype(np.float64)
+
+
+def _enough(x: np.ndarray, k: int, what: str) -> None:
+    if len(x) < 2 * k:
+        raise VprError(f"only {len(x)} local descriptors: too few to fit {k} {what} "
+                       f"(use fewer components or more reference images)")
+
+
+def fit_gmm(x: np.ndarray, s: FitSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Diagonal GMM with ``s.n_components`` components on ``x`` (n, K) -> (weights, means, variances)."""
+    from sklearn.exceptions import ConvergenceWarning
+    from sklearn.mixture import GaussianMixture
+
+    _enough(x, s.n_components, "GMM components")
+    with warnings.catch_warnings():  # stopping EM early is the chosen trade (README); not worth a warning
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        gm = GaussianMixture(n_components=s.n_components, covariance_type="diag",
+                             reg_covar=1e-6 * float(x.var()) + 1e-9, max_iter=s.iterations, random_state=s.seed,
+                             init_params="k-means++").fit(x)
+    return (gm.weights_.astype(np.float64), gm.means_.astype(np.float64), gm.covariances_.astype(np.float64))
+
+
+def fit_kmeans(x: np.ndarray, s: FitSettings) -> np.ndarray:
+    """``s.n_components`` k-means centres of ``x`` (n, K) (MiniBatchKMeans, k-means++) -> (k, K) float64."""
+    from sklearn.cluster import MiniBatchKMeans
+
+    _enough(x, s.n_components, "k-means centres")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # convergence and duplicate-point notices
+        km = MiniBatchKMeans(n_clusters=s.n_components, random_state=s.seed, n_init=3, max_iter=max(s.iterations, 10),
+                             batch_size=2048).fit(x)
+    return km.cluster_centers_.astype(np.float64)

@@ -1,0 +1,49 @@
+"""Every encoder by name: build-map's ``--encoding``, the map file and the tests read this table."""
+from __future__ import annotations
+
+import numpy as np
+
+from vpr_edge.encoders.base import Encoder, FitSettings
+from vpr_edge.encoders.fisher import FisherVector, ImprovedFisherVector
+from vpr_edge.encoders.flat import Flatten
+from vpr_edge.encoders.words import BagOfWords, Vlad
+from vpr_edge.errors import VprError
+
+ENCODERS: dict[str, type[Encoder]] = {c.name: c for c in (Flatten, BagOfWords, Vlad, FisherVector,
+                                                          ImprovedFisherVector)}
+
+
+def encoder_class(name: str) -> type[Encoder]:
+    """The registered encoder ``name``; ValueError listing the names if there is none."""
+    try:
+        return ENCODERS[name]
+    except KeyError:
+        raise ValueError(f"unknown encoding {name!r}; choose from {', '.join(ENCODERS)}") from None
+
+
+def fit_encoder(name: str, local: np.ndarray, mask: np.ndarray | None, settings: FitSettings,
+                n_local: int | None) -> Encoder:
+    """Fit encoder ``name`` on reference descriptors ``local`` (R, N, K) (``mask`` (R, N) or None);
+    ``n_local``: the front end's fixed N (None when it varies)."""
+    from vpr_edge.encoders.fit import sample_descriptors
+
+    cls = encoder_class(name)
+    k = local.shape[-1]
+    x = sample_descriptors(local, mask, settings.max_descriptors, settings.seed) if cls.needs_fit else \
+        np.zeros((0, k))
+    return cls.fit(x, settings, k, local=local, mask=mask, n_local=n_local)  # type: ignore[attr-defined]
+
+
+def encoder_from_arrays(spec: dict, arrays: dict[str, np.ndarray], input_dim: int, source: str) -> Encoder:
+    """Rebuild a stored encoder: ``spec`` {"name", "params"} from the file's JSON; VprError naming ``source``
+    when the arrays are missing or inconsistent."""
+    try:
+        cls = encoder_class(str(spec.get("name")))
+    except ValueError as e:
+        raise VprError(f"{source}: {e}") from None
+    try:
+        return cls.from_arrays(arrays, dict(spec.get("params") or {}), input_dim)  # type: ignore[attr-defined]
+    except KeyError as e:
+        raise VprError(f"{source}: {cls.name} codebook array {e} missing") from None
+    except (ValueError, TypeError) as e:
+        raise VprError(f"{source}: codebook arrays are inconsistent ({e})") from None

@@ -1,0 +1,94 @@
+"""Front ends: RGB images -> local descriptors (B, N, K), one contract, one module each, one registry.
+
+A front end has ``name``, ``dim`` (K), ``n_local`` (N, or None when the number varies per image and a mask
+marks the real ones), ``binary`` (descriptors are +-1 bits), ``local(images) -> (x, mask)``, ``describe()``
+(JSON recorded in a map so that queries are described the same way) and ``fingerprint`` (what a map checks).
+``cnn`` is an ONNX layer tap (``vpr_edge.extract``); the others are handcrafted and need no model.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from vpr_edge.errors import VprError
+
+
+class FrontEnd(Protocol):
+    name: str
+    binary: bool
+
+    @property
+    def dim(self) -> int: ...
+
+    @property
+    def n_local(self) -> int | None: ...
+
+    @property
+    def fingerprint(self) -> str: ...
+
+    def local(self, images: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
+        """RGB uint8 images (H, W, 3) -> descriptors (B, N, K) float32 and mask (B, N) bool or None."""
+
+    def describe(self) -> dict:
+        """{"name": ..., "params": {...}}: enough to rebuild this front end (``open_front_end``)."""
+
+
+FRONT_ENDS: dict[str, str] = {
+    "cnn": "an ONNX layer tap of a CNN (--model; default the bundled EfficientNet-Lite0 stage5): its W x H map "
+           "as W*H local K-dim descriptors",
+    "hog": "OpenCV HOG on the grey image at 128x64: each 16x16 block (4 cells x 9 bins) a local descriptor; "
+           "encoding none gives the whole image's HOG",
+    "sift": "OpenCV SIFT on a dense grid (every 16 px, 16 px keypoints) of the grey image at 128x96",
+    "sift-kp": "OpenCV SIFT on up to 64 detected keypoints of the grey image at 256x192",
+    "ldb": "Local Difference Binary (Yang & Cheng 2012) of the whole grey image at 64x64: grid levels 2-5, "
+           "intensity and x/y-gradient comparisons, 256 bits selected on the references",
+    "pixels": "SeqSLAM's image: grey 64x32, every 8x8 patch normalised (a 64-dim local descriptor each)",
+}
+
+
+def make_front_end(name: str, model: Path | None = None, threads: int = 0, spec: dict | None = None) -> FrontEnd:
+    """The front end ``name`` with default parameters, or as ``spec`` (a map's ``describe()``) records it.
+    ``model``/``threads`` apply to ``cnn`` only. ValueError for an unknown name."""
+    params = dict((spec or {}).get("params") or {})
+    if name == "cnn":
+        from vpr_edge.extract import FeatureExtractor, resolve_model
+
+        return FeatureExtractor(resolve_model(model), threads)
+    if model is not None:
+        raise VprError(f"{model}: front end {name} takes no model; drop --model")
+    try:
+        if name == "hog":
+            from vpr_edge.features.hog import Hog
+
+            return Hog(**params)
+        if name in ("sift", "sift-kp"):
+            from vpr_edge.features.sift import DenseSift, KeypointSift
+
+            return DenseSift(**params) if name == "sift" else KeypointSift(**params)
+        if name == "ldb":
+            from vpr_edge.features.ldb import Ldb
+
+            return Ldb(**params)
+        if name == "pixels":
+            from vpr_edge.features.patches import Patches
+
+            return Patches(**params)
+    except TypeError as e:
+        raise VprError(f"front end {name}: stored parameters not understood ({e})") from None
+    raise ValueError(f"unknown front end {name!r}; choose from {', '.join(FRONT_ENDS)}")
+
+
+def grey(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """RGB uint8 (H, W, 3) -> grey uint8 (height, width) at ``size`` = (width, height), area-averaged when
+    shrinking, bilinear when enlarging."""
+    import cv2
+
+    g = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+    interp = cv2.INTER_AREA if g.shape[1] >= size[0] else cv2.INTER_LINEAR
+    return cv2.resize(g, size, interpolation=interp)
+
+
+__all__ = ["FRONT_ENDS", "FrontEnd", "grey", "make_front_end"]
