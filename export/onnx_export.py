@@ -53,7 +53,12 @@ def export_onnx(backbone: str, tap: str, weights: Path, width: int, height: int,
     spec = BACKBONES[backbone]
     if tap not in spec.taps:
         raise ValueError(f"unknown {backbone} tap {tap!r}; choose from {sorted(spec.taps)}")
-    model = build_backbone(backbone, tap, load_state_dict(weights))
+    state = load_state_dict(weights)
+    if backbone == "hybridnet" and "conv1.weight" in state:
+        from vpr_edge_export.backbones import rgb_first_layer
+
+        state = rgb_first_layer(state)
+    model = build_backbone(backbone, tap, state)
     dummy = torch.zeros(1, 3, height, width)
     with torch.no_grad():
         fmap = model(dummy)

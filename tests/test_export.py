@@ -91,7 +91,48 @@ def test_export_names_missing_weights(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="lack 1 keys"):
         build_backbone("resnet50", "res3d", sd)
     with pytest.raises(ValueError, match="unknown vgg16 tap"):
-        build_backbone("vgg16", "fc1", {})
+        build_backbone("vgg16", "fc3", {})
+    with pytest.raises(ValueError, match="unknown hybridnet tap"):
+        build_backbone("hybridnet", "conv7", {})
+
+
+@pytest.mark.parametrize("tap,channels,grid", [("conv1", 96, (30, 22)), ("conv6", 256, (7, 5))])
+def test_hybridnet_export_takes_rgb(tmp_path: Path, tap: str, channels: int, grid: tuple[int, int]) -> None:
+    """Caffe layer names; the ONNX model on RGB equals the Caffe-layout (BGR) network on BGR."""
+    sd = _random_state_dict("hybridnet", tap)
+    assert "conv1.weight" in sd and f"{tap}.bias" in sd
+    weights = tmp_path / "hybridnet.pth"
+    torch.save(sd, weights)
+    out = tmp_path / "h.onnx"
+    _, meta = export_onnx("hybridnet", tap, weights, 128, 96, out)
+    assert (meta["channels"], meta["grid_width"], meta["grid_height"]) == (channels,) + grid
+    caffe = build_backbone("hybridnet", tap, sd)                 # expects BGR, as Caffe
+    ex = FeatureExtractor(out)
+    rgb = np.random.default_rng(1).integers(0, 255, size=(96, 128, 3)).astype(np.uint8)
+    x = ex.preprocess(rgb)[None]                                 # RGB minus the mean, 0-255 scale
+    np.testing.assert_allclose(x[0, 0] + 123, rgb[..., 0].astype(np.float32), atol=1e-3)
+    with torch.no_grad():
+        want = caffe(torch.from_numpy(x[:, ::-1].copy())).numpy()
+    got = ex.feature_maps(x)
+    assert np.abs(got - want).max() <= 1e-4 * max(1.0, np.abs(want).max())
+
+
+def test_vgg16_fc_taps_in_torchvision_layout() -> None:
+    """fc1/fc2 = pool5, 7x7 average pooling, classifier.0 (and .3) with ReLU, as torchvision computes them."""
+    sd = _random_state_dict("vgg16", "fc2")
+    assert "classifier.0.weight" in sd and "classifier.3.bias" in sd and "features.28.weight" in sd
+    x = torch.from_numpy(np.random.default_rng(2).normal(size=(1, 3, 224, 224)).astype(np.float32))
+    fc2 = build_backbone("vgg16", "fc2", sd)
+    fc1 = build_backbone("vgg16", "fc1", {k: v for k, v in sd.items() if not k.startswith("classifier.3")})
+    with torch.no_grad():
+        pooled = torch.flatten(torch.nn.functional.adaptive_avg_pool2d(fc2.features(x), 7), 1)
+        h1 = torch.relu(pooled @ sd["classifier.0.weight"].T + sd["classifier.0.bias"])
+        h2 = torch.relu(h1 @ sd["classifier.3.weight"].T + sd["classifier.3.bias"])
+        assert fc1(x).shape == (1, 4096, 1, 1)
+        torch.testing.assert_close(fc1(x)[:, :, 0, 0], h1)
+        torch.testing.assert_close(fc2(x)[:, :, 0, 0], h2)
+        with pytest.raises(ValueError, match="multiple of 7x7"):
+            fc1(x[:, :, :200, :200])
 
 
 def test_deep_taps_build() -> None:
