@@ -33,3 +33,27 @@ def test_bench_map_reports_each_size(tmp_path: Path, small_refs: Path) -> None:
     rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
     assert [(r[0], r[2]) for r in rows] == [("50", "mmap"), ("50", "ram"), ("300", "mmap"), ("300", "ram")]
     assert all(float(r[3]) >= 0 and float(r[6]) >= 0 and float(r[1]) >= 0 for r in rows)   # columns filled
+
+
+def test_thesis_grid_writes_tables_and_curves(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
+    import json
+    import shutil
+
+    data = tmp_path / "pair"
+    shutil.copytree(small_refs, data / "ref")
+    shutil.copytree(small_queries, data / "query")
+    streams = tmp_path / "streams"
+    tool("derive_streams.py", "--dataset", str(data), "--out", str(streams), "--kinds", "speed2",
+         "--map-places", "24")
+    out = tmp_path / "grid"
+    text = tool("thesis_grid.py", "--dataset", str(data), "--stream", str(streams / "speed2"), "--out", str(out),
+                "--groups", "handcrafted,encodings", "--components", "4")
+    assert (out / "grid.md").read_text().strip() == text.strip()
+    rows = json.loads((out / "grid.json").read_text())
+    configs = {(r["front_end"], r["encoding"], r["mode"], r["queries"]) for r in rows}
+    assert ("ldb", "none", "dtw", "speed2") in configs and ("hog", "none", "single", "aligned") in configs
+    assert {e for f, e, m, q in configs if m == "svm"} == {"none", "bow", "vlad", "fv", "ifv"}
+    assert all(0 <= r["auc"] <= 1 and 0 <= r["ap"] <= 1 for r in rows)
+    assert "| sift + none | dtw |" in text and "thesis" in text
+    assert {p.name for p in out.glob("*.png")} == {f"{g}.{q}.pr.png" for g in ("handcrafted", "encodings")
+                                                   for q in ("aligned", "speed2")}

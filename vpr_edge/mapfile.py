@@ -231,34 +231,42 @@ def extract_all(files: Sequence[Path], front: FrontEnd, folder: Path, batch_size
 def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = "ifv", encoder: Encoder | None = None,
               settings: FitSettings = FitSettings(), batch_size: int = 8, svm: bool = False,
               progress: Progress | None = None) -> PlaceMap:
-    """Describe every reference image in ``files`` (in that order; see ``list_images``) with ``front``, fit
-    the front end (LDB's bit selection) and the ``encoding`` codebook on them unless ``encoder`` is given,
-    encode each reference, and with ``svm`` train one linear classifier per place. Local descriptors are
-    staged in a temporary memory-mapped file so that RAM does not grow with the number of references.
-    Raises VprError on an unreadable image or an encoder that does not fit the front end."""
+    """Describe every reference image in ``files`` (in that order; see ``list_images``) with ``front`` and make
+    the map (``map_from_local``). Local descriptors are staged in a temporary memory-mapped file so that RAM
+    does not grow with the number of references. Raises VprError on an unreadable image or an encoder that
+    does not fit the front end."""
     if not files:
         raise VprError("no reference images given")
-    fitted = encoder is None
     with tempfile.TemporaryDirectory(prefix="vpr-edge-") as tmp:
         local, mask = extract_all(files, front, Path(tmp), batch_size, progress)
-        if getattr(front, "needs_fit", False):
-            front = front.fit(local, settings.seed)  # type: ignore[attr-defined]
-            local = front.select(local)              # type: ignore[attr-defined]
-        if encoder is None:
-            encoder = fit_encoder(encoding, local, mask, settings, front.n_local)
-        elif encoder.input_dim != front.dim:
-            raise VprError(f"codebook expects {encoder.input_dim}-dim descriptors but the {front.name} front end "
-                           f"gives {front.dim}")
-        encodings = encoder.transform_chunked(local, mask)
-        n_real = int(mask.sum()) if mask is not None else local.shape[0] * local.shape[1]
-        del local, mask
+        return map_from_local(local, mask, front, [f.name for f in files], str(Path(files[0]).parent), encoding,
+                              encoder, settings, svm)
+
+
+def map_from_local(local: np.ndarray, mask: np.ndarray | None, front: FrontEnd, names: list[str], refs_folder: str,
+                   encoding: str = "ifv", encoder: Encoder | None = None, settings: FitSettings = FitSettings(),
+                   svm: bool = False) -> PlaceMap:
+    """The map of references described by ``front`` as ``local`` (R, N, K) (``mask`` (R, N) or None): fit the
+    front end (LDB's bit selection, recorded in the map's ``features``) and the ``encoding`` codebook on them
+    unless ``encoder`` is given, encode each reference, and with ``svm`` train one linear SVM per place."""
+    fitted = encoder is None
+    if getattr(front, "needs_fit", False):
+        front = front.fit(local, settings.seed)  # type: ignore[attr-defined]
+        local = front.select(local)              # type: ignore[attr-defined]
+    if encoder is None:
+        encoder = fit_encoder(encoding, local, mask, settings, front.n_local)
+    elif encoder.input_dim != front.dim:
+        raise VprError(f"codebook expects {encoder.input_dim}-dim descriptors but the {front.name} front end "
+                       f"gives {front.dim}")
+    encodings = encoder.transform_chunked(local, mask)
+    n_real = int(mask.sum()) if mask is not None else local.shape[0] * local.shape[1]
     meta = front_end_meta(front) | {
         "codebook": {"fitted_on_refs": fitted, "n_components": encoder.n_components,
                      "pca_dim": int(encoder.pca.components.shape[0]) if encoder.pca is not None else None,
                      "seed": settings.seed}
                     | ({"descriptors": min(settings.max_descriptors, n_real), "iterations": settings.iterations}
                        if fitted and encoder.needs_fit else {}),
-        "refs_folder": str(Path(files[0]).parent),
+        "refs_folder": refs_folder,
         "vpr_edge_version": __version__,
     }
     classifier = None
@@ -267,4 +275,4 @@ def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = "ifv", enc
 
         weights, bias, svm_meta = fit_svm(encodings, seed=settings.seed)
         classifier = Svm(Encodings.pack(weights, "float32"), bias, svm_meta)
-    return PlaceMap(Encodings.pack(encodings, "float32"), [f.name for f in files], encoder, meta, classifier)
+    return PlaceMap(Encodings.pack(encodings, "float32"), names, encoder, meta, classifier)

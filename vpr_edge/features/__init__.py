@@ -7,6 +7,8 @@ marks the real ones), ``binary`` (descriptors are +-1 bits), ``local(images) -> 
 """
 from __future__ import annotations
 
+import hashlib
+import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Protocol
@@ -81,6 +83,11 @@ def make_front_end(name: str, model: Path | None = None, threads: int = 0, spec:
     raise ValueError(f"unknown front end {name!r}; choose from {', '.join(FRONT_ENDS)}")
 
 
+def spec_fingerprint(spec: dict) -> str:
+    """SHA-256 of a handcrafted front end's record (its name and parameters): what a map checks."""
+    return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
+
+
 def grey(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """RGB uint8 (H, W, 3) -> grey uint8 (height, width) at ``size`` = (width, height), area-averaged when
     shrinking, bilinear when enlarging."""
@@ -91,4 +98,4 @@ def grey(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return cv2.resize(g, size, interpolation=interp)
 
 
-__all__ = ["FRONT_ENDS", "FrontEnd", "grey", "make_front_end"]
+__all__ = ["FRONT_ENDS", "FrontEnd", "grey", "make_front_end", "spec_fingerprint"]

@@ -1,15 +1,13 @@
 """HOG front end (Dalal & Triggs 2005) with OpenCV's HOGDescriptor: each block a local descriptor."""
 from __future__ import annotations
 
-import hashlib
-import json
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 
 import cv2
 import numpy as np
 
-from vpr_edge.features import grey
+from vpr_edge.features import grey, spec_fingerprint
 
 
 @dataclass(frozen=True)
@@ -36,7 +34,7 @@ class Hog:
 
     @property
     def fingerprint(self) -> str:
-        return hashlib.sha256(json.dumps(self.describe(), sort_keys=True).encode()).hexdigest()
+        return spec_fingerprint(self.describe())
 
     def describe(self) -> dict:
         return {"name": self.name, "params": {k: v for k, v in asdict(self).items() if k not in ("name", "binary")}}

@@ -16,15 +16,13 @@ written here, vectorised over images and cells, and tested against a plain loop 
 """
 from __future__ import annotations
 
-import hashlib
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
 
-from vpr_edge.features import grey
+from vpr_edge.features import grey, spec_fingerprint
 
 LEVELS = (2, 3, 4, 5)
 
@@ -129,7 +127,7 @@ class Ldb:
 
     @property
     def fingerprint(self) -> str:
-        return hashlib.sha256(json.dumps(self.describe(), sort_keys=True).encode()).hexdigest()
+        return spec_fingerprint(self.describe())
 
     def describe(self) -> dict:
         return {"name": self.name, "params": {"size": self.size, "patches": self.patches, "levels": list(self.levels),

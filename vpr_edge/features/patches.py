@@ -1,13 +1,12 @@
 """SeqSLAM's front end as local descriptors: grey 64x32, each 8x8 patch normalised (``vpr_edge.pixels``)."""
 from __future__ import annotations
 
-import hashlib
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from vpr_edge.features import spec_fingerprint
 from vpr_edge.pixels import PATCH, SIZE, pixel_descriptor
 
 
@@ -31,7 +30,7 @@ class Patches:
 
     @property
     def fingerprint(self) -> str:
-        return hashlib.sha256(json.dumps(self.describe(), sort_keys=True).encode()).hexdigest()
+        return spec_fingerprint(self.describe())
 
     def describe(self) -> dict:
         return {"name": self.name, "params": {"width": self.width, "height": self.height, "patch": self.patch}}

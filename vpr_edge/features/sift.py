@@ -1,19 +1,13 @@
 """SIFT front ends (Lowe 2004) with OpenCV: on a dense grid, or on detected keypoints (padded, masked)."""
 from __future__ import annotations
 
-import hashlib
-import json
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
-from vpr_edge.features import grey
-
-
-def _fingerprint(spec: dict) -> str:
-    return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
+from vpr_edge.features import grey, spec_fingerprint
 
 
 @dataclass(frozen=True)
@@ -39,7 +33,7 @@ class DenseSift:
 
     @property
     def fingerprint(self) -> str:
-        return _fingerprint(self.describe())
+        return spec_fingerprint(self.describe())
 
     def describe(self) -> dict:
         return {"name": self.name, "params": {k: getattr(self, k) for k in ("width", "height", "step", "size")}}
@@ -69,7 +63,7 @@ class KeypointSift:
 
     @property
     def fingerprint(self) -> str:
-        return _fingerprint(self.describe())
+        return spec_fingerprint(self.describe())
 
     def describe(self) -> dict:
         return {"name": self.name, "params": {k: getattr(self, k) for k in ("width", "height", "max_keypoints")}}
