@@ -57,3 +57,13 @@ def test_thesis_grid_writes_tables_and_curves(tmp_path: Path, small_refs: Path, 
     assert "| sift + none | dtw |" in text and "thesis" in text
     assert {p.name for p in out.glob("*.png")} == {f"{g}.{q}.pr.png" for g in ("handcrafted", "encodings")
                                                    for q in ("aligned", "speed2")}
+
+
+def test_bench_frame_reports_each_stage(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
+    m = tmp_path / "m.npz"
+    build = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "build-map", str(small_refs), "-o", str(m),
+                            "--components", "2"], capture_output=True, text=True, timeout=600)
+    assert build.returncode == 0, build.stderr
+    out = tool("bench_frame.py", "--map", str(m), "--frames", str(small_queries), "--threads", "1", "--repeat", "1")
+    row = out.splitlines()[-1].split()
+    assert row[0] == "1" and len(row) == 7 and all(float(v) > 0 for v in row[1:])

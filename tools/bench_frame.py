@@ -48,8 +48,7 @@ def main() -> int:
     heads = ("threads", "decode", "prep", "infer", "encode", "match", "total")
     print(" ".join(f"{h:>7s}" for h in heads) + "  ms/frame")
     for threads in (int(t) for t in a.threads.split(",")):
-        ex = FeatureExtractor(model, use_threads(threads) if a.blas == "held" else threads)
-        place_map.check_model(ex, a.map or "built map")
+        ex = place_map.front_end(a.map or "built map", model, use_threads(threads) if a.blas == "held" else threads)
         times = np.zeros(5)
         for rep in range(a.repeat):
             dtw = get_matcher(a.matcher).stream(len(place_map.names))
