@@ -103,9 +103,10 @@ class Grid:
             t1 = time.perf_counter()
             pm = map_from_local(ref_local, ref_mask, front, [f.name for f in self.refs], "refs", encoding,
                                 settings=self.settings, svm="svm" in modes)
-            fitted = make_front_end(front_name, model, 0, spec=pm.features) if front_name == "ldb" else front
+            refit = getattr(front, "needs_fit", False)   # fitted on the references (LDB's bits): as the map says
+            fitted = make_front_end(front_name, model, 0, spec=pm.features) if refit else front
             for qname, (local, mask) in q_local.items():
-                if getattr(fitted, "bits", None) is not None:
+                if refit:
                     local = fitted.select(local)
                 enc = pm.encoder.transform_chunked(local, mask)
                 sims = {"cosine": pm.scores(enc, "cosine").astype(np.float64)}

@@ -182,6 +182,9 @@ def build_map_cmd(
         use = use_threads(threads)
         front = base.front_end(out, model, use) if base else make_front_end(
             features.value if features else (cb_meta or {}).get("features", {}).get("name", "cnn"), model, use)
+        if enc_name == "none" and front.n_local is None:
+            raise VprError(f"encoding none needs a front end with a fixed grid of descriptors; {front.name} detects "
+                           f"keypoints (a varying number per image): choose bow, vlad, fv or ifv")
         if base is not None:
             given = base.encoder
         elif given is not None:
