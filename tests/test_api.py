@@ -91,3 +91,21 @@ def test_threads_limit_blas() -> None:
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.stdout.strip() in ("[1]", "[]"), proc.stdout + proc.stderr
     assert use_threads(0) >= 1 and threadpool_info is not None
+
+
+def test_local_search_reads_only_the_window(api_map: Path, small_queries: Path) -> None:
+    """With a local search (window 3 on the 111-place sample map) push computes only the similarities the
+    matcher asks for, and answers as the matcher does on the full similarity matrix (evaluate's path)."""
+    loc = Localizer(api_map, params={"window": 3, "hold": 1.0, "probe": 16}, threads=1)
+    files = sorted(small_queries.iterdir())
+    sizes: list[int] = []
+    real = loc.map.scores
+    loc.map = type(loc.map)(loc.map.stored, loc.map.names, loc.map.encoder, loc.map.meta)   # same map, spied
+    object.__setattr__(loc.map, "scores", lambda q, kind="cosine", rows=None: sizes.append(
+        len(loc.names) if rows is None else len(rows)) or real(q, kind, rows))
+    pushed = [loc.push(load_image(f)) for f in files]
+    assert min(sizes) < len(loc.names)                 # some frames read a window (+ the probe sample)
+    enc = loc.encode([load_image(f) for f in files])
+    want = loc.matcher.run(loc.similarity(enc))
+    assert [m.ref_index if not m.lost else int(r) for m, r in zip(pushed, want.refs)] == list(want.refs)
+    np.testing.assert_allclose([m.score for m in pushed], want.scores, atol=1e-5)

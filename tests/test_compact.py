@@ -108,3 +108,14 @@ def test_map_storage_and_schema_1(tmp_path: Path, small_refs: Path) -> None:
         assert back.encoder.name == "ifv" and back.features["name"] == "cnn"
         x = np.random.default_rng(0).random((2, 5, back.encoder.input_dim)).astype(np.float32)
         np.testing.assert_array_equal(back.encode(x), now.encode(x))
+
+
+@pytest.mark.parametrize("storage", ["int8", "float16", "float32"])
+def test_similarity_of_some_rows(storage: str) -> None:
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(50, 16)).astype(np.float32)
+    q = rng.normal(size=(2, 16)).astype(np.float32)
+    enc = Encodings.pack(x, storage)
+    rows = np.array([0, 3, 4, 17, 49])
+    np.testing.assert_allclose(enc.similarity(q, rows), enc.similarity(q)[:, rows], rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(enc.dense_row(17), enc.dense()[17], rtol=1e-6)

@@ -7,6 +7,7 @@ import pytest
 
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.matchers.contrast import local_contrast
+from vpr_edge.matchers.base import step
 from vpr_edge.matchers.road import RoadMatcher
 from vpr_edge.matchers.seqslam import SeqSLAMOnline, enhanced_difference, seqslam_match, speeds
 
@@ -244,3 +245,39 @@ def test_every_matcher_keeps_the_contract(name: str) -> None:
 def test_unknown_matcher() -> None:
     with pytest.raises(ValueError, match="choose from"):
         get_matcher("nope")
+
+
+def test_local_search_follows_a_long_route_and_finds_a_jump() -> None:
+    """On a large route the stream matcher searches a window around a firm lock (``wanted``), checks the
+    whole route now and then, and re-locks after the vehicle turns up far away (a kidnap)."""
+    rng = np.random.default_rng(4)
+    places = np.concatenate([route([(1.0, 60), (3.0, 40), (0.0, 20), (0.5, 40)], start=100),
+                             route([(2.0, 120)], start=2200)])
+    sim = planted(rng, 3000, places, noise=0.3)
+    matcher = get_matcher("stream").with_params(window=50)
+    online = matcher.stream(3000)
+    asked, got = [], []
+    for row in sim:
+        asked.append(online.wanted())
+        got.append(step(online, lambda idx, row=row: row if idx is None else row[idx]))
+    refs = np.array([r for r, _ in got])
+    local = np.array([a is not None for a in asked])
+    assert local.mean() > 0.5                                    # most frames read a window, not the route
+    assert all(len(a) == 101 + 512 for a in asked if a is not None and 50 <= a[0] and a[100] < 2950)
+    first, after = slice(10, 160), slice(200, None)
+    assert np.mean(np.abs(refs[first] - places[first]) <= 1) > 0.95
+    assert np.mean(np.abs(refs[after] - places[after]) <= 1) > 0.95   # found again within 40 frames
+    # full rows give the same answers: the matcher takes what its window needs
+    again = matcher.stream(3000)
+    assert [again.update(row) for row in sim] == got
+    # the evaluation path (run_online) is the same path
+    assert list(matcher.run(sim).refs) == list(refs)
+
+
+def test_local_search_is_off_on_small_routes() -> None:
+    m = RoadMatcher(400, window=100)
+    for row in planted(np.random.default_rng(0), 400, np.arange(100, 150)):
+        m.update(row)
+        assert m.wanted() is None
+    with pytest.raises(ValueError):
+        RoadMatcher(3000, window=50).update(np.zeros(10), np.arange(10))   # refs not asked for

@@ -1,14 +1,16 @@
 #!/usr/bin/env python3
 """Online matcher benchmark: per-frame time and memory over a long synthetic stream against a large map.
 
-    python tools/bench_matcher.py --matcher stream --refs 10000 --frames 100000 --dim 256
+    python tools/bench_matcher.py --matcher stream --refs 100000 --frames 10000 --dim 2048 --storage int8
 
 A synthetic vehicle drives the mapped route with planted speed changes: every 20-200 frames it picks a new
 speed in {0 (stopped), 0.5, 1, 2, 3} references per frame, and now and then leaves the route for a 50-frame
-detour; each query encoding is a noisy copy of its true reference. Each frame costs one similarity row
-(R x D matrix-vector product) and one update of the registered online matcher. At each checkpoint it prints
-the mean per-frame time since the last checkpoint, current and peak RSS, and R@1 (within +-1 reference)
-over the mapped frames so far. Stand-in encodings of --dim dims: the similarity column scales with D.
+detour; each query encoding is a noisy copy of its true reference. Each frame costs the similarities the
+matcher asks for (``matchers.step``: every reference, or a local search's window and probe) from references
+stored as a map stores them (``compact.Encodings``, --storage) and one update of the registered online
+matcher. At each checkpoint it prints the mean per-frame time since the last checkpoint, current and peak
+RSS, R@1 (within +-1 reference) over the mapped frames so far and the share of frames searched locally.
+Random unit encodings of --dim dims: the similarity column scales with D.
 """
 from __future__ import annotations
 
@@ -22,7 +24,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from vpr_edge.matchers import get_matcher  # noqa: E402
+from vpr_edge.compact import STORAGES, Encodings  # noqa: E402
+from vpr_edge.matchers import get_matcher, step  # noqa: E402
 
 
 def rss_mb() -> float:
@@ -43,7 +46,9 @@ def main() -> int:
     p.add_argument("--frames", type=int, default=100_000)
     p.add_argument("--dim", type=int, default=256, help="encoding dimension of the synthetic map")
     p.add_argument("--noise", type=float, default=1.0, help="query noise relative to a unit reference")
+    p.add_argument("--storage", default="float32", choices=STORAGES, help="how the map keeps the references")
     p.add_argument("--matcher", default="stream", help="registered online matcher")
+    p.add_argument("--window", type=int, default=None, help="stream: local search half-width (0 = global)")
     p.add_argument("--checkpoints", default="1000,10000,100000")
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args()
@@ -51,14 +56,28 @@ def main() -> int:
     refs = rng.normal(size=(a.refs, a.dim)).astype(np.float32)
     refs /= np.linalg.norm(refs, axis=1, keepdims=True)
     checkpoints = sorted(int(c) for c in a.checkpoints.split(",") if int(c) <= a.frames)
-    dtw = get_matcher(a.matcher).stream(a.refs)
-    print(f"map {a.refs} refs x {a.dim} dims ({refs.nbytes / 1e6:.1f} MB), {a.frames} frames, matcher {a.matcher}")
+    matcher = get_matcher(a.matcher)
+    if a.window is not None:
+        matcher = matcher.with_params(window=a.window)
+    dtw = matcher.stream(a.refs)
+    stored = Encodings.pack(refs, a.storage)
+    del refs
+    print(f"map {a.refs} refs x {a.dim} dims {a.storage} ({stored.values.nbytes / 1e6:.1f} MB), {a.frames} frames, "
+          f"matcher {a.matcher} {matcher.params}")
     print(f"{'frames':>8s} {'ms/frame':>9s} {'sim ms':>7s} {'match ms':>8s} {'RSS MB':>8s} {'peak MB':>8s} "
-          f"{'acc+-1':>7s}")
+          f"{'acc+-1':>7s} {'local':>6s}")
     pos, detour, speed, until = 0.0, 0, 1.0, 0
     t_sim = t_dtw = 0.0
-    correct = counted = 0
+    correct = counted = local = 0
     last = 0
+    sim_s = [0.0]
+
+    def similarity(idx: np.ndarray | None) -> np.ndarray:
+        t0 = time.perf_counter()
+        row = stored.similarity(q[None], idx)[0]
+        sim_s[0] += time.perf_counter() - t0
+        return row
+
     noise_scale = a.noise / np.sqrt(a.dim)
     for t in range(1, a.frames + 1):
         if detour == 0 and rng.random() < 1e-3:
@@ -72,22 +91,23 @@ def main() -> int:
                 speed, until = float(rng.choice([0.0, 0.5, 1.0, 2.0, 3.0])), t + int(rng.integers(20, 201))
             pos = (pos + speed) % a.refs
             true = int(pos)
-            q = refs[true] + noise_scale * rng.normal(size=a.dim).astype(np.float32)
+            q = stored.dense_row(true) + noise_scale * rng.normal(size=a.dim).astype(np.float32)
+        local += getattr(dtw, "wanted", lambda: None)() is not None
+        sim_s[0] = 0.0
         t0 = time.perf_counter()
-        row = refs @ q
+        ref, _ = step(dtw, similarity)
         t1 = time.perf_counter()
-        ref, _ = dtw.update(row)
-        t2 = time.perf_counter()
-        t_sim += t1 - t0
-        t_dtw += t2 - t1
+        t_sim += sim_s[0]
+        t_dtw += t1 - t0 - sim_s[0]
         if true >= 0:
             counted += 1
             correct += abs(ref - true) <= 1 or abs(ref - true) >= a.refs - 1
         if t in checkpoints:
             n = t - last
             print(f"{t:8d} {1e3 * (t_sim + t_dtw) / n:9.3f} {1e3 * t_sim / n:7.3f} {1e3 * t_dtw / n:8.3f} "
-                  f"{rss_mb():8.1f} {peak_rss_mb():8.1f} {correct / max(counted, 1):7.3f}", flush=True)
-            last, t_sim, t_dtw = t, 0.0, 0.0
+                  f"{rss_mb():8.1f} {peak_rss_mb():8.1f} {correct / max(counted, 1):7.3f} {local / n:6.2f}",
+                  flush=True)
+            last, t_sim, t_dtw, local = t, 0.0, 0.0, 0
     return 0
 
 

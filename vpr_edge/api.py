@@ -24,7 +24,7 @@ from vpr_edge.errors import VprError
 from vpr_edge.features import FrontEnd
 from vpr_edge.images import MIN_SIDE, Frame
 from vpr_edge.mapfile import PlaceMap
-from vpr_edge.matchers import Matcher, get_matcher
+from vpr_edge.matchers import Matcher, get_matcher, step
 from vpr_edge.threads import use_threads
 
 
@@ -101,10 +101,16 @@ class Localizer:
         """RGB uint8 images (H, W, 3) -> encodings (B, D) float32, comparable with the map's by dot product."""
         return encode_images(images, self.map, self.front)
 
-    def similarity(self, encodings: np.ndarray) -> np.ndarray:
+    def similarity(self, encodings: np.ndarray, refs: np.ndarray | None = None) -> np.ndarray:
         """Encodings (B, D) -> what the matcher compares, (B, R): cosine similarities to every reference, or
-        for mode svm the places' decision values."""
-        return self.map.scores(encodings, self.matcher.scores)
+        for mode svm the places' decision values; to the references ``refs`` (sorted int array) only, if
+        given."""
+        return self.map.scores(encodings, self.matcher.scores, refs)
+
+    def _step(self, enc: np.ndarray) -> tuple[int, float]:
+        """Match one encoding (D,): only the similarities the matcher asks for are computed (a local search
+        around a locked position reads a window of the map, not all of it)."""
+        return step(self._online, lambda refs: self.similarity(enc[None], refs)[0])
 
     def _line(self, index: int, name: str, ref: int, score: float) -> Match:
         lost = self.threshold is not None and score < self.threshold
@@ -120,7 +126,7 @@ class Localizer:
                            f"{image.dtype} {image.shape}")
         enc = self.encode([image])[0]
         with self._lock:
-            ref, score = self._online.update(self.similarity(enc[None])[0])
+            ref, score = self._step(enc)
             self._count += 1
             return self._line(self._count - 1, name, ref, score)
 
@@ -133,7 +139,7 @@ class Localizer:
         if self._online is not None:
             for frame, enc in encoded:
                 with self._lock:
-                    ref, score = self._online.update(self.similarity(enc[None])[0])
+                    ref, score = self._step(enc)
                 yield self._line(frame.index, frame.name, ref, score)
             return
         pairs = list(encoded)

@@ -74,17 +74,26 @@ class Encodings:
         out = np.asarray(self.values, np.float32)
         return out * self.scale[:, None] if self.scale is not None else out
 
-    def similarity(self, queries: np.ndarray) -> np.ndarray:
-        """Queries (B, D) -> dot products with every reference (B, R) float32, a block of references at a
-        time (about BLOCK_BYTES of float32 scratch), from the stored values."""
+    def dense_row(self, r: int) -> np.ndarray:
+        """Reference ``r`` as float32 (D,)."""
+        row = np.asarray(self.values[r], np.float32)
+        return row * self.scale[r] if self.scale is not None else row
+
+    def similarity(self, queries: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Queries (B, D) -> dot products with every reference (B, R) float32, or with the references
+        ``rows`` (sorted int array) only (B, len(rows)); a block of references at a time (about
+        BLOCK_BYTES of float32 scratch), from the stored values."""
         q = np.atleast_2d(np.asarray(queries, np.float32))
+        if rows is not None:
+            out = q @ np.asarray(self.values[rows], np.float32).T
+            return out * self.scale[rows] if self.scale is not None else out
         if self.storage == "float32" and not isinstance(self.values, np.memmap):
             return q @ self.values.T
         r, d = self.shape
         out = np.empty((len(q), r), np.float32)
-        rows = max(1, BLOCK_BYTES // (4 * d))
-        for i in range(0, r, rows):
-            out[:, i:i + rows] = q @ np.asarray(self.values[i:i + rows], np.float32).T
+        rows_per_block = max(1, BLOCK_BYTES // (4 * d))
+        for i in range(0, r, rows_per_block):
+            out[:, i:i + rows_per_block] = q @ np.asarray(self.values[i:i + rows_per_block], np.float32).T
         if self.scale is not None:
             out *= self.scale
         return out

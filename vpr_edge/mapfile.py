@@ -36,9 +36,9 @@ class Svm:
     bias: np.ndarray          # (R,) float32
     meta: dict
 
-    def scores(self, queries: np.ndarray) -> np.ndarray:
-        """Encodings (B, D) -> decision values (B, R) float32."""
-        return self.weights.similarity(queries) + self.bias
+    def scores(self, queries: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Encodings (B, D) -> decision values (B, R) float32 (of the places ``rows`` only, if given)."""
+        return self.weights.similarity(queries, rows) + (self.bias if rows is None else self.bias[rows])
 
 
 @dataclass(frozen=True)
@@ -63,21 +63,23 @@ class PlaceMap:
         """The front end's record ({"name", "params"}); maps older than schema 3 are cnn."""
         return self.meta.get("features") or CNN
 
-    def similarity(self, queries: np.ndarray) -> np.ndarray:
-        """Query encodings (B, D) -> cosine similarities to every reference (B, R) float32."""
+    def similarity(self, queries: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Query encodings (B, D) -> cosine similarities to every reference (B, R) float32, or to the
+        references ``rows`` (sorted int array) only."""
         if queries.shape[-1] != self.stored.shape[1]:
             raise VprError(f"query encodings have {queries.shape[-1]} dims but the map's "
                            f"{self.features['name']} + {self.encoder.name} encodings have {self.stored.shape[1]}")
-        return self.stored.similarity(queries)
+        return self.stored.similarity(queries, rows)
 
-    def scores(self, queries: np.ndarray, kind: str = "cosine") -> np.ndarray:
-        """(B, R): ``cosine`` similarities, or ``svm`` decision values (VprError if the map has no SVM)."""
+    def scores(self, queries: np.ndarray, kind: str = "cosine", rows: np.ndarray | None = None) -> np.ndarray:
+        """(B, R): ``cosine`` similarities, or ``svm`` decision values (VprError if the map has no SVM); of
+        the references ``rows`` only if given."""
         if kind == "cosine":
-            return self.similarity(queries)
+            return self.similarity(queries, rows)
         if self.svm is None:
             raise VprError("this map has no SVM (build it with build-map --svm)")
-        self.similarity(queries[:0])  # dimension check
-        return self.svm.scores(queries)
+        self.similarity(queries[:0], rows)  # dimension check
+        return self.svm.scores(queries, rows)
 
     def save(self, path: str | os.PathLike[str], storage: str = "int8") -> None:
         """Write the map atomically to ``path`` (a ``.npz`` file), encodings (and SVM weights) stored as

@@ -8,6 +8,10 @@ ranked list of candidate references (best first, for recall@K).
 An *online* matcher sees one row at a time, past frames only: ``update(row) -> (ref, score)``, then
 ``ranking()`` gives its per-reference preference for that frame. Running it over a matrix row by row is its
 offline form, so every matcher, online or not, can be evaluated with ``run(sim)``.
+
+An online matcher may search locally: ``wanted()`` names the references whose similarities its next frame
+needs (None: all), and ``update(values, refs)`` takes just those. ``step`` drives either kind, so that the
+Localizer computes only the similarities asked for and ``evaluate`` measures exactly what it runs.
 """
 from __future__ import annotations
 
@@ -60,14 +64,25 @@ def lead_with(refs: np.ndarray, cand: np.ndarray) -> np.ndarray:
     return np.concatenate([refs[:, None], rest[:, : cand.shape[1] - 1]], axis=1)
 
 
+def step(matcher: OnlineMatcher, similarity: Callable[[np.ndarray | None], np.ndarray]) -> tuple[int, float]:
+    """One frame: ``similarity(refs)`` gives the frame's similarities to the references ``refs`` (sorted int
+    array; None = all, (R,)); ``refs`` is what the matcher's ``wanted()`` asks for, if it has one."""
+    wanted = getattr(matcher, "wanted", None)
+    refs = wanted() if wanted is not None else None
+    if refs is None:
+        return matcher.update(similarity(None))
+    return matcher.update(similarity(refs), refs)  # type: ignore[call-arg]
+
+
 def run_online(matcher: OnlineMatcher, sim: np.ndarray, k: int = 10) -> Result:
-    """Feed the rows of ``sim`` (Q, R) to an online matcher in order; collect its answers and top-k."""
+    """Feed the rows of ``sim`` (Q, R) to an online matcher in order (through ``step``: a local search sees
+    only the references it asks for); collect its answers and top-k."""
     q, r = sim.shape
     refs = np.empty(q, np.int64)
     scores = np.empty(q, np.float64)
     ranked = np.empty((q, min(k, r)), np.int64)
     for i in range(q):
-        refs[i], scores[i] = matcher.update(sim[i])
+        refs[i], scores[i] = step(matcher, lambda idx: sim[i] if idx is None else sim[i, idx])
         ranked[i] = top_k(matcher.ranking(), k)
     return Result(refs, scores, lead_with(refs, ranked))
 

@@ -45,68 +45,141 @@ class RoadMatcher:
     """Online matcher over (position, speed) trajectories; see the module docstring."""
 
     def __init__(self, n_refs: int, vmax: float = 4.0, grid: int = 2, decay: float = 0.9, bias: float = 1.0,
-                 turn: float = 1.0, memory: float = 50.0, lock: float = 5.0, rival_window: int = 10) -> None:
+                 turn: float = 1.0, memory: float = 50.0, lock: float = 5.0, rival_window: int = 10,
+                 window: int = 0, probe: int = 512, check: int = 50, span: int = 10, hold: float = 2.0) -> None:
         if n_refs < 1:
             raise ValueError("need at least one reference")
         if not 0.0 < decay < 1.0:
             raise ValueError(f"decay must be in (0, 1), got {decay}")
-        if grid < 1 or vmax < 0 or memory < 1:
-            raise ValueError(f"need grid >= 1, vmax >= 0, memory >= 1 (got {grid}, {vmax}, {memory})")
+        if grid < 1 or vmax < 0 or memory < 1 or window < 0 or probe < 2:
+            raise ValueError(f"need grid >= 1, vmax >= 0, memory >= 1, window >= 0, probe >= 2 (got {grid}, "
+                             f"{vmax}, {memory}, {window}, {probe})")
         self.n_refs, self.grid, self.decay, self.bias = n_refs, grid, decay, bias
         self.turn, self.memory, self.lock, self.rival_window = turn, memory, lock, max(0, int(rival_window))
         self.n_speeds = int(round(vmax * grid)) + 1
+        # local search pays only where the window is a small part of the route
+        self.window = int(window) if window and n_refs > 4 * window else 0
+        # references whose similarities estimate a frame's mean and spread while searching locally: a fixed
+        # random sample, so that the estimate costs O(probe), not O(R)
+        self._probe = np.sort(np.random.default_rng(0).choice(n_refs, min(n_refs, probe), replace=False))
+        self._win: tuple[int, int] | None = None   # references [lo, hi) searched locally; None = all
+        self.check, self.span, self.hold = max(1, int(check)), max(0, int(span)), hold
+        self._held = 0                               # frames since the local search began
         # float32: the per-frame passes over (speeds x positions) are memory-bound; halving the bytes halved
         # the time at 100,000 references (tools/bench_matcher.py)
         self.h = np.zeros((self.n_speeds, n_refs * grid), np.float32)
         self._m = np.empty_like(self.h)   # buffers reused every frame
+        self._new = np.empty_like(self.h)
         self._z = np.empty(n_refs * grid, np.float32)
         self._mean = np.zeros(n_refs)     # running mean z per reference
         self._stopped = False
-        self._weight = memory             # decayed number of frames in it: starts as if `memory` frames of mean 0
+        # per reference, the decayed number of frames in its mean (starts as if `memory` frames of mean 0) and
+        # the frame count when it was last seen: a reference outside a local search's window is not updated,
+        # and when seen again its old mean weighs as much as its age allows (an EMA over time, not over updates)
+        self._weight = np.full(n_refs, memory)
+        self._seen = np.zeros(n_refs, np.int64)
+        self._t = 0                       # frames counted for the means (not those of a stopped vehicle)
 
-    def _normalise(self, s: np.ndarray) -> np.ndarray:
-        """Similarity row (R,) -> z-scored over references, minus each reference's running mean."""
-        z = (s - s.mean()) / max(float(s.std()), 1e-12)
-        out = z - self._mean
+    def wanted(self) -> np.ndarray | None:
+        """References (sorted int array) whose similarities the next ``update`` needs, in that order; None:
+        all of them. While locked on a large route (``window`` > 0): the ``window`` references either side of
+        the answer, then the probe sample."""
+        if self._win is None:
+            return None
+        return np.concatenate([np.arange(*self._win), self._probe])
+
+    def _normalise(self, s: np.ndarray, lo: int, mean: float, std: float) -> np.ndarray:
+        """Similarities of references [lo, lo + len(s)) -> z-scored with the frame's ``mean`` and ``std`` over
+        all references, minus each reference's running mean."""
+        z = (s - mean) / max(std, 1e-12)
+        run, weight = self._mean[lo:lo + len(s)], self._weight[lo:lo + len(s)]
+        out = z - run
         if not self._stopped:   # frames of a stopped vehicle repeat one place: they say nothing of hubs
-            self._weight = (1.0 - 1.0 / self.memory) * self._weight + 1.0
-            self._mean += (z - self._mean) / self._weight
+            self._t += 1
+            seen = self._seen[lo:lo + len(s)]
+            weight *= (1.0 - 1.0 / self.memory) ** (self._t - seen)
+            weight += 1.0
+            seen[:] = self._t
+            run += (z - run) / weight
         return out
 
-    def _spread(self) -> np.ndarray:
-        """max over v' of H(v', p) - turn * |v - v'| for every v: forward and backward passes over speeds."""
-        m = self._m
-        np.copyto(m, self.h)
+    def _advance(self, a: int, b: int) -> None:
+        """One frame of the recursion on state columns [a, b) (z already in ``self._z[a:b]``): the max over
+        v' of H(v', p) - turn * |v - v'| (forward and backward passes over speeds), shifted v grid steps
+        ahead, decayed, plus z, floored at 0. Columns left of ``a`` feed it as predecessors."""
+        a0 = max(0, a - (self.n_speeds - 1))
+        m, new, w = self._m[:, : b - a0], self._new[:, : b - a], b - a
+        np.copyto(m, self.h[:, a0:b])
         for v in range(1, self.n_speeds):
             np.maximum(m[v], m[v - 1] - self.turn, out=m[v])
         for v in range(self.n_speeds - 2, -1, -1):
             np.maximum(m[v], m[v + 1] - self.turn, out=m[v])
-        return m
-
-    def update(self, sim_row: np.ndarray) -> tuple[int, float]:
-        """Similarities (R,) of the new frame -> (reference at the best state, score in [0, 2); >= 1: locked)."""
-        s = np.asarray(sim_row, np.float64)
-        if s.shape != (self.n_refs,):
-            raise ValueError(f"similarity row must have shape ({self.n_refs},), got {s.shape}")
-        z = self._z.reshape(self.n_refs, self.grid)
-        z[:] = self._normalise(s)[:, None]
-        z -= self.bias
-        m = self._spread()
-        h = self.h
         for v in range(self.n_speeds):   # a trajectory at speed v came from v grid steps behind
-            h[v, v:] = m[v, : m.shape[1] - v]
-            h[v, :v] = 0.0
-        h *= self.decay
-        np.maximum(h, 0.0, out=h)
-        h += self._z
-        np.maximum(h, 0.0, out=h)
+            k = a - v - a0
+            if k >= 0:
+                new[v] = m[v, k:k + w]
+            else:                        # before the route's start: nothing
+                new[v, :-k] = 0.0
+                new[v, -k:] = m[v, : w + k]
+        new *= self.decay
+        np.maximum(new, 0.0, out=new)
+        new += self._z[a:b]
+        np.maximum(new, 0.0, out=new)
+        self.h[:, a:b] = new
+
+    def update(self, sim_row: np.ndarray, refs: np.ndarray | None = None) -> tuple[int, float]:
+        """Similarities of the new frame -> (reference at the best state, score in [0, 2); >= 1: locked).
+        ``sim_row`` covers every reference (R,), or with ``refs`` exactly the references ``wanted()`` named."""
+        s = np.asarray(sim_row, np.float64)
+        lo, hi = self._win if self._win is not None else (0, self.n_refs)
+        if refs is not None:
+            if self._win is None or len(refs) != hi - lo + len(self._probe) or len(s) != len(refs):
+                raise ValueError("similarities must cover the references wanted() named")
+            part, probe = s[: hi - lo], s[hi - lo:]
+        elif s.shape != (self.n_refs,):
+            raise ValueError(f"similarity row must have shape ({self.n_refs},), got {s.shape}")
+        else:
+            part, probe = s[lo:hi], s[self._probe] if self._win is not None else s
+        g = self.grid
+        z = self._z[lo * g:hi * g].reshape(hi - lo, g)
+        z[:] = self._normalise(part, lo, float(probe.mean()), float(probe.std()))[:, None]
+        z -= self.bias
+        self._advance(lo * g, hi * g)
+        h = self.h[:, lo * g:hi * g]
         flat = int(np.argmax(h))
         self._stopped = flat < h.shape[1]          # the best trajectory has speed 0
-        ref, best = (flat % h.shape[1]) // self.grid, float(h.flat[flat])
-        per_ref = self.ranking()
-        w = self.rival_window
-        rival = max(float(per_ref[: max(0, ref - w)].max(initial=0.0)), float(per_ref[ref + w + 1:].max(initial=0.0)))
+        ref, best = lo + (flat % h.shape[1]) // g, float(h.flat[flat])
+        per_ref = h.max(axis=0).reshape(hi - lo, g).max(axis=1)
+        w, i = self.rival_window, ref - lo
+        rival = max(float(per_ref[: max(0, i - w)].max(initial=0.0)), float(per_ref[i + w + 1:].max(initial=0.0)))
+        held = False
+        if self.window and best >= self.hold * self.lock:   # firm lock, and no other hypothesis half as strong
+            w, i = self.window, ref - lo                    # beyond the window (seen only in global frames)
+            far = max(float(per_ref[: max(0, i - w)].max(initial=0.0)), float(per_ref[i + w + 1:].max(initial=0.0)))
+            held = far < 0.5 * best
+        self._follow(ref, held)
         return ref, float(best >= self.lock) + 1.0 - (rival + 1.0) / (best + 1.0)
+
+    def _follow(self, ref: int, held: bool) -> None:
+        """Choose the next frame's search: around ``ref`` while firmly locked (``window`` > 0), except for
+        ``span`` global frames every ``check`` frames, else everything. State outside the window is kept at
+        0 (trajectories there are dropped when the window is entered and when it moves on)."""
+        self._held = self._held + 1 if (self.window and held) else 0
+        if not self._held or self._held % self.check >= self.check - self.span:
+            self._win = None
+            return
+        g = self.grid
+        lo, hi = max(0, ref - self.window), min(self.n_refs, ref + self.window + 1)
+        if self._win is None:
+            self.h[:, : lo * g] = 0.0
+            self.h[:, hi * g:] = 0.0
+        else:
+            plo, phi = self._win
+            if plo < lo:
+                self.h[:, plo * g:min(lo, phi) * g] = 0.0
+            if phi > hi:
+                self.h[:, max(hi, plo) * g:phi * g] = 0.0
+        self._win = (lo, hi)
 
     def ranking(self) -> np.ndarray:
         """Best trajectory score ending at each reference (R,)."""
@@ -117,4 +190,8 @@ class RoadMatcher:
         self.h[:] = 0.0
         self._mean[:] = 0.0
         self._stopped = False
-        self._weight = self.memory
+        self._weight[:] = self.memory
+        self._seen[:] = 0
+        self._t = 0
+        self._win = None
+        self._held = 0

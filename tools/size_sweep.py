@@ -1,0 +1,123 @@
+#!/usr/bin/env python3
+"""Accuracy against bytes per place: encodings of several sizes and storages on derived streams.
+
+    python tools/derive_streams.py --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
+    python tools/size_sweep.py --streams out/nordland-dev --kinds aligned,speed2 --out out/size/nordland-dev
+
+Local descriptors of the references (STREAMS/ref) and of each stream STREAMS/KIND are extracted once with the
+bundled model (cached in OUT/local/) and shared by every configuration. A configuration is an IFV codebook
+(``--configs`` entries ``PCA_DIMxCOMPONENTS``, PCA 0 = none) fitted on the references by
+``map_from_local`` (the function behind ``build-map``) and a storage (how the map keeps the references:
+float32, int8 with a row scale, or sign bits). Each stream is scored by ``evaluate_mode`` (the function
+behind ``vpr-edge evaluate``) with the single and stream matchers. Prints a Markdown table (also OUT/size.md,
+OUT/size.json): dims, bytes per place, a 100,000-place map's size, fit seconds, then R@1 / AUC per stream
+and mode.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from vpr_edge import groundtruth  # noqa: E402
+from vpr_edge.compact import Encodings  # noqa: E402
+from vpr_edge.encoders import FitSettings  # noqa: E402
+from vpr_edge.evaluate import evaluate_mode  # noqa: E402
+from vpr_edge.extract import BUNDLED_MODEL  # noqa: E402
+from vpr_edge.features import make_front_end  # noqa: E402
+from vpr_edge.images import list_images  # noqa: E402
+from vpr_edge.mapfile import extract_all, map_from_local  # noqa: E402
+from vpr_edge.matchers import get_matcher  # noqa: E402
+from vpr_edge.threads import use_threads  # noqa: E402
+
+
+def cached_local(files: list[Path], front, folder: Path) -> np.ndarray:
+    """Local descriptors (N, L, K) of ``files``, extracted once into ``folder``/local.npy (memory-mapped)."""
+    path = folder / "local.npy"
+    if path.exists():
+        arr = np.load(path, mmap_mode="r", allow_pickle=False)
+        if len(arr) == len(files):
+            return arr
+    folder.mkdir(parents=True, exist_ok=True)
+    local, _ = extract_all(files, front, folder, 8)
+    local.flush()
+    return np.load(path, mmap_mode="r", allow_pickle=False)
+
+
+def stored_similarity(refs: np.ndarray, queries: np.ndarray, storage: str) -> np.ndarray:
+    """Cosine-like similarities (Q, R) of float queries against references kept as ``storage``."""
+    if storage == "bits":   # signs of both sides: 1 - 2 * Hamming / D
+        return (np.sign(queries) @ np.sign(refs).T) / refs.shape[1]
+    return Encodings.pack(refs, storage).similarity(queries).astype(np.float64)
+
+
+def bytes_per_place(dim: int, storage: str) -> int:
+    return {"float32": 4 * dim, "float16": 2 * dim, "int8": dim + 4, "bits": (dim + 7) // 8}[storage]
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--streams", type=Path, required=True, help="derive_streams output: ref/ and KIND/ + KIND.csv")
+    p.add_argument("--kinds", default="aligned,speed2")
+    p.add_argument("--configs", default="0x128,64x128,32x128,64x64,32x64,32x32,16x64,24x32")
+    p.add_argument("--storages", default="int8,bits")
+    p.add_argument("--seeds", default="0")
+    p.add_argument("--modes", default="single,stream")
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--threads", type=int, default=0)
+    a = p.parse_args()
+    use_threads(a.threads)
+    a.out.mkdir(parents=True, exist_ok=True)
+    front = make_front_end("cnn", BUNDLED_MODEL, a.threads)
+    kinds = a.kinds.split(",")
+    modes = a.modes.split(",")
+    t0 = time.perf_counter()
+    refs = list_images(a.streams / "ref")
+    ref_local = cached_local(refs, front, a.out / "local" / "ref")
+    queries = {k: (cached_local(list_images(a.streams / k), front, a.out / "local" / k),
+                   groundtruth.load_csv(a.streams / f"{k}.csv")) for k in kinds}
+    print(f"local descriptors: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+    rows = []
+    for config in a.configs.split(","):
+        pca, comps = (int(v) for v in config.split("x"))
+        for seed in (int(s) for s in a.seeds.split(",")):
+            t1 = time.perf_counter()
+            settings = FitSettings(n_components=comps, pca_dim=pca or None, seed=seed)
+            pm = map_from_local(ref_local, None, front, [f.name for f in refs], "ref", "ifv", settings=settings)
+            fit_s = time.perf_counter() - t1
+            ref_enc = pm.stored.dense()
+            q_enc = {k: pm.encoder.transform_chunked(v[0]) for k, v in queries.items()}
+            for storage in a.storages.split(","):
+                row = {"pca": pca, "components": comps, "seed": seed, "storage": storage, "dim": pm.encoder.dim,
+                       "bytes": bytes_per_place(pm.encoder.dim, storage), "fit_s": round(fit_s, 1)}
+                for k, (_, truth) in queries.items():
+                    sim = stored_similarity(ref_enc, q_enc[k], storage)
+                    for mode in modes:
+                        r = evaluate_mode(get_matcher(mode), sim, truth)
+                        row[f"{k} {mode}"] = (round(r.recall[1], 3), round(r.auc, 3))
+                rows.append(row)
+                print(json.dumps(row), file=sys.stderr, flush=True)
+    cols = [f"{k} {m}" for k in kinds for m in modes]
+    lines = [f"R@1 / AUC on {a.streams} ({len(refs)} references), tolerance 1; "
+             f"{(time.perf_counter() - t0) / 60:.1f} min", "",
+             "| PCA | components | seed | storage | dims | bytes/place | 100,000 places | fit s | " + " | ".join(cols) + " |",
+             "|---" * (8 + len(cols)) + "|"]
+    for r in rows:
+        lines.append(f"| {r['pca'] or 'none'} | {r['components']} | {r['seed']} | {r['storage']} | {r['dim']:,} | "
+                     f"{r['bytes']:,} | {r['bytes'] * 100_000 / 1e6:,.0f} MB | {r['fit_s']} | "
+                     + " | ".join(f"{r[c][0]:.3f} / {r[c][1]:.3f}" for c in cols) + " |")
+    (a.out / "size.md").write_text("\n".join(lines) + "\n")
+    (a.out / "size.json").write_text(json.dumps(rows, indent=1) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
