@@ -282,6 +282,9 @@ def localize_cmd(
                                              "start and end anywhere, 0-4 references per frame (dtw-open)."),
     decay: Optional[float] = typer.Option(None, min=0.01, max=0.999, help="stream / stream-dtw: each frame "
                                           "discounts the past by this factor (about 1/(1-decay) frames kept)."),
+    window: Optional[int] = typer.Option(None, min=0, help="stream: local search, references either side of a "
+                                         "firm lock read per frame, on routes over 4x this (default %d; 0 = "
+                                         "every reference every frame)." % MATCHERS["stream"].params["window"]),
     min_confidence: Optional[float] = typer.Option(
         None, help="Frames scoring below this are reported lost (ref_index -1). Default: the mode's own "
                    "(stream: %.1f; other modes: never lost)." % MATCHERS["stream"].min_confidence),
@@ -302,7 +305,7 @@ def localize_cmd(
         if fmt and suffix_fmt and fmt.value != suffix_fmt:
             raise VprError(f"{out}: --format {fmt.value} contradicts the file's {out.suffix} suffix")
         params = _params_for(mode.value, {"variant": variant.value if variant else None, "open_ends": open_ends,
-                                          "decay": decay})
+                                          "decay": decay, "window": window})
         frames, count = open_stream(stream)
         localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
                               min_confidence=min_confidence, threads=threads)

@@ -35,6 +35,16 @@ answer.
 The max over speeds with the speed penalty is a distance transform (two passes over the speeds), so a frame
 costs O(grid * speeds * R) vectorised work in preallocated buffers, and the state is (grid * speeds + 1) * R
 floats, whatever the stream's length.
+
+Local search (``window`` > 0, used on routes of more than 4 * window references): while the best trajectory is
+firmly locked (H >= ``hold`` * lock, and no trajectory more than ``window`` references away has half its H),
+the next frame updates only the references within ``window`` of the answer, and ``wanted()`` asks for just
+their similarities plus those of ``probe`` fixed random references, from which the frame's mean and spread
+(the z-score's) are estimated. State outside the window is held at 0. ``span`` frames in every ``check``
+firmly locked frames, and every frame that is not firmly locked, search the whole route, so a stronger
+hypothesis elsewhere (a jump, a re-entry after a detour) is found. A frame then costs O(window) instead of
+O(R), plus the global frames. Each reference's running mean counts time, not updates: seen again after k
+frames outside the window, its old mean is weighted by (1 - 1/memory)^k.
 """
 from __future__ import annotations
 
