@@ -103,7 +103,7 @@ class Localizer:
 
     def similarity(self, encodings: np.ndarray, refs: np.ndarray | None = None) -> np.ndarray:
         """Encodings (B, D) -> what the matcher compares, (B, R): cosine similarities to every reference, or
-        for mode svm the places' decision values; to the references ``refs`` (sorted int array) only, if
+        for mode svm the places' decision values; to the references ``refs`` (int array) only, if
         given."""
         return self.map.scores(encodings, self.matcher.scores, refs)
 

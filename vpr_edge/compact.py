@@ -82,7 +82,7 @@ class Encodings:
 
     def similarity(self, queries: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
         """Queries (B, D) -> dot products with every reference (B, R) float32, or with the references
-        ``rows`` (sorted int array) only (B, len(rows)); a block of references at a time (about
+        ``rows`` (int array) only (B, len(rows)); a block of references at a time (about
         BLOCK_BYTES of float32 scratch), from the stored values."""
         q = np.atleast_2d(np.asarray(queries, np.float32))
         if rows is not None:

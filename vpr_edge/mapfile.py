@@ -65,7 +65,7 @@ class PlaceMap:
 
     def similarity(self, queries: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
         """Query encodings (B, D) -> cosine similarities to every reference (B, R) float32, or to the
-        references ``rows`` (sorted int array) only."""
+        references ``rows`` (int array) only."""
         if queries.shape[-1] != self.stored.shape[1]:
             raise VprError(f"query encodings have {queries.shape[-1]} dims but the map's "
                            f"{self.features['name']} + {self.encoder.name} encodings have {self.stored.shape[1]}")

@@ -91,7 +91,7 @@ class RoadMatcher:
         self._t = 0                       # frames counted for the means (not those of a stopped vehicle)
 
     def wanted(self) -> np.ndarray | None:
-        """References (sorted int array) whose similarities the next ``update`` needs, in that order; None:
+        """References (int array) whose similarities the next ``update`` needs, in that order; None:
         all of them. While locked on a large route (``window`` > 0): the ``window`` references either side of
         the answer, then the probe sample."""
         if self._win is None:
