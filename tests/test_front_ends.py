@@ -235,3 +235,26 @@ def test_runtime_imports_no_heavy_module_for_any_map(tmp_path: Path, small_refs:
     proc = subprocess.run([sys.executable, "-c", code, str(out), str(small_queries)], capture_output=True,
                           text=True, timeout=300)
     assert "HEAVY []" in proc.stderr and len(proc.stdout.splitlines()) == 25, proc.stderr[-500:]
+
+
+def test_bundled_small_model(tmp_path: Path, small_refs: Path) -> None:
+    """The bundled tap at 160x120: a quarter of the pixels, a 10x8 grid of the same 112 channels, and a map
+    built with it localises with it."""
+    import subprocess
+    import sys
+
+    from vpr_edge.extract import BUNDLED_MODEL, SMALL_MODEL, FeatureExtractor
+
+    small, big = FeatureExtractor(SMALL_MODEL, threads=1), FeatureExtractor(BUNDLED_MODEL, threads=1)
+    assert small.size == (160, 120) and big.size == (320, 240)
+    assert small.dim == big.dim == 112 and (small.n_local, big.n_local) == (10 * 8, 20 * 15)
+    out = tmp_path / "small.map.npz"
+    cli = [sys.executable, "-m", "vpr_edge.cli"]
+    proc = subprocess.run(cli + ["build-map", str(small_refs), "-o", str(out), "--model", str(SMALL_MODEL),
+                                 "--components", "4"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    proc = subprocess.run(cli + ["localize", "-m", str(out), "-s", str(small_refs), "--mode", "single"],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    refs = [int(line.split(",")[2]) for line in proc.stdout.splitlines()[1:]]
+    assert sum(r == i for i, r in enumerate(refs)) >= 0.9 * len(refs)     # each reference finds itself

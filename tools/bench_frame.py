@@ -38,9 +38,10 @@ def main() -> int:
     p.add_argument("--repeat", type=int, default=2, help="passes over the frames (the first is warm-up)")
     p.add_argument("--blas", choices=("held", "default"), default="held")
     a = p.parse_args()
-    model = a.model or default_model_path()
     place_map = (PlaceMap.load(a.map) if a.map else
-                 build_map(list_images(ROOT / "samples" / "corridor" / "ref"), FeatureExtractor(model)))
+                 build_map(list_images(ROOT / "samples" / "corridor" / "ref"),
+                           FeatureExtractor(a.model or default_model_path())))
+    model = place_map.model_path(a.model)     # a given --model, else the map's own (as localize chooses)
     files = list_images(a.frames)
     print(f"{len(files)} frames from {a.frames}; map {len(place_map.names)} refs x {place_map.stored.shape[1]} "
           f"dims; model {model.name}")

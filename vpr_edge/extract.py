@@ -18,6 +18,8 @@ _REQUIRED = ("backbone", "tap", "input_width", "input_height", "mean", "std", "c
 
 
 BUNDLED_MODEL = Path(__file__).resolve().parent.parent / "models" / "efficientnet_lite0_stage5_320x240.onnx"
+# the same tap exported at a quarter of the pixels, for small cameras (README, "Input size")
+SMALL_MODEL = BUNDLED_MODEL.with_name("efficientnet_lite0_stage5_160x120.onnx")
 
 
 def default_model_path() -> Path:
@@ -104,7 +106,8 @@ class FeatureExtractor:
         """RGB uint8 (H, W, 3) -> normalised float32 (3, input_height, input_width)."""
         if 4 * rgb.shape[1] < self.size[0] or 4 * rgb.shape[0] < self.size[1]:
             warn(f"{rgb.shape[1]}x{rgb.shape[0]} images are upsampled more than 4x per side to the model's "
-                 f"{self.size[0]}x{self.size[1]} input ({self.path.name}); a model with a smaller input suits them")
+                 f"{self.size[0]}x{self.size[1]} input ({self.path.name}); a model with a smaller input suits them"
+                 + (f" (bundled: --model {SMALL_MODEL})" if self.size[0] > 160 else ""))
         interp = cv2.INTER_AREA if rgb.shape[1] > self.size[0] else cv2.INTER_LINEAR
         x = cv2.resize(rgb, self.size, interpolation=interp).astype(np.float32) * (1.0 / 255.0)
         x = (x - self._mean) / self._std
