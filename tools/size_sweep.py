@@ -39,11 +39,12 @@ from vpr_edge.threads import use_threads  # noqa: E402
 
 
 def cached_local(files: list[Path], front, folder: Path) -> np.ndarray:
-    """Local descriptors (N, L, K) of ``files``, extracted once into ``folder``/local.npy (memory-mapped)."""
+    """Local descriptors (N, L, K) of ``files``, extracted once into ``folder``/local.npy (memory-mapped; used
+    again only if it has the shape this front end gives those files)."""
     path = folder / "local.npy"
     if path.exists():
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
-        if len(arr) == len(files):
+        if arr.shape == (len(files), front.n_local, front.dim):
             return arr
     folder.mkdir(parents=True, exist_ok=True)
     local, _ = extract_all(files, front, folder, 8)

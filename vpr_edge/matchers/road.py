@@ -51,6 +51,11 @@ from __future__ import annotations
 import numpy as np
 
 
+def _beyond(per_ref: np.ndarray, i: int, w: int) -> float:
+    """The highest of ``per_ref`` (n,) more than ``w`` entries away from entry ``i`` (0 if none)."""
+    return max(float(per_ref[: max(0, i - w)].max(initial=0.0)), float(per_ref[i + w + 1:].max(initial=0.0)))
+
+
 class RoadMatcher:
     """Online matcher over (position, speed) trajectories; see the module docstring."""
 
@@ -160,13 +165,10 @@ class RoadMatcher:
         self._stopped = flat < h.shape[1]          # the best trajectory has speed 0
         ref, best = lo + (flat % h.shape[1]) // g, float(h.flat[flat])
         per_ref = h.max(axis=0).reshape(hi - lo, g).max(axis=1)
-        w, i = self.rival_window, ref - lo
-        rival = max(float(per_ref[: max(0, i - w)].max(initial=0.0)), float(per_ref[i + w + 1:].max(initial=0.0)))
-        held = False
-        if self.window and best >= self.hold * self.lock:   # firm lock, and no other hypothesis half as strong
-            w, i = self.window, ref - lo                    # beyond the window (seen only in global frames)
-            far = max(float(per_ref[: max(0, i - w)].max(initial=0.0)), float(per_ref[i + w + 1:].max(initial=0.0)))
-            held = far < 0.5 * best
+        rival = _beyond(per_ref, ref - lo, self.rival_window)
+        # firm lock: strong evidence, and no hypothesis beyond the window half as strong (seen in global frames)
+        held = bool(self.window) and best >= self.hold * self.lock and \
+            _beyond(per_ref, ref - lo, self.window) < 0.5 * best
         self._follow(ref, held)
         return ref, float(best >= self.lock) + 1.0 - (rival + 1.0) / (best + 1.0)
 
