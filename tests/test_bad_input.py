@@ -267,7 +267,8 @@ def test_option_values_refused_by_the_parser() -> None:
     message (three lines: usage, hint, error), exit code 2, no traceback."""
     for argv in (["build-map", "x", "-o", "y.npz", "--storage", "int4"], ["localize", "-m", "m", "-s", "s",
                                                                           "--mode", "nope"],
-                 ["build-map", "x", "-o", "y.npz", "--fit-iterations", "0"]):
+                 ["build-map", "x", "-o", "y.npz", "--fit-iterations", "0"],
+                 ["localize", "-m", "m", "-s", "s", "--window", "-1"]):
         res = CliRunner().invoke(app, argv)
         assert res.exit_code == 2 and isinstance(res.exception, SystemExit), res.stderr
         assert "Traceback" not in res.stderr and argv[-2] in res.stderr.splitlines()[-1]
