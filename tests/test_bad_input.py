@@ -128,6 +128,10 @@ CASES = [
     Case("bm-codebook-other-front-end", "build-map {w}/refs -o {w}/out.npz --codebook {w}/cb.npz --features sift",
          ("cb.npz", "fitted on cnn descriptors", "sift")),
     Case("bm-append-svm", "build-map {w}/refs -o {w}/good.npz --append --svm", ("good.npz", "--append", "--svm")),
+    Case("bm-append-resize", "build-map {w}/refs -o {w}/good.npz --append --resize pad",
+         ("good.npz", "--append", "--resize")),
+    Case("bm-resize-handcrafted", "build-map {w}/refs -o {w}/h.npz --features hog --resize crop",
+         ("--resize", "cnn", "hog")),
     Case("bm-svm-no-sklearn", "build-map {w}/refs -o {w}/out.npz --codebook {w}/cb.npz --svm",
          ("scikit-learn", "vpr-edge[fit]"), hide=("sklearn",)),
     # localize
@@ -268,7 +272,8 @@ def test_option_values_refused_by_the_parser() -> None:
     for argv in (["build-map", "x", "-o", "y.npz", "--storage", "int4"], ["localize", "-m", "m", "-s", "s",
                                                                           "--mode", "nope"],
                  ["build-map", "x", "-o", "y.npz", "--fit-iterations", "0"],
-                 ["localize", "-m", "m", "-s", "s", "--window", "-1"]):
+                 ["localize", "-m", "m", "-s", "s", "--window", "-1"],
+                 ["build-map", "x", "-o", "y.npz", "--resize", "squash"]):
         res = CliRunner().invoke(app, argv)
         assert res.exit_code == 2 and isinstance(res.exception, SystemExit), res.stderr
         assert "Traceback" not in res.stderr and argv[-2] in res.stderr.splitlines()[-1]

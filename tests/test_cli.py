@@ -53,7 +53,7 @@ def test_map_contents(small_map: Path, model_path: Path) -> None:
     assert pm.names[0] == "0000000.jpg" and pm.meta["model"]["tap"] == "stage5"
     assert pm.meta["codebook"] == {"fitted_on_refs": True, "n_components": 8, "pca_dim": 32, "seed": 0,
                                    "descriptors": 24 * 300, "iterations": 30}
-    assert pm.features == {"name": "cnn", "params": {}} and pm.encoder.name == "ifv" and pm.svm is None
+    assert pm.features == {"name": "cnn", "params": {"resize": "stretch"}} and pm.encoder.name == "ifv" and pm.svm is None
 
 
 @pytest.mark.parametrize("mode", ["stream", "stream --min-confidence 0", "stream --window 3", "dtw", "single",
@@ -234,6 +234,15 @@ def test_append_grows_the_map_with_its_codebook(tmp_path: Path, small_refs: Path
     whole = tmp_path / "whole.npz"
     assert run("build-map", small_refs, "-o", whole, "--codebook", cb, "--storage", "float32").returncode == 0
     np.testing.assert_allclose(PlaceMap.load(whole).encodings, after.encodings, atol=1e-6)
+    # int8 (the default storage): the old rows' stored bytes are copied, not expanded and requantised
+    small = tmp_path / "int8.npz"
+    assert run("build-map", first, "-o", small, "--components", "4").returncode == 0
+    old = PlaceMap.load(small).stored
+    assert run("build-map", second, "-o", small, "--append").returncode == 0
+    new = PlaceMap.load(small).stored
+    assert new.storage == "int8" and new.shape[0] == 24
+    np.testing.assert_array_equal(new.values[:14], old.values)
+    np.testing.assert_array_equal(new.scale[:14], old.scale)
     assert_one_line_error(run("build-map", second, "-o", grown, "--append", "--components", "8"), "--components")
     assert_one_line_error(run("build-map", second, "-o", tmp_path / "none.npz", "--append"), "none.npz",
                           "no such file")

@@ -258,3 +258,55 @@ def test_bundled_small_model(tmp_path: Path, small_refs: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     refs = [int(line.split(",")[2]) for line in proc.stdout.splitlines()[1:]]
     assert sum(r == i for i, r in enumerate(refs)) >= 0.9 * len(refs)     # each reference finds itself
+
+
+def naive_fit(img: np.ndarray, size: tuple[int, int], policy: str, fill: tuple[int, int, int]) -> np.ndarray:
+    """The resize policies spelled out: scale factors per policy, then a canvas filled / cut pixel by pixel."""
+    w, h = size
+    ih, iw = img.shape[:2]
+    if policy == "stretch":
+        return cv2.resize(img, size, interpolation=cv2.INTER_AREA if iw > w else cv2.INTER_LINEAR)
+    f = (min if policy == "pad" else max)(w / iw, h / ih)
+    tw, th = max(1, round(iw * f)), max(1, round(ih * f))
+    scaled = cv2.resize(img, (tw, th), interpolation=cv2.INTER_AREA if iw > tw else cv2.INTER_LINEAR)
+    out = np.zeros((h, w, 3), np.uint8)
+    for y in range(h):
+        for x in range(w):
+            if policy == "pad":
+                sy, sx = y - (h - th) // 2, x - (w - tw) // 2
+                out[y, x] = scaled[sy, sx] if 0 <= sy < th and 0 <= sx < tw else fill
+            else:
+                out[y, x] = scaled[y + (th - h) // 2, x + (tw - w) // 2]
+    return out
+
+
+@pytest.mark.parametrize("policy", ["stretch", "pad", "crop"])
+@pytest.mark.parametrize("shape", [(32, 64), (120, 160), (100, 40), (61, 97)])
+def test_resize_policies_against_plain_loops(policy: str, shape: tuple[int, int]) -> None:
+    from vpr_edge.extract import fit_to_input
+
+    img = np.random.default_rng(shape[0]).integers(0, 256, shape + (3,), dtype=np.uint8)
+    fill = np.array([124, 116, 104], np.uint8)
+    got = fit_to_input(img, (80, 60), policy, fill)
+    assert got.shape == (60, 80, 3) and got.dtype == np.uint8
+    np.testing.assert_array_equal(got, naive_fit(img, (80, 60), policy, (124, 116, 104)))
+
+
+def test_resize_policy_recorded_in_the_map(tmp_path: Path, small_refs: Path) -> None:
+    """build-map --resize pad: the map records it, its queries go through it; old maps (no record) stretch."""
+    from vpr_edge.extract import BUNDLED_MODEL, FeatureExtractor
+
+    out = tmp_path / "pad.npz"
+    res = CliRunner().invoke(app, ["build-map", str(small_refs), "-o", str(out), "--resize", "pad",
+                                   "--components", "4"])
+    assert res.exit_code == 0, res.output
+    pm = PlaceMap.load(out)
+    assert pm.features == {"name": "cnn", "params": {"resize": "pad"}}
+    front = pm.front_end(out)
+    assert front.resize == "pad"                                       # type: ignore[attr-defined]
+    wide = np.full((32, 64, 3), 200, np.uint8)                         # 2:1 into the model's 4:3: bands padded
+    x = front.preprocess(wide)                                         # type: ignore[attr-defined]
+    assert np.abs(x[:, :30]).max() < 0.03 and np.abs(x[:, 40:200]).min() > 0.5
+    old = PlaceMap(pm.stored, pm.names, pm.encoder, pm.meta | {"features": {"name": "cnn", "params": {}}})
+    assert old.front_end(out).resize == "stretch"                      # type: ignore[attr-defined]
+    assert FeatureExtractor(BUNDLED_MODEL).describe() == {"name": "cnn", "params": {"resize": "stretch"}}

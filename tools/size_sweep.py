@@ -68,6 +68,8 @@ def main() -> int:
     p.add_argument("--streams", type=Path, required=True, help="derive_streams output: ref/ and KIND/ + KIND.csv")
     p.add_argument("--kinds", default="aligned,speed2")
     p.add_argument("--configs", default="0x128,64x128,32x128,64x64,32x64,32x32,16x64,24x32")
+    p.add_argument("--fits", default=f"{FitSettings.max_descriptors}x{FitSettings.iterations}",
+                   help="codebook fits DESCRIPTORSxITERATIONS, comma-separated (default build-map's)")
     p.add_argument("--storages", default="int8,bits")
     p.add_argument("--seeds", default="0")
     p.add_argument("--modes", default="single,stream")
@@ -87,17 +89,19 @@ def main() -> int:
                    groundtruth.load_csv(a.streams / f"{k}.csv")) for k in kinds}
     print(f"local descriptors: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     rows = []
-    for config in a.configs.split(","):
+    for config, fit in ((c, f) for c in a.configs.split(",") for f in a.fits.split(",")):
         pca, comps = (int(v) for v in config.split("x"))
+        n_desc, iters = (int(v) for v in fit.split("x"))
         for seed in (int(s) for s in a.seeds.split(",")):
             t1 = time.perf_counter()
-            settings = FitSettings(n_components=comps, pca_dim=pca or None, seed=seed)
+            settings = FitSettings(n_components=comps, pca_dim=pca or None, seed=seed, max_descriptors=n_desc,
+                                   iterations=iters)
             pm = map_from_local(ref_local, None, front, [f.name for f in refs], "ref", "ifv", settings=settings)
             fit_s = time.perf_counter() - t1
             ref_enc = pm.stored.dense()
             q_enc = {k: pm.encoder.transform_chunked(v[0]) for k, v in queries.items()}
             for storage in a.storages.split(","):
-                row = {"pca": pca, "components": comps, "seed": seed, "storage": storage, "dim": pm.encoder.dim,
+                row = {"pca": pca, "components": comps, "fit": fit, "seed": seed, "storage": storage, "dim": pm.encoder.dim,
                        "bytes": bytes_per_place(pm.encoder.dim, storage), "fit_s": round(fit_s, 1)}
                 for k, (_, truth) in queries.items():
                     sim = stored_similarity(ref_enc, q_enc[k], storage)
@@ -109,10 +113,10 @@ def main() -> int:
     cols = [f"{k} {m}" for k in kinds for m in modes]
     lines = [f"R@1 / AUC on {a.streams} ({len(refs)} references), tolerance 1; "
              f"{(time.perf_counter() - t0) / 60:.1f} min", "",
-             "| PCA | components | seed | storage | dims | bytes/place | 100,000 places | fit s | " + " | ".join(cols) + " |",
-             "|---" * (8 + len(cols)) + "|"]
+             "| PCA | components | fit | seed | storage | dims | bytes/place | 100,000 places | fit s | " + " | ".join(cols) + " |",
+             "|---" * (9 + len(cols)) + "|"]
     for r in rows:
-        lines.append(f"| {r['pca'] or 'none'} | {r['components']} | {r['seed']} | {r['storage']} | {r['dim']:,} | "
+        lines.append(f"| {r['pca'] or 'none'} | {r['components']} | {r['fit']} | {r['seed']} | {r['storage']} | {r['dim']:,} | "
                      f"{r['bytes']:,} | {r['bytes'] * 100_000 / 1e6:,.0f} MB | {r['fit_s']} | "
                      + " | ".join(f"{r[c][0]:.3f} / {r[c][1]:.3f}" for c in cols) + " |")
     (a.out / "size.md").write_text("\n".join(lines) + "\n")

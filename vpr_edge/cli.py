@@ -20,6 +20,7 @@ from vpr_edge.compact import STORAGES
 from vpr_edge.encoders import ENCODERS
 from vpr_edge.features import FRONT_ENDS, make_front_end
 from vpr_edge.errors import VprError, warn
+from vpr_edge.extract import RESIZE
 from vpr_edge.images import Frame, list_images, load_image, open_stream
 from vpr_edge.api import Localizer, Match, encode_frames
 from vpr_edge.mapfile import FIT_DESCRIPTORS, FIT_ITERATIONS, PlaceMap, build_map
@@ -48,6 +49,7 @@ def _main(version: bool = typer.Option(False, "--version", callback=_version, is
 ModeOpt = Enum("ModeOpt", {name: name for name in MATCHERS}, type=str)  # type: ignore[misc]
 StorageOpt = Enum("StorageOpt", {name: name for name in STORAGES}, type=str)  # type: ignore[misc]
 FrontOpt = Enum("FrontOpt", {name: name for name in FRONT_ENDS}, type=str)  # type: ignore[misc]
+ResizeOpt = Enum("ResizeOpt", {name: name for name in RESIZE}, type=str)  # type: ignore[misc]
 EncodingOpt = Enum("EncodingOpt", {name: name for name in ENCODERS}, type=str)  # type: ignore[misc]
 
 
@@ -103,6 +105,9 @@ def build_map_cmd(
                                                    "descriptors become one vector: " + ", ".join(ENCODERS)
                                                    + " (default ifv, the thesis's). README, Encodings."),
     model: Optional[Path] = typer.Option(None, help=_MODEL_HELP + " cnn only."),
+    resize: Optional[ResizeOpt] = typer.Option(None, help="cnn only: how images are brought to the model's "
+                                               "input: " + "; ".join(f"{k}: {v}" for k, v in RESIZE.items())
+                                               + ". Recorded in the map; queries are resized the same way."),
     codebook: Optional[Path] = typer.Option(
         None, help="Reuse this codebook (.npz from --save-codebook) instead of fitting one on the references."),
     components: Optional[int] = typer.Option(None, min=1, help="Codebook size when fitting: GMM components "
@@ -147,6 +152,7 @@ def build_map_cmd(
             else None
         if append:
             given_opts = [o for o, v in (("--codebook", codebook), ("--alpha", alpha), ("--features", features),
+                                         ("--resize", resize),
                                          ("--encoding", encoding), ("--svm", svm or None)) if v is not None]
             if given_opts:
                 raise VprError(f"{codebook or out}: --append describes and encodes as the map does; drop "
@@ -162,7 +168,7 @@ def build_map_cmd(
         if save_codebook and save_codebook.resolve() == out.resolve():
             raise VprError(f"{out}: --out and --save-codebook name the same file")
         files = list_images(refs)
-        base = PlaceMap.load(out) if append else None
+        base = PlaceMap.load(out, mmap=True) if append else None
         given = cb_meta = None
         if codebook:
             given, cb_meta = load_codebook(codebook)
@@ -180,8 +186,11 @@ def build_map_cmd(
         if (given is None and base is None and ENCODERS[enc_name].needs_fit) or svm:
             require_sklearn()
         use = use_threads(threads)
+        front_name = features.value if features else (cb_meta or {}).get("features", {}).get("name", "cnn")
+        if resize is not None and (base.features["name"] if base else front_name) != "cnn":
+            raise VprError(f"--resize applies to the cnn front end, not {front_name}")
         front = base.front_end(out, model, use) if base else make_front_end(
-            features.value if features else (cb_meta or {}).get("features", {}).get("name", "cnn"), model, use)
+            front_name, model, use, spec={"params": {"resize": resize.value}} if resize else None)
         if enc_name == "none" and front.n_local is None:
             raise VprError(f"encoding none needs a front end with a fixed grid of descriptors; {front.name} detects "
                            f"keypoints (a varying number per image): choose bow, vlad, fv or ifv")
@@ -204,12 +213,13 @@ def build_map_cmd(
                                fit_iterations or FIT_ITERATIONS, seed, bool(tfidf))
 
         # --- the work ---
+        kept = storage.value if storage else base.stored.storage if base else "int8"
         with typer.progressbar(length=len(files), label="extracting", file=sys.stderr,
                                hidden=not sys.stderr.isatty()) as bar:
-            place_map = build_map(files, front, enc_name, given, settings, batch_size, svm, progress=bar.update)
-        kept = storage.value if storage else base.stored.storage if base else "int8"
+            place_map = build_map(files, front, enc_name, given, settings, batch_size, svm, kept,
+                                  progress=bar.update)
         if base is not None:
-            place_map = base.extended(place_map)
+            place_map = base.repacked(kept).extended(place_map)
         place_map.save(out, kept)
         if save_codebook:
             place_map.encoder.save(save_codebook, {k: place_map.meta.get(k) for k in

@@ -61,6 +61,14 @@ class Encodings:
             raise ValueError("int8 encodings without one scale per row")
         return cls(values, storage, np.asarray(scale, np.float32) if storage == "int8" else None)
 
+    def concat(self, more: "Encodings") -> "Encodings":
+        """These rows then ``more``'s, in this storage (``more`` repacked if it is stored otherwise): the
+        stored values are copied as they are, never expanded to float32 (an appended route)."""
+        if more.storage != self.storage:
+            more = Encodings.pack(more.dense(), self.storage)
+        scale = None if self.scale is None else np.concatenate([self.scale, more.scale])
+        return Encodings(np.concatenate([self.values, more.values]), self.storage, scale)
+
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Arrays for the map file."""
         return {"encodings": self.values} | ({"encodings_scale": self.scale} if self.scale is not None else {})
@@ -101,3 +109,34 @@ class Encodings:
         if self.scale is not None:
             out *= self.scale
         return out
+
+
+class EncodingWriter:
+    """Encodings of R references filled in as they are computed, any rows at a time, each batch packed into
+    ``storage`` at once (int8 scales are per row, so packing by batch equals packing all together). Holds
+    the stored bytes only, plus a float32 copy when ``keep_float`` (to train classifiers on)."""
+
+    def __init__(self, n: int, dim: int, storage: str, keep_float: bool = False) -> None:
+        if storage not in STORAGES:
+            raise ValueError(f"unknown storage {storage!r}; choose from {', '.join(STORAGES)}")
+        self.storage = storage
+        self.values = np.zeros((n, dim), DTYPES[storage])
+        self.scale = np.ones(n, np.float32) if storage == "int8" else None
+        self.floats = np.zeros((n, dim), np.float32) if keep_float else None
+        self._filled = np.zeros(n, bool)
+
+    def put(self, rows: np.ndarray, x: np.ndarray) -> None:
+        """Store float encodings ``x`` (B, D) as references ``rows`` (B,) int."""
+        packed = Encodings.pack(x, self.storage)
+        self.values[rows] = packed.values
+        if self.scale is not None:
+            self.scale[rows] = packed.scale
+        if self.floats is not None:
+            self.floats[rows] = x
+        self._filled[rows] = True
+
+    def encodings(self) -> Encodings:
+        """The stored encodings; every row must have been put."""
+        if not self._filled.all():
+            raise ValueError(f"{int((~self._filled).sum())} references were never encoded")
+        return Encodings(self.values, self.storage, self.scale)

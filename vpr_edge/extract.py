@@ -17,6 +17,35 @@ _REQUIRED = ("backbone", "tap", "input_width", "input_height", "mean", "std", "c
              "grid_height", "weights_sha256")
 
 
+RESIZE = {
+    "stretch": "resize to the model's input whatever the image's aspect (the default)",
+    "pad": "keep the aspect: resize to fit inside the input, pad the rest with the normalisation mean (zero input)",
+    "crop": "keep the aspect: resize to cover the input, cut the centre",
+}
+
+
+def fit_to_input(rgb: np.ndarray, size: tuple[int, int], policy: str, fill: np.ndarray) -> np.ndarray:
+    """RGB uint8 (H, W, 3) -> uint8 (height, width, 3) at ``size`` = (width, height) by ``policy`` (``RESIZE``):
+    area-averaged when shrinking, bilinear when enlarging; ``pad`` fills with ``fill`` (3,) uint8."""
+    (w, h), (iw, ih) = size, (rgb.shape[1], rgb.shape[0])
+    if policy == "stretch" or iw * h == ih * w:
+        tw, th = w, h
+    elif (policy == "pad") == (iw * h > ih * w):   # pad a wide image / crop a tall one: match the widths
+        tw, th = w, max(1, round(ih * w / iw))
+    else:
+        tw, th = max(1, round(iw * h / ih)), h
+    interp = cv2.INTER_AREA if iw > tw else cv2.INTER_LINEAR
+    x = cv2.resize(rgb, (tw, th), interpolation=interp)
+    if (tw, th) == (w, h):
+        return x
+    if policy == "crop":
+        top, left = (th - h) // 2, (tw - w) // 2
+        return np.ascontiguousarray(x[top:top + h, left:left + w])
+    top, left = (h - th) // 2, (w - tw) // 2
+    return cv2.copyMakeBorder(x, top, h - th - top, left, w - tw - left, cv2.BORDER_CONSTANT,
+                              value=[int(v) for v in fill])
+
+
 BUNDLED_MODEL = Path(__file__).resolve().parent.parent / "models" / "efficientnet_lite0_stage5_320x240.onnx"
 # the same tap exported at a quarter of the pixels, for small cameras (README, "Input size")
 SMALL_MODEL = BUNDLED_MODEL.with_name("efficientnet_lite0_stage5_160x120.onnx")
@@ -48,13 +77,15 @@ class FeatureExtractor:
 
     ``info`` is the model's metadata (backbone, tap, input size, mean/std, channels, weights hash);
     ``fingerprint`` is the SHA-256 of the ONNX file, which maps record to refuse a different model.
-    It is the ``cnn`` front end (``vpr_edge.features.FrontEnd``).
+    It is the ``cnn`` front end (``vpr_edge.features.FrontEnd``). ``resize`` is how a frame is brought to
+    the model's input (``RESIZE``; default: the model's metadata ``resize`` if any, else ``stretch``); a map
+    records it, and its queries are resized the same way.
     """
 
     name = "cnn"
     binary = False
 
-    def __init__(self, model_path: str | os.PathLike[str], threads: int = 0) -> None:
+    def __init__(self, model_path: str | os.PathLike[str], threads: int = 0, resize: str | None = None) -> None:
         import onnxruntime as ort
 
         self.path = Path(model_path)
@@ -83,6 +114,10 @@ class FeatureExtractor:
         self._mean = np.asarray(info["mean"], np.float32)
         self._std = np.asarray(info["std"], np.float32)
         self._input = self.session.get_inputs()[0].name
+        self.resize = str(resize or info.get("resize") or "stretch")
+        if self.resize not in RESIZE:
+            raise VprError(f"{self.path}: unknown resize policy {self.resize!r}; choose from {', '.join(RESIZE)}")
+        self._fill = np.clip(np.rint(self._mean * 255.0), 0, 255).astype(np.uint8)
 
     @property
     def dim(self) -> int:
@@ -96,7 +131,7 @@ class FeatureExtractor:
 
     def describe(self) -> dict:
         """The front-end record of a map (the model's identity is recorded beside it, see ``mapfile``)."""
-        return {"name": self.name, "params": {}}
+        return {"name": self.name, "params": {"resize": self.resize}}
 
     def local(self, images: Sequence[np.ndarray]) -> tuple[np.ndarray, None]:
         """RGB uint8 images (H, W, 3) -> local descriptors (B, N, K) float32 in one model run (no mask)."""
@@ -108,8 +143,7 @@ class FeatureExtractor:
             warn(f"{rgb.shape[1]}x{rgb.shape[0]} images are upsampled more than 4x per side to the model's "
                  f"{self.size[0]}x{self.size[1]} input ({self.path.name}); a model with a smaller input suits them"
                  + (f" (bundled: --model {SMALL_MODEL})" if self.size[0] > 160 else ""))
-        interp = cv2.INTER_AREA if rgb.shape[1] > self.size[0] else cv2.INTER_LINEAR
-        x = cv2.resize(rgb, self.size, interpolation=interp).astype(np.float32) * (1.0 / 255.0)
+        x = fit_to_input(rgb, self.size, self.resize, self._fill).astype(np.float32) * (1.0 / 255.0)
         x = (x - self._mean) / self._std
         return np.ascontiguousarray(x.transpose(2, 0, 1))
 

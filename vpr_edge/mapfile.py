@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge import __version__
-from vpr_edge.compact import Encodings
+from vpr_edge.compact import EncodingWriter, Encodings
 from vpr_edge.encoders import Encoder, FitSettings, encoder_from_arrays, fit_encoder
 from vpr_edge.errors import VprError, warn
 from vpr_edge.extract import resolve_model
@@ -81,19 +81,25 @@ class PlaceMap:
         self.similarity(queries[:0], rows)  # dimension check
         return self.svm.scores(queries, rows)
 
-    def save(self, path: str | os.PathLike[str], storage: str = "int8") -> None:
-        """Write the map atomically to ``path`` (a ``.npz`` file), encodings (and SVM weights) stored as
-        ``storage`` (``compact.STORAGES``: int8 with a per-row scale, float16, float32)."""
+    def repacked(self, storage: str) -> "PlaceMap":
+        """This map with its encodings (and SVM weights) stored as ``storage``."""
         def packed(e: Encodings) -> Encodings:
             return e if e.storage == storage else Encodings.pack(e.dense(), storage)
 
-        arrays = packed(self.stored).to_arrays() | {"encoder_" + k: v for k, v in self.encoder.to_arrays().items()}
+        svm = None if self.svm is None else Svm(packed(self.svm.weights), self.svm.bias, self.svm.meta)
+        return PlaceMap(packed(self.stored), self.names, self.encoder, self.meta, svm)
+
+    def save(self, path: str | os.PathLike[str], storage: str = "int8") -> None:
+        """Write the map atomically to ``path`` (a ``.npz`` file), encodings (and SVM weights) stored as
+        ``storage`` (``compact.STORAGES``: int8 with a per-row scale, float16, float32)."""
+        m = self.repacked(storage)
+        arrays = m.stored.to_arrays() | {"encoder_" + k: v for k, v in self.encoder.to_arrays().items()}
         meta = self.meta | {"kind": "map", "schema": MAP_SCHEMA, "names": self.names, "storage": storage,
                             "n_refs": len(self.names), "dim": int(self.stored.shape[1]), "features": self.features,
                             "descriptor_dim": self.encoder.input_dim,
                             "encoding": {"name": self.encoder.name, "params": self.encoder.params()}}
         if self.svm is not None:
-            arrays |= {"svm_" + k: v for k, v in packed(self.svm.weights).to_arrays().items()}
+            arrays |= {"svm_" + k: v for k, v in m.svm.weights.to_arrays().items()}
             arrays["svm_bias"] = self.svm.bias
             meta["svm"] = self.svm.meta
         write_npz(path, arrays, meta)
@@ -137,8 +143,9 @@ class PlaceMap:
 
     def extended(self, more: "PlaceMap") -> "PlaceMap":
         """This map with ``more``'s references after its own (``more`` encoded with this map's front end,
-        encoder and model; raises VprError otherwise). Loads this map's encodings into RAM to write the new
-        file. An SVM is not carried over (its classifiers would need retraining on the whole route)."""
+        encoder and model; raises VprError otherwise). The result is in this map's storage: its stored rows
+        are copied as they are (into RAM, never expanded to float32). An SVM is not carried over (its
+        classifiers would need retraining on the whole route)."""
         if more.encoder is not self.encoder or more.meta.get("features_fingerprint") != self.fingerprint:
             raise VprError("appended references must be described and encoded with the map's own front end, "
                            "model and codebook")
@@ -148,11 +155,10 @@ class PlaceMap:
                  f"references by index too")
         if self.svm is not None:
             warn("the map's SVM is dropped by --append (rebuild with --svm to train it on the whole route)")
-        dense = np.concatenate([self.stored.dense(), more.stored.dense()])
         appended = self.meta.get("appended", []) + [{"folder": more.meta.get("refs_folder"),
                                                      "first_index": len(self.names), "count": len(more.names)}]
         meta = {k: v for k, v in self.meta.items() if k != "svm"}
-        return PlaceMap(Encodings.pack(dense, "float32"), self.names + more.names, self.encoder,
+        return PlaceMap(self.stored.concat(more.stored), self.names + more.names, self.encoder,
                         meta | {"appended": appended, "vpr_edge_version": more.meta.get("vpr_edge_version")})
 
     @property
@@ -174,7 +180,7 @@ class PlaceMap:
                 raise VprError(f"{map_path}: map was built with the {name} front end, which takes no model; "
                                f"drop --model")
             return make_front_end(name, spec=self.features)
-        front = make_front_end("cnn", self.model_path(model), threads)
+        front = make_front_end("cnn", self.model_path(model), threads, spec=self.features)
         if front.fingerprint != self.meta.get("model_sha256"):
             m = self.meta.get("model", {})
             info = getattr(front, "info", {})
@@ -230,28 +236,41 @@ def extract_all(files: Sequence[Path], front: FrontEnd, folder: Path, batch_size
     return local, mask
 
 
-def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = "ifv", encoder: Encoder | None = None,
-              settings: FitSettings = FitSettings(), batch_size: int = 8, svm: bool = False,
-              progress: Progress | None = None) -> PlaceMap:
-    """Describe every reference image in ``files`` (in that order; see ``list_images``) with ``front`` and make
-    the map (``map_from_local``). Local descriptors are staged in a temporary memory-mapped file so that RAM
-    does not grow with the number of references. Raises VprError on an unreadable image or an encoder that
-    does not fit the front end."""
-    if not files:
-        raise VprError("no reference images given")
-    with tempfile.TemporaryDirectory(prefix="vpr-edge-") as tmp:
-        local, mask = extract_all(files, front, Path(tmp), batch_size, progress)
-        return map_from_local(local, mask, front, [f.name for f in files], str(Path(files[0]).parent), encoding,
-                              encoder, settings, svm)
+FIT_POOL = 4   # a codebook is fitted on a random subset of references holding FIT_POOL x max_descriptors local
+               # descriptors (all references on routes smaller than that), kept in RAM while the map is built
 
 
-def map_from_local(local: np.ndarray, mask: np.ndarray | None, front: FrontEnd, names: list[str], refs_folder: str,
-                   encoding: str = "ifv", encoder: Encoder | None = None, settings: FitSettings = FitSettings(),
-                   svm: bool = False) -> PlaceMap:
-    """The map of references described by ``front`` as ``local`` (R, N, K) (``mask`` (R, N) or None): fit the
-    front end (LDB's bit selection, recorded in the map's ``features``) and the ``encoding`` codebook on them
-    unless ``encoder`` is given, encode each reference, and with ``svm`` train one linear SVM per place."""
-    fitted = encoder is None
+def _fit_pool(files: Sequence[Path], front: FrontEnd, settings: FitSettings, batch_size: int,
+              progress: Progress | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The references a codebook is fitted on: images drawn at random (``settings.seed``) until they hold
+    ``FIT_POOL * settings.max_descriptors`` real descriptors, or all of them. Returns (indices (P,) sorted,
+    local (P, N, K), mask (P, N) or None), in file order."""
+    order = np.random.default_rng(settings.seed).permutation(len(files))
+    want = FIT_POOL * settings.max_descriptors
+    taken: list[np.ndarray] = []
+    parts: list[tuple[np.ndarray, np.ndarray | None]] = []
+    real = 0
+    for i in range(0, len(files), batch_size):
+        idx = order[i:i + batch_size]
+        x, m = front.local([load_image(files[j]) for j in idx])
+        taken.append(idx)
+        parts.append((x, m))
+        real += int(m.sum()) if m is not None else x.shape[0] * x.shape[1]
+        if progress:
+            progress(len(idx))
+        if real >= want:
+            break
+    idx = np.concatenate(taken)
+    sort = np.argsort(idx)
+    local = np.concatenate([x for x, _ in parts])[sort]
+    mask = None if parts[0][1] is None else np.concatenate([m for _, m in parts])[sort]
+    return idx[sort], local, mask
+
+
+def _fit(front: FrontEnd, local: np.ndarray, mask: np.ndarray | None, encoding: str, encoder: Encoder | None,
+         settings: FitSettings) -> tuple[FrontEnd, Encoder, np.ndarray]:
+    """Fit the front end (LDB's bit selection) and, unless ``encoder`` is given, the ``encoding`` codebook on
+    reference descriptors ``local`` (R, N, K); returns them and ``local`` as the fitted front end gives it."""
     if getattr(front, "needs_fit", False):
         front = front.fit(local, settings.seed)  # type: ignore[attr-defined]
         local = front.select(local)              # type: ignore[attr-defined]
@@ -260,9 +279,13 @@ def map_from_local(local: np.ndarray, mask: np.ndarray | None, front: FrontEnd, 
     elif encoder.input_dim != front.dim:
         raise VprError(f"codebook expects {encoder.input_dim}-dim descriptors but the {front.name} front end "
                        f"gives {front.dim}")
-    encodings = encoder.transform_chunked(local, mask)
-    n_real = int(mask.sum()) if mask is not None else local.shape[0] * local.shape[1]
-    meta = front_end_meta(front) | {
+    return front, encoder, local
+
+
+def _meta(front: FrontEnd, encoder: Encoder, fitted: bool, settings: FitSettings, n_real: int,
+          refs_folder: str) -> dict:
+    """A new map's metadata: the front end, how the codebook was made, where the references came from."""
+    return front_end_meta(front) | {
         "codebook": {"fitted_on_refs": fitted, "n_components": encoder.n_components,
                      "pca_dim": int(encoder.pca.components.shape[0]) if encoder.pca is not None else None,
                      "seed": settings.seed}
@@ -271,6 +294,70 @@ def map_from_local(local: np.ndarray, mask: np.ndarray | None, front: FrontEnd, 
         "refs_folder": refs_folder,
         "vpr_edge_version": __version__,
     }
+
+
+def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = "ifv", encoder: Encoder | None = None,
+              settings: FitSettings = FitSettings(), batch_size: int = 8, svm: bool = False,
+              storage: str = "int8", progress: Progress | None = None) -> PlaceMap:
+    """Describe every reference image in ``files`` (in that order; see ``list_images``) with ``front`` and
+    make the map, encodings kept as ``storage`` (``compact.STORAGES``). Each image is described once: unless
+    ``encoder`` is given, the codebook is first fitted on a random subset of the references (``_fit_pool``;
+    all of them on small routes), then every other reference is encoded as it is extracted, so that memory
+    and disk hold only the stored encodings, whatever the route's length (with ``svm`` also their float32
+    copy, to train on). bow with tf-idf needs every reference's words to fit and goes through
+    ``map_from_local``. Raises VprError on an unreadable image or an encoder that does not fit the front end."""
+    if not files:
+        raise VprError("no reference images given")
+    names, refs_folder = [f.name for f in files], str(Path(files[0]).parent)
+    if encoder is None and encoding == "bow" and settings.tfidf:
+        with tempfile.TemporaryDirectory(prefix="vpr-edge-") as tmp:
+            local, mask = extract_all(files, front, Path(tmp), batch_size, progress)
+            place_map = map_from_local(local, mask, front, names, refs_folder, encoding, None, settings, svm)
+        return place_map if storage == "float32" else place_map.repacked(storage)
+    fitted = encoder is None
+    pool, n_real = np.zeros(0, np.int64), 0
+    if fitted or getattr(front, "needs_fit", False):
+        pool, local, mask = _fit_pool(files, front, settings, batch_size, progress)
+        n_real = int(mask.sum()) if mask is not None else local.size // local.shape[-1]
+        front, encoder, local = _fit(front, local, mask, encoding, encoder, settings)
+    elif encoder.input_dim != front.dim:
+        raise VprError(f"codebook expects {encoder.input_dim}-dim descriptors but the {front.name} front end "
+                       f"gives {front.dim}")
+    assert encoder is not None
+    store = EncodingWriter(len(files), encoder.dim, storage, keep_float=svm)
+    if len(pool):
+        for i in range(0, len(pool), 32):
+            store.put(pool[i:i + 32], encoder.transform(local[i:i + 32], None if mask is None else mask[i:i + 32]))
+        del local, mask
+    rest = np.setdiff1d(np.arange(len(files)), pool)
+    for i in range(0, len(rest), batch_size):
+        idx = rest[i:i + batch_size]
+        x, m = front.local([load_image(files[j]) for j in idx])
+        store.put(idx, encoder.transform(x, m))
+        if progress:
+            progress(len(idx))
+    classifier = None
+    if svm:
+        from vpr_edge.matchers.svm import fit_svm
+
+        weights, bias, svm_meta = fit_svm(store.floats, seed=settings.seed)
+        classifier = Svm(Encodings.pack(weights, storage), bias, svm_meta)
+    meta = _meta(front, encoder, fitted, settings, n_real, refs_folder)
+    return PlaceMap(store.encodings(), names, encoder, meta, classifier)
+
+
+def map_from_local(local: np.ndarray, mask: np.ndarray | None, front: FrontEnd, names: list[str], refs_folder: str,
+                   encoding: str = "ifv", encoder: Encoder | None = None, settings: FitSettings = FitSettings(),
+                   svm: bool = False) -> PlaceMap:
+    """The map of references described by ``front`` as ``local`` (R, N, K) (``mask`` (R, N) or None): fit the
+    front end (LDB's bit selection, recorded in the map's ``features``) and the ``encoding`` codebook on them
+    unless ``encoder`` is given, encode each reference (float32), and with ``svm`` train one linear SVM per
+    place. For descriptors already extracted (the tools); ``build_map`` describes images and encodes as it goes."""
+    fitted = encoder is None
+    front, encoder, local = _fit(front, local, mask, encoding, encoder, settings)
+    encodings = encoder.transform_chunked(local, mask)
+    n_real = int(mask.sum()) if mask is not None else local.shape[0] * local.shape[1]
+    meta = _meta(front, encoder, fitted, settings, n_real, refs_folder)
     classifier = None
     if svm:
         from vpr_edge.matchers.svm import fit_svm

@@ -58,7 +58,10 @@ def make_front_end(name: str, model: Path | None = None, threads: int = 0, spec:
     if name == "cnn":
         from vpr_edge.extract import FeatureExtractor, resolve_model
 
-        return FeatureExtractor(resolve_model(model), threads)
+        resize = params.pop("resize", None)
+        if params:
+            raise VprError(f"front end cnn: stored parameters not understood ({', '.join(params)})")
+        return FeatureExtractor(resolve_model(model), threads, resize)
     if model is not None:
         raise VprError(f"{model}: front end {name} takes no model; drop --model")
     try:
