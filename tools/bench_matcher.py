@@ -10,7 +10,8 @@ matcher asks for (``matchers.step``: every reference, or a local search's window
 stored as a map stores them (``compact.Encodings``, --storage) and one update of the registered online
 matcher. At each checkpoint it prints the mean per-frame time since the last checkpoint, current and peak
 RSS, R@1 (within +-1 reference) over the mapped frames so far and the share of frames searched locally.
-Random unit encodings of --dim dims: the similarity column scales with D.
+Random unit encodings of --dim dims: the similarity column scales with D. ``--coarse``: the frames that
+search the whole route go through ``coarse.CoarseSearch`` as ``Localizer`` does on large maps.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from vpr_edge.coarse import CoarseSearch  # noqa: E402
 from vpr_edge.compact import STORAGES, Encodings  # noqa: E402
 from vpr_edge.matchers import get_matcher, step  # noqa: E402
 
@@ -49,6 +51,8 @@ def main() -> int:
     p.add_argument("--storage", default="float32", choices=STORAGES, help="how the map keeps the references")
     p.add_argument("--matcher", default="stream", help="registered online matcher")
     p.add_argument("--window", type=int, default=None, help="stream: local search half-width (0 = global)")
+    p.add_argument("--coarse", action="store_true", help="whole-route frames by coarse.CoarseSearch (signs, "
+                   "then exact values for the best candidates), as Localizer does on maps of 20,000+ references")
     p.add_argument("--checkpoints", default="1000,10000,100000")
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args()
@@ -62,6 +66,11 @@ def main() -> int:
     dtw = matcher.stream(a.refs)
     stored = Encodings.pack(refs, a.storage)
     del refs
+    coarse = CoarseSearch(stored) if a.coarse else None
+    if coarse is not None:
+        t0 = time.perf_counter()
+        coarse.signs
+        print(f"signs packed in {1e3 * (time.perf_counter() - t0):.0f} ms ({coarse.signs.nbytes / 1e6:.1f} MB)")
     print(f"map {a.refs} refs x {a.dim} dims {a.storage} ({stored.values.nbytes / 1e6:.1f} MB), {a.frames} frames, "
           f"matcher {a.matcher} {matcher.params}")
     print(f"{'frames':>8s} {'ms/frame':>9s} {'sim ms':>7s} {'match ms':>8s} {'RSS MB':>8s} {'peak MB':>8s} "
@@ -74,7 +83,7 @@ def main() -> int:
 
     def similarity(idx: np.ndarray | None) -> np.ndarray:
         t0 = time.perf_counter()
-        row = stored.similarity(q[None], idx)[0]
+        row = coarse.similarity(q) if coarse is not None and idx is None else stored.similarity(q[None], idx)[0]
         sim_s[0] += time.perf_counter() - t0
         return row
 

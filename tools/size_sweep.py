@@ -101,7 +101,8 @@ def main() -> int:
             ref_enc = pm.stored.dense()
             q_enc = {k: pm.encoder.transform_chunked(v[0]) for k, v in queries.items()}
             for storage in a.storages.split(","):
-                row = {"pca": pca, "components": comps, "fit": fit, "seed": seed, "storage": storage, "dim": pm.encoder.dim,
+                row = {"pca": pca, "components": comps, "fit": fit, "seed": seed, "storage": storage,
+                       "dim": pm.encoder.dim,
                        "bytes": bytes_per_place(pm.encoder.dim, storage), "fit_s": round(fit_s, 1)}
                 for k, (_, truth) in queries.items():
                     sim = stored_similarity(ref_enc, q_enc[k], storage)
@@ -113,7 +114,8 @@ def main() -> int:
     cols = [f"{k} {m}" for k in kinds for m in modes]
     lines = [f"R@1 / AUC on {a.streams} ({len(refs)} references), tolerance 1; "
              f"{(time.perf_counter() - t0) / 60:.1f} min", "",
-             "| PCA | components | fit | seed | storage | dims | bytes/place | 100,000 places | fit s | " + " | ".join(cols) + " |",
+             "| PCA | components | fit | seed | storage | dims | bytes/place | 100,000 places | fit s | "
+             + " | ".join(cols) + " |",
              "|---" * (9 + len(cols)) + "|"]
     for r in rows:
         lines.append(f"| {r['pca'] or 'none'} | {r['components']} | {r['fit']} | {r['seed']} | {r['storage']} | {r['dim']:,} | "

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vpr_edge.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.errors import VprError
 from vpr_edge.features import FrontEnd
 from vpr_edge.images import MIN_SIDE, Frame
@@ -73,14 +74,16 @@ class Localizer:
     ``mode`` names a registered matcher (``vpr_edge.matchers.MATCHERS``), ``params`` overrides its
     parameters, ``min_confidence`` its lost threshold (default: the matcher's own). ``threads`` > 0 sets
     onnxruntime's threads and, process-wide, NumPy's BLAS pool to that count (0: one per core for both;
-    None: onnxruntime's default, BLAS untouched). Construction is thread-safe (nothing global but the
+    None: onnxruntime's default, BLAS untouched). ``coarse``: a local-search matcher's whole-route frames use
+    ``coarse.CoarseSearch`` (signs, exact values for the best candidates); None = on maps of at least
+    ``COARSE_MIN_REFS`` references. Construction is thread-safe (nothing global but the
     BLAS limit); ``push`` may be called from any thread, one frame at a time (a lock orders them).
     Raises VprError for a bad map or model, ValueError for an unknown mode or parameter.
     """
 
     def __init__(self, map_path: str | os.PathLike[str], *, model: str | os.PathLike[str] | None = None,
                  mode: str = "stream", params: dict | None = None, min_confidence: float | None = None,
-                 threads: int | None = None) -> None:
+                 threads: int | None = None, coarse: bool | None = None) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
         self.map = PlaceMap.load(map_path, mmap=True)
         ort_threads = 0 if threads is None else use_threads(threads)
@@ -89,6 +92,10 @@ class Localizer:
             raise VprError(f"{map_path}: mode svm needs a map built with build-map --svm")
         self.threshold = self.matcher.min_confidence if min_confidence is None else min_confidence
         self._online = self.matcher.stream(len(self.map.names)) if self.matcher.online else None
+        if coarse is None:
+            coarse = len(self.map.names) >= COARSE_MIN_REFS
+        self._coarse = CoarseSearch(self.map.stored) if (coarse and self.matcher.scores == "cosine" and hasattr(
+            self._online, "wanted")) else None
         self._lock = threading.Lock()
         self._count = 0
 
@@ -109,8 +116,14 @@ class Localizer:
 
     def _step(self, enc: np.ndarray) -> tuple[int, float]:
         """Match one encoding (D,): only the similarities the matcher asks for are computed (a local search
-        around a locked position reads a window of the map, not all of it)."""
-        return step(self._online, lambda refs: self.similarity(enc[None], refs)[0])
+        around a locked position reads a window of the map, not all of it; with ``coarse``, a whole-route
+        frame reads the signs and the best candidates)."""
+        def similarity(refs: np.ndarray | None) -> np.ndarray:
+            if refs is None and self._coarse is not None:
+                return self._coarse.similarity(enc)
+            return self.similarity(enc[None], refs)[0]
+
+        return step(self._online, similarity)
 
     def _line(self, index: int, name: str, ref: int, score: float) -> Match:
         lost = self.threshold is not None and score < self.threshold

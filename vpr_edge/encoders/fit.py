@@ -56,19 +56,34 @@ def _enough(x: np.ndarray, k: int, what: str) -> None:
                        f"(use fewer components or more reference images)")
 
 
+INIT_SAMPLE = 5_000   # descriptors the k-means++ seeds are drawn from (on all 30,000 it took 1.9 of 7 s)
+
+
 def fit_gmm(x: np.ndarray, s: FitSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Diagonal GMM with ``s.n_components`` components on ``x`` (n, K) -> (weights, means, variances) float64.
-    EM runs in float32: half the time of float64 on this CPU class (README, "Fitting the codebook")."""
+
+    scikit-learn's EM, started as its own ``k-means++`` start does (means at k-means++ seeds, equal weights,
+    variances at the regularisation floor, so the first E-step assigns each descriptor to its nearest seed)
+    but with the seeds drawn from ``INIT_SAMPLE`` descriptors; EM runs in float32 (every array given to it is
+    float32, or NumPy promotes the whole EM to float64), half the time of float64 here (README, "Fitting the
+    codebook")."""
+    from sklearn.cluster import kmeans_plusplus
     from sklearn.exceptions import ConvergenceWarning
     from sklearn.mixture import GaussianMixture
 
     _enough(x, s.n_components, "GMM components")
     x = np.asarray(x, np.float32)
+    m, k = s.n_components, x.shape[1]
+    reg = 1e-6 * float(x.var(dtype=np.float64)) + 1e-9
+    rng = np.random.default_rng(s.seed)
+    pool = x if len(x) <= INIT_SAMPLE else x[np.sort(rng.choice(len(x), INIT_SAMPLE, replace=False))]
+    seeds, _ = kmeans_plusplus(pool, m, random_state=s.seed)
     with warnings.catch_warnings():  # stopping EM early is the chosen trade (README); not worth a warning
         warnings.simplefilter("ignore", ConvergenceWarning)
-        gm = GaussianMixture(n_components=s.n_components, covariance_type="diag",
-                             reg_covar=1e-6 * float(x.var(dtype=np.float64)) + 1e-9, max_iter=s.iterations, random_state=s.seed,
-                             init_params="k-means++").fit(x)
+        gm = GaussianMixture(n_components=m, covariance_type="diag", reg_covar=reg, max_iter=s.iterations,
+                             random_state=s.seed, init_params="random_from_data",
+                             weights_init=np.full(m, 1.0 / m, np.float32), means_init=seeds.astype(np.float32),
+                             precisions_init=np.full((m, k), 1.0 / reg, np.float32)).fit(x)
     return (gm.weights_.astype(np.float64), gm.means_.astype(np.float64), gm.covariances_.astype(np.float64))
 
 

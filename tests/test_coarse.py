@@ -1,0 +1,80 @@
+"""Coarse whole-route similarities: signs and Hamming distances against plain loops, exact values where the
+search keeps them, the calibration line elsewhere, and the Localizer's whole-route frames through it."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vpr_edge.coarse import CoarseSearch, hamming, pack_signs
+from vpr_edge.compact import Encodings
+
+
+@pytest.mark.parametrize("d", [64, 100, 2048])
+def test_signs_and_hamming_against_plain_loops(d: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    import vpr_edge.coarse as coarse
+
+    rng = np.random.default_rng(d)
+    x = rng.normal(size=(37, d)).astype(np.float32)
+    x[3, : d // 2] = 0.0                                  # zeros count as negative (bit clear)
+    q = rng.normal(size=d).astype(np.float32)
+    monkeypatch.setattr(coarse, "SIGN_BLOCK", 5)          # several blocks and a short last one
+    got = hamming(pack_signs(x), pack_signs(q[None])[0])
+    naive = [sum((float(a) > 0) != (float(b) > 0) for a, b in zip(row, q)) for row in x]
+    assert got.tolist() == naive
+
+
+def test_similarity_exact_where_kept_calibrated_elsewhere() -> None:
+    rng = np.random.default_rng(0)
+    refs = rng.normal(size=(3000, 256)).astype(np.float32)
+    refs /= np.linalg.norm(refs, axis=1, keepdims=True)
+    stored = Encodings.pack(refs, "int8")
+    search = CoarseSearch(stored, keep=50, calib=200, seed=1)
+    q = stored.dense_row(1234) + 0.05 * rng.normal(size=256).astype(np.float32)
+    row = search.similarity(q)
+    exact = stored.similarity(q[None])[0]
+    est = search.agreement(q)
+    naive_est = np.array([np.mean((r > 0) == (q > 0)) * 2 - 1 for r in stored.values.astype(np.float32)])
+    np.testing.assert_allclose(est, naive_est, atol=1e-6)  # a stored 0 counts as negative
+    top = np.argsort(-est, kind="stable")[:50]
+    kept = np.union1d(top, search.calib)
+    np.testing.assert_allclose(row[kept], exact[kept], atol=1e-6)
+    x, y = est[search.calib], exact[search.calib]
+    rest = np.setdiff1d(np.arange(3000), kept)
+    np.testing.assert_allclose(row[rest], y.mean() + (est[rest] - x.mean()) * y.std() / x.std(), atol=1e-5)
+    assert int(np.argmax(row)) == int(np.argmax(exact)) == 1234
+    # the row is on the exact scale: same mean and spread within 10%
+    assert abs(row.mean() - exact.mean()) < 0.1 * exact.std() and abs(row.std() / exact.std() - 1) < 0.1
+
+
+def test_localizer_whole_route_frames_go_through_it(api_map_small: Path, small_queries: Path) -> None:
+    """Forced on the 24-place map (keep >= R: every value exact), the answers are those without it, and
+    every frame went through the coarse search (the local search does not engage on 24 places)."""
+    from vpr_edge import Localizer
+    from vpr_edge.images import load_image
+
+    files = sorted(small_queries.iterdir())
+    plain = Localizer(api_map_small, threads=1)
+    coarse = Localizer(api_map_small, threads=1, coarse=True)
+    assert plain._coarse is None and coarse._coarse is not None
+    calls = []
+    real = coarse._coarse.similarity
+    coarse._coarse.similarity = lambda q: calls.append(1) or real(q)   # type: ignore[method-assign]
+    a = [plain.push(load_image(f)) for f in files]
+    b = [coarse.push(load_image(f)) for f in files]
+    assert len(calls) == len(files)
+    assert [m.ref_index for m in a] == [m.ref_index for m in b]
+    np.testing.assert_allclose([m.score for m in a], [m.score for m in b], atol=1e-5)
+
+
+@pytest.fixture(scope="module")
+def api_map_small(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Path:
+    from typer.testing import CliRunner
+
+    from vpr_edge.cli import app
+
+    out = tmp_path_factory.mktemp("coarse") / "m.npz"
+    res = CliRunner().invoke(app, ["build-map", str(small_refs), "-o", str(out), "--components", "4"])
+    assert res.exit_code == 0, res.output
+    return out
