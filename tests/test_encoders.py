@@ -160,6 +160,9 @@ def test_none_flattens_in_grid_order() -> None:
         np.testing.assert_allclose(got[b], x[b].reshape(-1) / np.linalg.norm(x[b]), rtol=1e-6)
     with pytest.raises(VprError, match="expects 6 descriptors"):
         Flatten(3, 6).transform(x[:, :5])
+    mask = np.arange(6)[None].repeat(len(x), 0) % 2 == 0          # a padded frame's border cells: zeros
+    kept = np.where(mask[..., None], x, 0.0)
+    np.testing.assert_allclose(Flatten(3, 6).transform(x, mask), Flatten(3, 6).transform(kept), rtol=1e-6)
 
 
 @pytest.mark.parametrize("name", ["bow", "vlad", "fv", "ifv"])

@@ -292,6 +292,19 @@ def test_resize_policies_against_plain_loops(policy: str, shape: tuple[int, int]
     np.testing.assert_array_equal(got, naive_fit(img, (80, 60), policy, (124, 116, 104)))
 
 
+def test_pad_masks_the_cells_that_see_only_padding() -> None:
+    from vpr_edge.extract import content_cells
+
+    size, grid = (320, 240), (20, 15)                  # 16-pixel cells
+    for shape in [(32, 64), (240, 100), (120, 160), (10, 4000)]:
+        got = content_cells(shape, size, grid).reshape(15, 20)
+        canvas = naive_fit(np.full(shape + (3,), 255, np.uint8), size, "pad", (0, 0, 0))[..., 0] > 0
+        centres = canvas[8::16, 8::16]                 # the image at each cell's centre pixel
+        assert got.any()
+        if centres.any():
+            np.testing.assert_array_equal(got, centres)
+
+
 def test_resize_policy_recorded_in_the_map(tmp_path: Path, small_refs: Path) -> None:
     """build-map --resize pad: the map records it, its queries go through it; old maps (no record) stretch."""
     from vpr_edge.extract import BUNDLED_MODEL, FeatureExtractor
@@ -307,6 +320,8 @@ def test_resize_policy_recorded_in_the_map(tmp_path: Path, small_refs: Path) -> 
     wide = np.full((32, 64, 3), 200, np.uint8)                         # 2:1 into the model's 4:3: bands padded
     x = front.preprocess(wide)                                         # type: ignore[attr-defined]
     assert np.abs(x[:, :30]).max() < 0.03 and np.abs(x[:, 40:200]).min() > 0.5
+    _, mask = front.local([wide, np.full((240, 320, 3), 9, np.uint8)])    # type: ignore[attr-defined]
+    assert mask is not None and mask[0].sum() == 20 * 10 and mask[1].all()  # 2:1 into 4:3: 10 of 15 rows
     old = PlaceMap(pm.stored, pm.names, pm.encoder, pm.meta | {"features": {"name": "cnn", "params": {}}})
     assert old.front_end(out).resize == "stretch"                      # type: ignore[attr-defined]
     assert FeatureExtractor(BUNDLED_MODEL).describe() == {"name": "cnn", "params": {"resize": "stretch"}}

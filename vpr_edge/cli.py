@@ -226,9 +226,12 @@ def build_map_cmd(
                                                    ("features", "features_fingerprint", "model_sha256")})
         how = "fitted on the references" if given is None else "the map's" if base else "given"
         book = f", {place_map.encoder.n_components}-entry codebook ({how})" if place_map.encoder.needs_fit else ""
+        policy = (place_map.features.get("params") or {}).get("resize")
+        how_resized = f" (frames resized by {policy})" if policy not in (None, "stretch") else ""
         typer.echo(f"wrote {out}: {len(place_map.names)} references{f' ({len(files)} appended)' if base else ''}, "
-                   f"{place_map.stored.shape[1]}-dim {kept} {place_map.features['name']} + {place_map.encoder.name} "
-                   f"encodings{book}{', an SVM per place' if place_map.svm is not None else ''}", err=True)
+                   f"{place_map.stored.shape[1]}-dim {kept} {place_map.features['name']}{how_resized} + "
+                   f"{place_map.encoder.name} encodings{book}"
+                   f"{', an SVM per place' if place_map.svm is not None else ''}", err=True)
 
 
 @contextlib.contextmanager

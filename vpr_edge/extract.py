@@ -24,18 +24,22 @@ RESIZE = {
 }
 
 
+def _scaled(shape: tuple[int, ...], size: tuple[int, int], policy: str) -> tuple[int, int]:
+    """(width, height) an image of ``shape`` (H, W, ...) is resized to before padding or cropping."""
+    (w, h), (iw, ih) = size, (shape[1], shape[0])
+    if policy == "stretch" or iw * h == ih * w:
+        return w, h
+    if (policy == "pad") == (iw * h > ih * w):   # pad a wide image / crop a tall one: match the widths
+        return w, max(1, round(ih * w / iw))
+    return max(1, round(iw * h / ih)), h
+
+
 def fit_to_input(rgb: np.ndarray, size: tuple[int, int], policy: str, fill: np.ndarray) -> np.ndarray:
     """RGB uint8 (H, W, 3) -> uint8 (height, width, 3) at ``size`` = (width, height) by ``policy`` (``RESIZE``):
     area-averaged when shrinking, bilinear when enlarging; ``pad`` fills with ``fill`` (3,) uint8."""
-    (w, h), (iw, ih) = size, (rgb.shape[1], rgb.shape[0])
-    if policy == "stretch" or iw * h == ih * w:
-        tw, th = w, h
-    elif (policy == "pad") == (iw * h > ih * w):   # pad a wide image / crop a tall one: match the widths
-        tw, th = w, max(1, round(ih * w / iw))
-    else:
-        tw, th = max(1, round(iw * h / ih)), h
-    interp = cv2.INTER_AREA if iw > tw else cv2.INTER_LINEAR
-    x = cv2.resize(rgb, (tw, th), interpolation=interp)
+    (w, h), iw = size, rgb.shape[1]
+    tw, th = _scaled(rgb.shape, size, policy)
+    x = cv2.resize(rgb, (tw, th), interpolation=cv2.INTER_AREA if iw > tw else cv2.INTER_LINEAR)
     if (tw, th) == (w, h):
         return x
     if policy == "crop":
@@ -44,6 +48,21 @@ def fit_to_input(rgb: np.ndarray, size: tuple[int, int], policy: str, fill: np.n
     top, left = (h - th) // 2, (w - tw) // 2
     return cv2.copyMakeBorder(x, top, h - th - top, left, w - tw - left, cv2.BORDER_CONSTANT,
                               value=[int(v) for v in fill])
+
+
+def content_cells(shape: tuple[int, ...], size: tuple[int, int], grid: tuple[int, int]) -> np.ndarray:
+    """Which cells of a (grid_width x grid_height) tap grid see the image under ``pad`` -> (N,) bool in
+    row-major grid order: cells whose centre lies in the resized image, not in the padding (at least the
+    cell at the image's centre)."""
+    (w, h), (gw, gh) = size, grid
+    tw, th = _scaled(shape, size, "pad")
+    left, top = (w - tw) // 2, (h - th) // 2
+    cx = (np.arange(gw) + 0.5) * w / gw
+    cy = (np.arange(gh) + 0.5) * h / gh
+    inside = ((cy >= top) & (cy < top + th))[:, None] & ((cx >= left) & (cx < left + tw))[None, :]
+    if not inside.any():
+        inside[min(int((top + th / 2) * gh / h), gh - 1), min(int((left + tw / 2) * gw / w), gw - 1)] = True
+    return inside.reshape(-1)
 
 
 BUNDLED_MODEL = Path(__file__).resolve().parent.parent / "models" / "efficientnet_lite0_stage5_320x240.onnx"
@@ -117,6 +136,8 @@ class FeatureExtractor:
         self.resize = str(resize or info.get("resize") or "stretch")
         if self.resize not in RESIZE:
             raise VprError(f"{self.path}: unknown resize policy {self.resize!r}; choose from {', '.join(RESIZE)}")
+        self._scale = (1.0 / (255.0 * self._std)).astype(np.float32)   # (x / 255 - mean) / std, per channel
+        self._offset = (self._mean / self._std).astype(np.float32)
         self._fill = np.clip(np.rint(self._mean * 255.0), 0, 255).astype(np.uint8)
 
     @property
@@ -133,9 +154,15 @@ class FeatureExtractor:
         """The front-end record of a map (the model's identity is recorded beside it, see ``mapfile``)."""
         return {"name": self.name, "params": {"resize": self.resize}}
 
-    def local(self, images: Sequence[np.ndarray]) -> tuple[np.ndarray, None]:
-        """RGB uint8 images (H, W, 3) -> local descriptors (B, N, K) float32 in one model run (no mask)."""
-        return self.local_features(np.stack([self.preprocess(im) for im in images])), None
+    def local(self, images: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
+        """RGB uint8 images (H, W, 3) -> local descriptors (B, N, K) float32 in one model run, and under
+        ``pad`` the mask (B, N) of the cells that see the image (the padding's descriptors, the same in every
+        image, would otherwise weigh in every encoding); else no mask."""
+        x = self.local_features(np.stack([self.preprocess(im) for im in images]))
+        if self.resize != "pad":
+            return x, None
+        grid = (int(self.info["grid_width"]), int(self.info["grid_height"]))
+        return x, np.stack([content_cells(im.shape, self.size, grid) for im in images])
 
     def preprocess(self, rgb: np.ndarray) -> np.ndarray:
         """RGB uint8 (H, W, 3) -> normalised float32 (3, input_height, input_width)."""
@@ -143,9 +170,12 @@ class FeatureExtractor:
             warn(f"{rgb.shape[1]}x{rgb.shape[0]} images are upsampled more than 4x per side to the model's "
                  f"{self.size[0]}x{self.size[1]} input ({self.path.name}); a model with a smaller input suits them"
                  + (f" (bundled: --model {SMALL_MODEL})" if self.size[0] > 160 else ""))
-        x = fit_to_input(rgb, self.size, self.resize, self._fill).astype(np.float32) * (1.0 / 255.0)
-        x = (x - self._mean) / self._std
-        return np.ascontiguousarray(x.transpose(2, 0, 1))
+        x = fit_to_input(rgb, self.size, self.resize, self._fill)
+        out = np.empty((3,) + x.shape[:2], np.float32)
+        for c in range(3):  # one plane at a time, in place: 4x faster than whole-image float temporaries
+            np.multiply(x[:, :, c], self._scale[c], out=out[c], casting="unsafe")
+            out[c] -= self._offset[c]
+        return out
 
     def feature_maps(self, batch: np.ndarray) -> np.ndarray:
         """Preprocessed batch (B, 3, H, W) float32 -> tap output (B, K, h, w) float32."""

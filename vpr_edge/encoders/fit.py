@@ -15,13 +15,27 @@ from vpr_edge.errors import VprError
 
 
 def require_sklearn() -> None:
-    """Raise VprError naming the missing extra unless scikit-learn imports."""
+    """Raise VprError naming the missing extra unless scikit-learn is installed; then import it in the
+    background (1.5-2 s here), so that it is ready when the references have been described."""
+    import importlib.util
+    import threading
+
+    try:
+        found = importlib.util.find_spec("sklearn") is not None
+    except (ImportError, ValueError):
+        found = False
+    if not found:
+        raise VprError("fitting a codebook needs scikit-learn (sklearn is missing): pip install 'vpr-edge[fit]', "
+                       "or pass --codebook FILE")
+    threading.Thread(target=_import_sklearn, daemon=True, name="import-sklearn").start()
+
+
+def _import_sklearn() -> None:
     try:
         import sklearn.cluster  # noqa: F401
         import sklearn.mixture  # noqa: F401
-    except ImportError as e:
-        raise VprError(f"fitting a codebook needs scikit-learn ({e.name or e} is missing): "
-                       f"pip install 'vpr-edge[fit]', or pass --codebook FILE") from None
+    except Exception:  # a broken install fails again, with its message, where the fit imports it
+        pass
 
 
 def sample_descriptors(local: np.ndarray, mask: np.ndarray | None, limit: int, seed: int) -> np.ndarray:

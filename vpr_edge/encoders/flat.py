@@ -13,7 +13,7 @@ from vpr_edge.errors import VprError
 
 @dataclass(frozen=True)
 class Flatten(Encoder):
-    """(B, N, K) -> (B, N*K) unit rows. Needs a fixed grid (the same N for every image, no mask)."""
+    """(B, N, K) -> (B, N*K) unit rows. Needs a fixed grid (the same N for every image; masked cells count as zeros)."""
 
     name: ClassVar[str] = "none"
     summary: ClassVar[str] = "no encoding: local descriptors flattened in grid order, L2-normalised"
@@ -46,6 +46,9 @@ class Flatten(Encoder):
 
     def transform(self, x: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         self.check(x)
-        if x.shape[1] != self.n_local or (mask is not None and not np.all(mask)):
+        if x.shape[1] != self.n_local:
             raise VprError(f"encoding none expects {self.n_local} descriptors per image, got {x.shape[1]}")
-        return power_l2(np.asarray(x, np.float64).reshape(len(x), -1))
+        x = np.asarray(x, np.float64)
+        if mask is not None:   # masked cells of a fixed grid (a padded frame's border) count as zeros
+            x = x * np.asarray(mask, bool)[..., None]
+        return power_l2(x.reshape(len(x), -1))
