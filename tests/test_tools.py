@@ -80,10 +80,29 @@ def test_size_sweep_reports_each_configuration(tmp_path: Path, small_refs: Path,
     out = tool("size_sweep.py", "--streams", str(streams), "--kinds", "aligned", "--configs", "0x4,8x2",
                "--storages", "int8,bits", "--modes", "single", "--out", str(tmp_path / "out"), "--threads", "1")
     rows = [line.split("|")[1:-1] for line in out.splitlines() if line.startswith("| ") and "PCA" not in line]
-    assert [(r[0].strip(), r[1].strip(), r[3].strip()) for r in rows] == [
+    assert [(r[0].strip(), r[1].strip(), r[4].strip()) for r in rows] == [
         ("none", "4", "int8"), ("none", "4", "bits"), ("8", "2", "int8"), ("8", "2", "bits")]
-    assert [r[5].strip() for r in rows] == ["900", "112", "36", "4"]      # bytes per place: D + 4, D / 8
+    assert [r[6].strip() for r in rows] == ["900", "112", "36", "4"]      # bytes per place: D + 4, D / 8
+    assert {r[2].strip() for r in rows} == {"30000x20"}                    # build-map's fit
     r1 = [float(r[-1].split("/")[0]) for r in rows]
     assert min(r1[:2]) >= 0.7 and all(0.0 <= v <= 1.0 for v in r1)      # the sample's queries are found
     assert r1[0] > r1[2]                                                   # 896 dims beat 32
     assert (tmp_path / "out" / "size.json").exists() and (tmp_path / "out" / "local" / "ref" / "local.npy").exists()
+
+
+def test_coarse_check_compares_exact_and_coarse(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
+    m = tmp_path / "m.npz"
+    build = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "build-map", str(small_refs), "-o", str(m),
+                            "--components", "4"], capture_output=True, text=True, timeout=600)
+    assert build.returncode == 0, build.stderr
+    streams = tmp_path / "streams"
+    streams.mkdir()
+    (streams / "aligned").symlink_to(small_queries)
+    n = len(list(small_queries.iterdir()))
+    (streams / "aligned.csv").write_text("query,references\n" + "".join(f"{i},{i}\n" for i in range(n)))
+    out = tool("coarse_check.py", "--map", str(m), "--streams", str(streams), "--kinds", "aligned", "--keep", "24",
+               "--threads", "1")
+    row = [c.strip() for c in out.splitlines()[-1].split("|")[1:-1]]
+    assert row[0] == "aligned" and row[1] == row[2]      # keep >= R: every value exact, the same answers
+    assert row[3] == row[4]
+    assert row[5] == "1.000" and row[6] == "1.00"        # 24 places: no local search, every frame whole-route

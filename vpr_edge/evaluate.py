@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vpr_edge.matchers import Matcher
+from vpr_edge.matchers import Matcher, Result
 from vpr_edge import metrics
 
 RECALL_KS: tuple[int, ...] = (1, 5, 10)
@@ -45,12 +45,19 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     t0 = time.perf_counter()
     result = matcher.run(sim, k=max(RECALL_KS))
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)
+    threshold = matcher.min_confidence if min_confidence is None else min_confidence
+    return score_result(result, truth, tolerance, threshold, ms)
+
+
+def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshold: float | None = None,
+                 match_ms: float = float("nan")) -> ModeReport:
+    """A matcher's answers (``Result``, Q frames) against ``truth`` (Q, T); frames scoring below
+    ``threshold`` count as lost (None: no lost state)."""
     mapped = (truth >= 0).any(axis=1)
     correct = metrics.correct_candidates(result.ranked, truth, tolerance)
     curve = metrics.pr_curve(result.scores, correct[:, 0], int(mapped.sum()))
     err = metrics.localisation_error(result.refs, truth)
-    threshold = matcher.min_confidence if min_confidence is None else min_confidence
-    lost = result.scores < threshold if threshold is not None else np.zeros(len(sim), bool)
+    lost = result.scores < threshold if threshold is not None else np.zeros(len(result.refs), bool)
 
     def share(mask: np.ndarray) -> float:
         return float(lost[mask].mean()) if threshold is not None and mask.any() else float("nan")
@@ -59,4 +66,4 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
                       metrics.auc_trapezoid(curve), metrics.average_precision(curve),
                       metrics.precision_at_full_recall(curve), metrics.recall_at_full_precision(curve),
                       float(np.nanmedian(err)) if mapped.any() else float("nan"),
-                      share(~mapped), share(mapped), ms, curve)
+                      share(~mapped), share(mapped), match_ms, curve)

@@ -77,12 +77,18 @@ def step(matcher: OnlineMatcher, similarity: Callable[[np.ndarray | None], np.nd
 def run_online(matcher: OnlineMatcher, sim: np.ndarray, k: int = 10) -> Result:
     """Feed the rows of ``sim`` (Q, R) to an online matcher in order (through ``step``: a local search sees
     only the references it asks for); collect its answers and top-k."""
-    q, r = sim.shape
+    return run_rows(matcher, lambda i, idx: sim[i] if idx is None else sim[i, idx], sim.shape[0], sim.shape[1], k)
+
+
+def run_rows(matcher: OnlineMatcher, rows: Callable[[int, np.ndarray | None], np.ndarray], q: int, r: int,
+             k: int = 10) -> Result:
+    """``run_online`` with frame i's similarities to references ``idx`` (None: all R) given by
+    ``rows(i, idx)``, for rows computed on demand (a coarse whole-route search, ``tools/coarse_check.py``)."""
     refs = np.empty(q, np.int64)
     scores = np.empty(q, np.float64)
     ranked = np.empty((q, min(k, r)), np.int64)
     for i in range(q):
-        refs[i], scores[i] = step(matcher, lambda idx: sim[i] if idx is None else sim[i, idx])
+        refs[i], scores[i] = step(matcher, lambda idx: rows(i, idx))
         ranked[i] = top_k(matcher.ranking(), k)
     return Result(refs, scores, lead_with(refs, ranked))
 

@@ -1,0 +1,79 @@
+#!/usr/bin/env python3
+"""Does the coarse whole-route search change what the stream matcher answers? Exact against coarse on real maps.
+
+    python tools/coarse_check.py --map out/nordland-dev/map.npz --streams out/nordland-dev --keep 16 --calib 64
+
+Each derived stream (STREAMS/KIND with STREAMS/KIND.csv) is encoded once through the map's front end
+(``Localizer.encode``) and matched by the ``stream`` matcher twice, frame by frame through ``matchers.step``:
+every similarity exact (what ``evaluate`` measures), and with the frames that search the whole route served by
+``coarse.CoarseSearch`` (signs, then exact values for the ``--keep`` best candidates and ``--calib`` random
+references), as ``Localizer`` does on maps of 20,000+ references. The local-search frames are exact in both.
+Prints R@1 / AUC and the lost shares of unmapped / mapped frames (``evaluate.score_result``, the figures of
+``vpr-edge evaluate``; nan where a stream has no unmapped frames), the share of frames whose answers agree and
+the share of whole-route frames, per stream.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from vpr_edge import groundtruth  # noqa: E402
+from vpr_edge.api import Localizer  # noqa: E402
+from vpr_edge.coarse import CoarseSearch  # noqa: E402
+from vpr_edge.evaluate import score_result  # noqa: E402
+from vpr_edge.images import list_images, load_image  # noqa: E402
+from vpr_edge.matchers import run_rows  # noqa: E402
+
+KINDS = "aligned,speed2,speed3,stop-and-go,variable,partial,detour"
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--map", type=Path, required=True)
+    p.add_argument("--streams", type=Path, required=True, help="derive_streams output: KIND/ and KIND.csv")
+    p.add_argument("--kinds", default=KINDS)
+    p.add_argument("--keep", type=int, default=1024, help="exact values for the best KEEP by sign agreement")
+    p.add_argument("--calib", type=int, default=512, help="exact values of CALIB fixed random references")
+    p.add_argument("--tolerance", type=int, default=1)
+    p.add_argument("--threads", type=int, default=0)
+    a = p.parse_args()
+    loc = Localizer(a.map, threads=a.threads)
+    place_map = loc.map
+    r = len(place_map.names)
+    print(f"map {a.map}: {r} references x {place_map.stored.shape[1]} dims {place_map.stored.storage}; "
+          f"keep {a.keep}, calib {a.calib}, tolerance {a.tolerance}")
+    print("| stream | exact R@1 / AUC | coarse R@1 / AUC | exact lost unmapped / mapped | coarse lost unmapped / "
+          "mapped | same answer | whole-route frames |")
+    print("|---|---|---|---|---|---|---|")
+    for kind in a.kinds.split(","):
+        files = list_images(a.streams / kind)
+        truth = groundtruth.load_csv(a.streams / f"{kind}.csv")
+        enc = np.concatenate([loc.encode([load_image(f) for f in files[i:i + 16]]) for i in range(0, len(files), 16)])
+        exact = place_map.similarity(enc)
+        coarse = CoarseSearch(place_map.stored, keep=a.keep, calib=a.calib)
+        whole = [0]
+
+        def rows(i: int, idx: np.ndarray | None) -> np.ndarray:
+            if idx is not None:
+                return exact[i, idx]
+            whole[0] += 1
+            return coarse.similarity(enc[i])
+
+        matcher = loc.matcher
+        base = run_rows(matcher.stream(r), lambda i, idx: exact[i] if idx is None else exact[i, idx], len(enc), r)
+        approx = run_rows(matcher.stream(r), rows, len(enc), r)
+        s0 = score_result(base, truth, a.tolerance, matcher.min_confidence)
+        s1 = score_result(approx, truth, a.tolerance, matcher.min_confidence)
+        print(f"| {kind} | {s0.recall[1]:.3f} / {s0.auc:.3f} | {s1.recall[1]:.3f} / {s1.auc:.3f} | "
+              f"{s0.lost_unmapped:.3f} / {s0.lost_mapped:.3f} | {s1.lost_unmapped:.3f} / {s1.lost_mapped:.3f} | "
+              f"{float(np.mean(base.refs == approx.refs)):.3f} | {whole[0] / len(enc):.2f} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
