@@ -276,10 +276,15 @@ def _fit(front: FrontEnd, local: np.ndarray, mask: np.ndarray | None, encoding: 
         local = front.select(local)              # type: ignore[attr-defined]
     if encoder is None:
         encoder = fit_encoder(encoding, local, mask, settings, front.n_local)
-    elif encoder.input_dim != front.dim:
+    _check_fits(encoder, front)
+    return front, encoder, local
+
+
+def _check_fits(encoder: Encoder, front: FrontEnd) -> None:
+    """VprError unless ``encoder`` takes the descriptors ``front`` gives."""
+    if encoder.input_dim != front.dim:
         raise VprError(f"codebook expects {encoder.input_dim}-dim descriptors but the {front.name} front end "
                        f"gives {front.dim}")
-    return front, encoder, local
 
 
 def _meta(front: FrontEnd, encoder: Encoder, fitted: bool, settings: FitSettings, n_real: int,
@@ -320,10 +325,8 @@ def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = "ifv", enc
         pool, local, mask = _fit_pool(files, front, settings, batch_size, progress)
         n_real = int(mask.sum()) if mask is not None else local.size // local.shape[-1]
         front, encoder, local = _fit(front, local, mask, encoding, encoder, settings)
-    elif encoder.input_dim != front.dim:
-        raise VprError(f"codebook expects {encoder.input_dim}-dim descriptors but the {front.name} front end "
-                       f"gives {front.dim}")
     assert encoder is not None
+    _check_fits(encoder, front)
     store = EncodingWriter(len(files), encoder.dim, storage, keep_float=svm)
     if len(pool):
         for i in range(0, len(pool), 32):
