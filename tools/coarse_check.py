@@ -27,7 +27,7 @@ from vpr_edge.api import Localizer  # noqa: E402
 from vpr_edge.coarse import CoarseSearch  # noqa: E402
 from vpr_edge.evaluate import score_result  # noqa: E402
 from vpr_edge.images import list_images, load_image  # noqa: E402
-from vpr_edge.matchers import run_rows  # noqa: E402
+from vpr_edge.matchers import run_online, run_rows  # noqa: E402
 
 KINDS = "aligned,speed2,speed3,stop-and-go,variable,partial,detour"
 
@@ -65,7 +65,7 @@ def main() -> int:
             return coarse.similarity(enc[i])
 
         matcher = loc.matcher
-        base = run_rows(matcher.stream(r), lambda i, idx: exact[i] if idx is None else exact[i, idx], len(enc), r)
+        base = run_online(matcher.stream(r), exact)
         approx = run_rows(matcher.stream(r), rows, len(enc), r)
         s0 = score_result(base, truth, a.tolerance, matcher.min_confidence)
         s1 = score_result(approx, truth, a.tolerance, matcher.min_confidence)

@@ -187,7 +187,7 @@ def build_map_cmd(
             require_sklearn()
         use = use_threads(threads)
         front_name = features.value if features else (cb_meta or {}).get("features", {}).get("name", "cnn")
-        if resize is not None and (base.features["name"] if base else front_name) != "cnn":
+        if resize is not None and front_name != "cnn":   # (with --append, --resize was refused above)
             raise VprError(f"--resize applies to the cnn front end, not {front_name}")
         front = base.front_end(out, model, use) if base else make_front_end(
             front_name, model, use, spec={"params": {"resize": resize.value}} if resize else None)

@@ -13,7 +13,8 @@ from vpr_edge.errors import VprError
 
 @dataclass(frozen=True)
 class Flatten(Encoder):
-    """(B, N, K) -> (B, N*K) unit rows. Needs a fixed grid (the same N for every image; masked cells count as zeros)."""
+    """(B, N, K) -> (B, N*K) unit rows. Needs a fixed grid (the same N for every image); masked cells count
+    as zeros."""
 
     name: ClassVar[str] = "none"
     summary: ClassVar[str] = "no encoding: local descriptors flattened in grid order, L2-normalised"
