@@ -7,8 +7,10 @@ onnxruntime's static QDQ quantisation: weights and activations uint8 (U8U8), wei
 activation ranges by MinMax over the calibration images, preprocessed exactly as the runtime does.
 Measured on the bundled tap (cosine of int8 to fp32 feature maps, 8 Corridor query frames, 32 calibration
 references): U8U8 0.987; the usual U8S8 0.860 (x86 kernels without VNNI saturate the u8 x s8 products),
-U8S8 with reduce_range 0.952, S8S8 0.868, U8U8 per tensor 0.839. Dynamic quantisation was measured 9x
-slower than fp32 here and lost accuracy, so it is not offered. The model's ``vpr_edge`` metadata is copied
+U8S8 with reduce_range 0.952, S8S8 0.868, U8U8 per tensor 0.839. On this AVX2 machine without VNNI U8U8 runs
+4.5x slower than fp32; U8S8 reduce_range in the QOperator format (``--weights int8 --format qoperator``) is the
+one scheme faster than fp32 (0.86x at 320x240, 0.91x at 160x120), at some accuracy (README "int8 models").
+Dynamic quantisation was measured 9x slower than fp32 here and lost accuracy, so it is not offered. The model's ``vpr_edge`` metadata is copied
 and marked (``quantization``: scheme, calibration images, source SHA-256), so maps record which model they
 were built with and refuse the other one. Written atomically. Needs the ``export`` extra (onnx).
 """
@@ -46,10 +48,18 @@ def calibration_files(folder: Path, count: int) -> list[Path]:
     return [files[i] for i in idx]
 
 
-def quantize(model: Path, calibration: Path, out: Path, count: int = 32, weights: str = "uint8") -> dict:
+FORMATS = {"qdq": "QDQ", "qoperator": "QOperator"}
+
+
+def quantize(model: Path, calibration: Path, out: Path, count: int = 32, weights: str = "uint8",
+             fmt: str = "qdq") -> dict:
     """Write the int8 model of ``model`` to ``out``, calibrated on ``count`` images of ``calibration``;
     return its metadata. ``weights``: uint8 (U8U8, accurate) or int8 (U8S8 with reduce_range: the fast
-    kernels of CPUs with int8 dot products, less accurate on x86 without VNNI)."""
+    kernels of CPUs with int8 dot products, less accurate on x86 without VNNI). ``fmt``: qdq (QuantizeLinear /
+    DequantizeLinear pairs around float operators, fused by onnxruntime at load) or qoperator (QLinearConv
+    and friends written into the graph)."""
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown format {fmt!r}; choose from {', '.join(FORMATS)}")
     import onnx
     from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_static
     from onnxruntime.quantization.shape_inference import quant_pre_process
@@ -57,15 +67,16 @@ def quantize(model: Path, calibration: Path, out: Path, count: int = 32, weights
     extractor = FeatureExtractor(model)
     files = calibration_files(calibration, count)
     meta = dict(extractor.info) | {"quantization": {
-        "scheme": f"static QDQ, {'U8U8' if weights == 'uint8' else 'U8S8 reduce_range'}, weights per channel, "
-                  f"activations MinMax",
+        "scheme": f"static {FORMATS[fmt]}, {'U8U8' if weights == 'uint8' else 'U8S8 reduce_range'}, "
+                  f"weights per channel, activations MinMax",
         "calibration_images": len(files), "calibration_folder": str(calibration),
         "source_model": model.name, "source_sha256": extractor.fingerprint}}
     with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
         prepared, raw = Path(tmp) / "prepared.onnx", Path(tmp) / "int8.onnx"
         quant_pre_process(str(model), str(prepared))
-        quantize_static(str(prepared), str(raw), _Images(extractor, files), quant_format=QuantFormat.QDQ,
-                        per_channel=True, activation_type=QuantType.QUInt8,
+        quantize_static(str(prepared), str(raw), _Images(extractor, files),
+                        quant_format=getattr(QuantFormat, FORMATS[fmt]), per_channel=True,
+                        activation_type=QuantType.QUInt8,
                         weight_type=QuantType.QUInt8 if weights == "uint8" else QuantType.QInt8,
                         reduce_range=weights == "int8", calibrate_method=CalibrationMethod.MinMax)
         proto = onnx.load(str(raw))
@@ -86,9 +97,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--weights", choices=("uint8", "int8"), default="uint8",
                    help="uint8: U8U8, accurate (default); int8: U8S8 with reduce_range, for CPUs with int8 "
                         "dot-product kernels (ARM dotprod, x86 VNNI)")
+    p.add_argument("--format", choices=tuple(FORMATS), default="qdq",
+                   help="qdq: Q/DQ pairs fused by onnxruntime (default); qoperator: QLinearConv etc. in the "
+                        "graph (with --weights int8 the fastest here, README 'int8 models')")
     p.add_argument("--out", type=Path, required=True)
     a = p.parse_args(argv)
-    meta = quantize(a.model, a.calibration, a.out, a.images, a.weights)
+    meta = quantize(a.model, a.calibration, a.out, a.images, a.weights, a.format)
     print(json.dumps(meta["quantization"], indent=1, sort_keys=True))
     fp32, int8 = FeatureExtractor(a.model), FeatureExtractor(a.out)
     probe = np.stack([fp32.preprocess(load_image(f)) for f in calibration_files(a.calibration, 8)])

@@ -161,3 +161,30 @@ def test_quantize_keeps_features_and_marks_the_model(tmp_path: Path, model_path:
     cos = (x * y).sum(1) / (np.linalg.norm(x, axis=1) * np.linalg.norm(y, axis=1))
     assert cos.min() > 0.95, cos                          # U8U8 per channel: ~0.987 on Corridor
     assert sorted(p.name for p in tmp_path.iterdir()) == ["int8.onnx"]     # no temporary files left
+
+
+def test_quantize_qoperator_writes_qlinear_operators(tmp_path: Path, model_path: Path, small_refs: Path,
+                                                     small_queries: Path) -> None:
+    onnx = pytest.importorskip("onnx")
+    from vpr_edge.images import load_image
+    from vpr_edge_export.quantize import main as quantize_main
+
+    out = tmp_path / "int8.onnx"
+    assert quantize_main(["--model", str(model_path), "--calibration", str(small_refs), "--images", "6",
+                          "--weights", "int8", "--format", "qoperator", "--out", str(out)]) == 0
+    ops = {n.op_type for n in onnx.load(str(out)).graph.node}
+    assert "QLinearConv" in ops and "DequantizeLinear" in ops and "Conv" not in ops
+    fp32, int8 = FeatureExtractor(model_path), FeatureExtractor(out)
+    assert int8.info["quantization"]["scheme"].startswith("static QOperator, U8S8 reduce_range")
+    batch = np.stack([fp32.preprocess(load_image(f)) for f in sorted(small_queries.iterdir())[:3]])
+    x, y = (m.feature_maps(batch).reshape(3, -1) for m in (fp32, int8))
+    cos = (x * y).sum(1) / (np.linalg.norm(x, axis=1) * np.linalg.norm(y, axis=1))
+    assert cos.min() > 0.9, cos                           # ~0.95 on Corridor (7-bit weights)
+
+    # the int8 model may reuse the codebook of the fp32 model it was made from (not another model's)
+    from test_cli import run
+    cb = tmp_path / "cb.npz"
+    assert run("build-map", small_refs, "-o", tmp_path / "fp32.npz", "--components", "4",
+               "--save-codebook", cb).returncode == 0
+    proc = run("build-map", small_refs, "-o", tmp_path / "int8.npz", "--model", out, "--codebook", cb)
+    assert proc.returncode == 0, proc.stderr

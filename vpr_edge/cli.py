@@ -199,7 +199,9 @@ def build_map_cmd(
         elif given is not None:
             recorded = cb_meta.get("features_fingerprint") or cb_meta.get("model_sha256")
             described = (cb_meta.get("features") or {}).get("name", "cnn")
-            if described != front.name or recorded not in (None, front.fingerprint):
+            # an int8 model may reuse the codebook of the fp32 model it was quantised from
+            fits = (None, front.fingerprint, getattr(front, "source_fingerprint", None))
+            if described != front.name or recorded not in fits:
                 raise VprError(f"{codebook}: codebook was fitted on {described} descriptors "
                                f"({str(recorded)[:12]}), not on this {front.name} front end's "
                                f"({front.fingerprint[:12]}){'; another model' if front.name == 'cnn' else ''}")

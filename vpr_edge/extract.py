@@ -141,6 +141,12 @@ class FeatureExtractor:
         self._fill = np.clip(np.rint(self._mean * 255.0), 0, 255).astype(np.uint8)
 
     @property
+    def source_fingerprint(self) -> str | None:
+        """For an int8 model written by ``vpr_edge_export.quantize``, the SHA-256 of the fp32 model it was
+        made from (its features approximate that model's, so a codebook fitted on them fits); else None."""
+        return (self.info.get("quantization") or {}).get("source_sha256")
+
+    @property
     def dim(self) -> int:
         """Channels K of the tap: the dimension of each local descriptor."""
         return int(self.info["channels"])
