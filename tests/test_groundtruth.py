@@ -6,7 +6,7 @@ import pytest
 
 from vpr_edge import groundtruth
 from vpr_edge.errors import VprError
-from vpr_edge.streams import KINDS, derive_stream
+from vpr_edge.streams import KINDS, derive_stream, sensor_noise, write_stream
 
 
 def test_csv_with_unmapped_rows(tmp_path) -> None:
@@ -61,3 +61,29 @@ def test_derived_streams(kind: str) -> None:
         assert (steps == 0).sum() > 20 and set(steps) <= {0, 1}
     if kind == "variable":
         assert 0 <= steps.min() and steps.max() <= 3 and len(set(steps)) >= 3
+
+
+def test_sensor_noise_matches_its_sigma_and_stays_in_range() -> None:
+    rng = np.random.default_rng(0)
+    image = np.full((200, 100, 3), 128, np.uint8)
+    noisy = sensor_noise(image, 3.0, rng)
+    assert noisy.dtype == np.uint8 and noisy.shape == image.shape
+    assert abs(float((noisy.astype(float) - 128).std()) - 3.0) < 0.1
+    edges = sensor_noise(np.array([[0, 255]], np.uint8), 50.0, rng)
+    assert edges.min() >= 0 and edges.max() <= 255                       # clipped, not wrapped
+
+
+def test_write_stream_repeats_are_noisy_copies(tmp_path, small_queries) -> None:
+    import cv2
+
+    sources = sorted(small_queries.iterdir())[:3]
+    places = np.array([0, 1, 1, 1, 2])
+    write_stream(tmp_path / "s", sources, places, n_mapped=2, repeat_noise=3.0, seed=1)
+    names = sorted(p.name for p in (tmp_path / "s").iterdir())
+    assert names == ["0000000.jpg", "0000001.jpg", "0000002.png", "0000003.png", "0000004.jpg"]
+    assert (tmp_path / "s.csv").read_text().splitlines()[1:] == ["0,0", "1,1", "2,1", "3,1", "4,"]
+    base = cv2.imread(str(sources[1]), cv2.IMREAD_UNCHANGED).astype(float)
+    a, b = (cv2.imread(str(tmp_path / "s" / n), cv2.IMREAD_UNCHANGED).astype(float) for n in names[2:4])
+    assert a.shape == base.shape and 2.0 < (a - base).std() < 4.0 and not np.array_equal(a, b)
+    write_stream(tmp_path / "t", sources, places, n_mapped=2)             # default: the same file again
+    assert sorted(p.name for p in (tmp_path / "t").iterdir())[2:4] == ["0000002.jpg", "0000003.jpg"]

@@ -6,7 +6,8 @@
 DATASET holds ref/ and query/ whose i-th files show the same place. OUT gets ref/ (the first --map-places
 references: the map's places), and per stream kind (aligned, speed2, speed3, stop-and-go, variable, partial,
 detour) a folder of frames OUT/KIND/ and its ground truth OUT/KIND.csv (true place, empty = unmapped).
-Frames are hard links to the dataset's files where the file system allows. Then, for instance:
+Frames are hard links to the dataset's files where the file system allows; with --repeat-noise S a frame that
+repeats the one before (a stop) is a noisy PNG copy instead (sensor noise of S grey levels). Then, for instance:
 
     vpr-edge build-map OUT/ref --out OUT/map.npz
     vpr-edge evaluate --map OUT/map.npz --queries OUT/speed2 --gt OUT/speed2.csv
@@ -34,6 +35,10 @@ def main() -> int:
                    help="places in the map (default: two thirds of the references; the rest are detour places)")
     p.add_argument("--kinds", default=",".join(KINDS))
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--repeat-noise", type=float, default=0.0,
+                   help="sigma (grey levels) of Gaussian sensor noise on a frame that repeats the one before "
+                        "(stops, slow crawls), so that a stopped vehicle's frames are alike but not identical "
+                        "(default 0: the same file again)")
     a = p.parse_args()
     try:
         refs, queries = list_images(a.dataset / "ref"), list_images(a.dataset / "query")
@@ -45,7 +50,7 @@ def main() -> int:
         write_stream(a.out / "ref", refs, np.arange(n_mapped), n_mapped, with_truth=False)
         for kind in a.kinds.split(","):
             places = derive_stream(kind, n_mapped, len(refs), a.seed)
-            write_stream(a.out / kind, queries, places, n_mapped)
+            write_stream(a.out / kind, queries, places, n_mapped, repeat_noise=a.repeat_noise, seed=a.seed)
             print(f"{kind:12s} {len(places):6d} frames, {int((places >= n_mapped).sum()):5d} of unmapped places")
     except VprError as e:
         print(f"error: {e}", file=sys.stderr)

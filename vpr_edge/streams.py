@@ -72,16 +72,38 @@ def write_ground_truth(path: str | os.PathLike[str], truth: Sequence[Sequence[in
             w.writerow([q, " ".join(str(int(r)) for r in refs)])
 
 
+def sensor_noise(image: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
+    """``image`` (H, W[, C]) uint8 plus Gaussian noise of ``sigma`` grey levels per pixel, rounded and clipped:
+    a camera's frame-to-frame noise, so that a stopped vehicle's frames are alike but not identical."""
+    noisy = image.astype(np.float32) + rng.normal(0.0, sigma, image.shape).astype(np.float32)
+    return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+
+
 def write_stream(out: str | os.PathLike[str], sources: Sequence[Path], places: np.ndarray, n_mapped: int,
-                 with_truth: bool = True) -> None:
+                 with_truth: bool = True, repeat_noise: float = 0.0, seed: int = 0) -> None:
     """Write frames ``sources[places[i]]`` as ``out/NNNNNNN.ext`` (hard links where possible) and, with
-    ``with_truth``, ``out.csv``: their ground truth (the true place, or empty for an unmapped one)."""
+    ``with_truth``, ``out.csv``: their ground truth (the true place, or empty for an unmapped one).
+    ``repeat_noise`` > 0: a frame showing the same place as the one before it (a stop, a slow crawl) is
+    written as a PNG with ``sensor_noise`` of that sigma instead of as the same file again (seeded)."""
+    import cv2
+
     out = Path(out)
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
+    rng = np.random.default_rng(seed)
     for i, p in enumerate(places):
         src = sources[int(p)]
+        if repeat_noise > 0 and i > 0 and p == places[i - 1]:
+            image = cv2.imread(str(src), cv2.IMREAD_UNCHANGED)
+            if image is None:
+                raise VprError(f"{src}: cannot be read as an image")
+            ok, png = cv2.imencode(".png", sensor_noise(image, repeat_noise, rng))
+            if not ok:
+                raise VprError(f"{src}: cannot be encoded as PNG")
+            with atomic_output(out / f"{i:07d}.png") as tmp:
+                tmp.write_bytes(png.tobytes())
+            continue
         dst = out / f"{i:07d}{src.suffix}"
         try:
             os.link(src, dst)
