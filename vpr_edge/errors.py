@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 
 _said: set[str] = set()
 
@@ -15,3 +16,15 @@ def warn(message: str) -> None:
     if message not in _said:
         _said.add(message)
         print(f"vpr-edge: warning: {message}", file=sys.stderr, flush=True)
+
+
+def one_line_errors(prog: str, main: Callable[[], int]) -> int:
+    """Run a command-line ``main``; a VprError, or a file the system refuses (OSError), becomes
+    ``prog: error: message`` on stderr and exit code 2 instead of a traceback (for ``python -m`` tools)."""
+    try:
+        return main()
+    except VprError as e:
+        print(f"{prog}: error: {e}", file=sys.stderr)
+    except OSError as e:
+        print(f"{prog}: error: {e.filename or ''}: {e.strerror or e}", file=sys.stderr)
+    return 2
