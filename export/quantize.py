@@ -10,9 +10,10 @@ references): U8U8 0.987; the usual U8S8 0.860 (x86 kernels without VNNI saturate
 U8S8 with reduce_range 0.952, S8S8 0.868, U8U8 per tensor 0.839. On this AVX2 machine without VNNI U8U8 runs
 4.5x slower than fp32; U8S8 reduce_range in the QOperator format (``--weights int8 --format qoperator``) is the
 one scheme faster than fp32 (0.86x at 320x240, 0.91x at 160x120), at some accuracy (README "int8 models").
-Dynamic quantisation was measured 9x slower than fp32 here and lost accuracy, so it is not offered. The model's ``vpr_edge`` metadata is copied
-and marked (``quantization``: scheme, calibration images, source SHA-256), so maps record which model they
-were built with and refuse the other one. Written atomically. Needs the ``export`` extra (onnx).
+Dynamic quantisation was measured 9x slower than fp32 here and lost accuracy, so it is not offered. The
+model's ``vpr_edge`` metadata is copied and marked (``quantization``: scheme, calibration images, source
+SHA-256), so maps record which model they were built with and refuse the other one; a codebook fitted with
+the source model is accepted. Written atomically. Needs the ``export`` extra (onnx).
 """
 from __future__ import annotations
 

@@ -224,5 +224,6 @@ def test_export_tools_check_the_output_path_first(tmp_path: Path, capsys: pytest
 
     pytest.importorskip("onnx")
     args = ["--model", str(model_path), "--calibration", str(small_refs)] if tool == "quantize" else []
-    assert importlib.import_module(f"vpr_edge_export.{tool}").main(args + ["--out", str(tmp_path / "no" / "x.onnx")]) == 2
+    main = importlib.import_module(f"vpr_edge_export.{tool}").main
+    assert main(args + ["--out", str(tmp_path / "no" / "x.onnx")]) == 2
     assert "does not exist" in capsys.readouterr().err
