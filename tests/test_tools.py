@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -106,3 +108,23 @@ def test_coarse_check_compares_exact_and_coarse(tmp_path: Path, small_refs: Path
     assert row[0] == "aligned" and row[1] == row[2]      # keep >= R: every value exact, the same answers
     assert row[3] == row[4]
     assert row[5] == "1.000" and row[6] == "1.00"        # 24 places: no local search, every frame whole-route
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--kinds", "speed2,warp"], "--kinds: unknown warp"),
+    (["--repeat-noise", "-1"], "--repeat-noise must be >= 0"),
+    (["--map-places", "999"], "--map-places must be in 1..24"),
+])
+def test_derive_streams_checks_before_writing(tmp_path: Path, small_refs: Path, small_queries: Path,
+                                              args: list[str], needle: str) -> None:
+    import shutil
+
+    data = tmp_path / "pair"
+    shutil.copytree(small_refs, data / "ref")
+    shutil.copytree(small_queries, data / "query")
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "derive_streams.py"), "--dataset", str(data),
+                           "--out", str(tmp_path / "streams"), *args], capture_output=True, text=True, timeout=600)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert lines[0].startswith("derive_streams: error: ") and needle in lines[0]
+    assert not (tmp_path / "streams").exists()                  # nothing written

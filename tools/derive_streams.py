@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np  # noqa: E402
 
-from vpr_edge.errors import VprError  # noqa: E402
+from vpr_edge.errors import VprError, one_line_errors  # noqa: E402
 from vpr_edge.images import list_images  # noqa: E402
 from vpr_edge.streams import KINDS, derive_stream, write_stream  # noqa: E402
 
@@ -40,21 +40,28 @@ def main() -> int:
                         "(stops, slow crawls), so that a stopped vehicle's frames are alike but not identical "
                         "(default 0: the same file again)")
     a = p.parse_args()
-    try:
-        refs, queries = list_images(a.dataset / "ref"), list_images(a.dataset / "query")
-        if len(refs) != len(queries):
-            raise VprError(f"{a.dataset}: ref/ and query/ differ in length ({len(refs)} vs {len(queries)})")
-        n_mapped = a.map_places or (2 * len(refs)) // 3
-        if not 0 < n_mapped <= len(refs):
-            raise VprError(f"--map-places must be in 1..{len(refs)}")
-        write_stream(a.out / "ref", refs, np.arange(n_mapped), n_mapped, with_truth=False)
-        for kind in a.kinds.split(","):
-            places = derive_stream(kind, n_mapped, len(refs), a.seed)
-            write_stream(a.out / kind, queries, places, n_mapped, repeat_noise=a.repeat_noise, seed=a.seed)
-            print(f"{kind:12s} {len(places):6d} frames, {int((places >= n_mapped).sum()):5d} of unmapped places")
-    except VprError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    return one_line_errors("derive_streams", lambda: _run(a))
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, inputs checked first: the pair's folders, --map-places, --kinds, --repeat-noise."""
+    refs, queries = list_images(a.dataset / "ref"), list_images(a.dataset / "query")
+    if len(refs) != len(queries):
+        raise VprError(f"{a.dataset}: ref/ and query/ differ in length ({len(refs)} vs {len(queries)})")
+    n_mapped = a.map_places or (2 * len(refs)) // 3
+    if not 0 < n_mapped <= len(refs):
+        raise VprError(f"--map-places must be in 1..{len(refs)}")
+    kinds = a.kinds.split(",")
+    unknown = [k for k in kinds if k not in KINDS]
+    if unknown:
+        raise VprError(f"--kinds: unknown {', '.join(unknown)}; choose from {', '.join(KINDS)}")
+    if a.repeat_noise < 0:
+        raise VprError(f"--repeat-noise must be >= 0, got {a.repeat_noise}")
+    write_stream(a.out / "ref", refs, np.arange(n_mapped), n_mapped, with_truth=False)
+    for kind in kinds:
+        places = derive_stream(kind, n_mapped, len(refs), a.seed)
+        write_stream(a.out / kind, queries, places, n_mapped, repeat_noise=a.repeat_noise, seed=a.seed)
+        print(f"{kind:12s} {len(places):6d} frames, {int((places >= n_mapped).sum()):5d} of unmapped places")
     print(f"map places: {n_mapped} of {len(refs)} (folder {a.out / 'ref'})")
     return 0
 

@@ -19,7 +19,7 @@ from vpr_edge import __version__
 from vpr_edge.compact import STORAGES
 from vpr_edge.encoders import ENCODERS
 from vpr_edge.features import FRONT_ENDS, make_front_end
-from vpr_edge.errors import VprError, warn
+from vpr_edge.errors import VprError, os_error_line, warn
 from vpr_edge.extract import RESIZE
 from vpr_edge.images import Frame, list_images, load_image, open_stream
 from vpr_edge.api import Localizer, Match, encode_frames
@@ -81,8 +81,7 @@ def _user_errors() -> Iterator[None]:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         raise typer.Exit(1) from None
     except OSError as e:  # disk full, permission lost mid-run: name the file and the reason
-        where = f"{e.filename}: " if e.filename else ""
-        typer.echo(f"vpr-edge: error: {where}{e.strerror or e}", err=True)
+        typer.echo(f"vpr-edge: error: {os_error_line(e)}", err=True)
         raise typer.Exit(2) from None
     except KeyboardInterrupt:
         typer.echo("vpr-edge: interrupted", err=True)
