@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError
+from vpr_edge.images import load_image
 from vpr_edge.store import atomic_output
 
 KINDS: tuple[str, ...] = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
@@ -95,10 +96,8 @@ def write_stream(out: str | os.PathLike[str], sources: Sequence[Path], places: n
     for i, p in enumerate(places):
         src = sources[int(p)]
         if repeat_noise > 0 and i > 0 and p == places[i - 1]:
-            image = cv2.imread(str(src), cv2.IMREAD_UNCHANGED)
-            if image is None:
-                raise VprError(f"{src}: cannot be read as an image")
-            ok, png = cv2.imencode(".png", sensor_noise(image, repeat_noise, rng))
+            noisy = sensor_noise(load_image(src), repeat_noise, rng)
+            ok, png = cv2.imencode(".png", cv2.cvtColor(noisy, cv2.COLOR_RGB2BGR))
             if not ok:
                 raise VprError(f"{src}: cannot be encoded as PNG")
             with atomic_output(out / f"{i:07d}.png") as tmp:
