@@ -78,3 +78,37 @@ def api_map_small(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) ->
     res = CliRunner().invoke(app, ["build-map", str(small_refs), "-o", str(out), "--components", "4"])
     assert res.exit_code == 0, res.output
     return out
+
+
+def _rss_file_mb() -> float | None:
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("RssFile:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return None
+
+
+def test_sign_pass_releases_a_memory_mapped_map(tmp_path: Path) -> None:
+    """Packing the signs reads every stored row; on a memory-mapped map those pages are then dropped from
+    the process (store.release_pages), the values still read the same, and an in-RAM map is left alone."""
+    from vpr_edge.store import read_npz, release_pages, write_npz
+
+    rng = np.random.default_rng(1)
+    stored = Encodings.pack(rng.normal(size=(16_000, 1024)).astype(np.float32), "int8")   # 16 MB
+    write_npz(tmp_path / "m.npz", stored.to_arrays(), {"kind": "test map", "schema": 1})
+    mapped = Encodings.from_arrays(read_npz(tmp_path / "m.npz", "test map", 1, mmap=True)[0], "int8")
+    before = _rss_file_mb()
+    coarse = CoarseSearch(mapped)
+    np.testing.assert_array_equal(coarse.signs, CoarseSearch(stored).signs)
+    after = _rss_file_mb()
+    if before is not None:   # Linux: the pass did not leave the map's 16 MB resident
+        assert after - before < 8.0
+        int(np.asarray(mapped.values).sum(dtype=np.int64))        # touch every page again
+        assert _rss_file_mb() - before > 8.0
+        assert release_pages(mapped.values[100:200])               # through a view, the whole mapping
+        assert _rss_file_mb() - before < 8.0
+    np.testing.assert_array_equal(mapped.values[5000], stored.values[5000])
+    assert not release_pages(stored.values)

@@ -2,6 +2,8 @@
 planted routes (speeds 0-3, a detour, a restart)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -117,6 +119,24 @@ def test_road_matcher_follows_any_speed(speed: float) -> None:
     assert np.mean(np.abs(res.refs[settled] - places[settled]) <= 1) > 0.95
 
 
+def test_road_matcher_stop_off_the_map_on_a_look_alike() -> None:
+    """A vehicle that drives off the map and stops where the view resembles place 300 as a true match would
+    (the frame repeated with fresh noise, as a camera repeats a view) stays lost; counting every repeat in full
+    (stop_gain 1, the moving decay) locks on the look-alike. Eight noise draws, the shares over all of them."""
+    default = get_matcher("stream")
+    counted = replace(default, params={**default.params, "stop_gain": 1.0, "stop_decay": default.params["decay"]})
+    places = np.concatenate([route([(1.0, 40)], start=50), np.full(10, -1), np.full(12, 300)])
+    stop = slice(54, 62)
+    lost, parked = [], []
+    for seed in range(8):
+        sim = planted(np.random.default_rng(seed), 600, places)
+        res, old = default.run(sim), counted.run(sim)
+        assert np.mean(np.abs(res.refs[10:40] - places[10:40]) <= 1) > 0.95
+        lost.append(np.mean(res.scores[stop] < default.min_confidence))
+        parked.append(np.mean((old.refs[stop] == 300) & (old.scores[stop] >= counted.min_confidence)))
+    assert np.mean(lost) > 0.8 and np.mean(parked) > 0.6
+
+
 def test_road_matcher_detour_lost_and_restart() -> None:
     rng = np.random.default_rng(9)
     places = np.concatenate([route([(1.0, 40), (2.0, 30)], start=50), np.full(40, -1),
@@ -138,7 +158,7 @@ def test_road_matcher_detour_lost_and_restart() -> None:
     assert np.mean(np.abs(np.array(again[10:]) - places[135:]) <= 1) > 0.95
 
 
-def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window):
+def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, stop_gain, stop_decay):
     """RoadMatcher written as plain loops over states, from its docstring."""
     n_refs = sim.shape[1]
     n_speeds, n_pos = int(round(vmax * grid)) + 1, n_refs * grid
@@ -154,7 +174,11 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window):
         for v in range(n_speeds):
             for p in range(n_pos):
                 prev = max((h[u, p - v] - turn * abs(v - u) for u in range(n_speeds)), default=0.0) if p >= v else 0.0
-                new[v, p] = max(0.0, max(0.0, decay * prev) + zr[p // grid] - bias)
+                e = zr[p // grid] - bias
+                if v == 0:   # standing still: decays by stop_decay, a positive excess counts stop_gain of itself
+                    new[v, p] = max(0.0, max(0.0, stop_decay * prev) + (stop_gain * e if e > 0 else e))
+                else:
+                    new[v, p] = max(0.0, max(0.0, decay * prev) + e)
         h = new
         v_best, p_best = np.unravel_index(np.argmax(h), h.shape)
         stopped, ref, best = v_best == 0, p_best // grid, h[v_best, p_best]
@@ -163,12 +187,13 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window):
     return out
 
 
-@pytest.mark.parametrize("grid, vmax", [(1, 2.0), (2, 1.5)])
-def test_road_matcher_against_plain_loops(grid: int, vmax: float) -> None:
+@pytest.mark.parametrize("grid, vmax, stop_gain, stop_decay", [(1, 2.0, 0.3, 0.95), (2, 1.5, 0.3, 0.95),
+                                                                (2, 1.5, 1.0, 0.8)])
+def test_road_matcher_against_plain_loops(grid: int, vmax: float, stop_gain: float, stop_decay: float) -> None:
     rng = np.random.default_rng(grid)
     sim = planted(rng, 20, route([(1.0, 12), (0.0, 5), (0.5, 8)], start=1), noise=0.6)
     params = {"vmax": vmax, "grid": grid, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 6.0, "lock": 3.0,
-              "rival_window": 2}
+              "rival_window": 2, "stop_gain": stop_gain, "stop_decay": stop_decay}
     m = RoadMatcher(20, **params)
     got = [m.update(row) for row in sim]
     want = naive_road(sim, **params)

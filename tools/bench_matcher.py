@@ -8,14 +8,16 @@ speed in {0 (stopped), 0.5, 1, 2, 3} references per frame, and now and then leav
 detour; each query encoding is a noisy copy of its true reference. Each frame costs the similarities the
 matcher asks for (``matchers.step``: every reference, or a local search's window and probe) from references
 stored as a map stores them (``compact.Encodings``, --storage) and one update of the registered online
-matcher. At each checkpoint it prints the mean per-frame time since the last checkpoint, current and peak
-RSS, R@1 (within +-1 reference) over the mapped frames so far and the share of frames searched locally.
+matcher. At each checkpoint it prints the mean per-frame time since the last checkpoint, current RSS (all;
+the process's own, anonymous; pages of mapped files, i.e. of the map with --mmap) and peak RSS, R@1 (within
++-1 reference) over the mapped frames so far and the share of frames searched locally.
 Random unit encodings of --dim dims: the similarity column scales with D. ``--coarse``: the frames that
 search the whole route go through ``coarse.CoarseSearch`` as ``Localizer`` does on large maps.
 """
 from __future__ import annotations
 
 import argparse
+import gc
 import resource
 import sys
 import time
@@ -28,12 +30,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from vpr_edge.coarse import CoarseSearch  # noqa: E402
 from vpr_edge.compact import STORAGES, Encodings  # noqa: E402
 from vpr_edge.matchers import get_matcher, step  # noqa: E402
+from vpr_edge.store import read_npz, write_npz  # noqa: E402
 
 
-def rss_mb() -> float:
+def rss_mb(field: str = "VmRSS") -> float:
+    """This process's resident memory in MB from /proc/self/status: ``VmRSS`` (all), ``RssAnon`` (its own
+    memory: state, signs, buffers) or ``RssFile`` (pages of mapped files: a memory-mapped map's rows)."""
     with open("/proc/self/status") as f:
         for line in f:
-            if line.startswith("VmRSS:"):
+            if line.startswith(field + ":"):
                 return int(line.split()[1]) / 1024
     return float("nan")
 
@@ -53,6 +58,9 @@ def main() -> int:
     p.add_argument("--window", type=int, default=None, help="stream: local search half-width (0 = global)")
     p.add_argument("--coarse", action="store_true", help="whole-route frames by coarse.CoarseSearch (signs, "
                    "then exact values for the best candidates), as Localizer does on maps of 20,000+ references")
+    p.add_argument("--mmap", type=Path, default=None, metavar="FILE",
+                   help="write the stored references to FILE (a map-style .npz) and read them back memory-mapped, "
+                   "as localize opens a map, so that RSS counts only the pages the frames touch")
     p.add_argument("--checkpoints", default="1000,10000,100000")
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args()
@@ -66,6 +74,12 @@ def main() -> int:
     dtw = matcher.stream(a.refs)
     stored = Encodings.pack(refs, a.storage)
     del refs
+    if a.mmap is not None:
+        write_npz(a.mmap, stored.to_arrays(), {"kind": "bench references", "schema": 1})
+        del stored
+        gc.collect()
+        stored = Encodings.from_arrays(read_npz(a.mmap, "bench references", 1, mmap=True)[0], a.storage)
+        print(f"references memory-mapped from {a.mmap}, RSS {rss_mb():.1f} MB")
     coarse = CoarseSearch(stored) if a.coarse else None
     if coarse is not None:
         t0 = time.perf_counter()
@@ -73,8 +87,8 @@ def main() -> int:
         print(f"signs packed in {1e3 * (time.perf_counter() - t0):.0f} ms ({coarse.signs.nbytes / 1e6:.1f} MB)")
     print(f"map {a.refs} refs x {a.dim} dims {a.storage} ({stored.values.nbytes / 1e6:.1f} MB), {a.frames} frames, "
           f"matcher {a.matcher} {matcher.params}")
-    print(f"{'frames':>8s} {'ms/frame':>9s} {'sim ms':>7s} {'match ms':>8s} {'RSS MB':>8s} {'peak MB':>8s} "
-          f"{'acc+-1':>7s} {'local':>6s}")
+    print(f"{'frames':>8s} {'ms/frame':>9s} {'sim ms':>7s} {'match ms':>8s} {'RSS MB':>8s} {'anon MB':>8s} "
+          f"{'file MB':>8s} {'peak MB':>8s} {'acc+-1':>7s} {'local':>6s}")
     pos, detour, speed, until = 0.0, 0, 1.0, 0
     t_sim = t_dtw = 0.0
     correct = counted = local = 0
@@ -114,7 +128,8 @@ def main() -> int:
         if t in checkpoints:
             n = t - last
             print(f"{t:8d} {1e3 * (t_sim + t_dtw) / n:9.3f} {1e3 * t_sim / n:7.3f} {1e3 * t_dtw / n:8.3f} "
-                  f"{rss_mb():8.1f} {peak_rss_mb():8.1f} {correct / max(counted, 1):7.3f} {local / n:6.2f}",
+                  f"{rss_mb():8.1f} {rss_mb('RssAnon'):8.1f} {rss_mb('RssFile'):8.1f} {peak_rss_mb():8.1f} "
+                  f"{correct / max(counted, 1):7.3f} {local / n:6.2f}",
                   flush=True)
             last, t_sim, t_dtw, local = t, 0.0, 0.0, 0
     return 0

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from vpr_edge.compact import Encodings
+from vpr_edge.store import release_pages
 
 COARSE_MIN_REFS = 20_000   # Localizer engages it on maps at least this long (shorter ones: exact is cheap)
 SIGN_BLOCK = 8192          # references per block of the Hamming pass (scratch ~ 2 MB at 2,048 dims)
@@ -53,7 +54,7 @@ class CoarseSearch:
     """Whole-route similarity rows of single queries against ``stored`` (``compact.Encodings``, R x D):
     exact for the ``keep`` best by sign agreement and for ``calib`` fixed random references, sign agreement
     scaled to the sample's exact mean and spread elsewhere. Signs are packed on the first call (one pass
-    over the stored encodings)."""
+    over the stored encodings, whose pages a memory-mapped map then releases)."""
 
     def __init__(self, stored: Encodings, keep: int = 1024, calib: int = 512, seed: int = 0) -> None:
         r = stored.shape[0]
@@ -69,6 +70,7 @@ class CoarseSearch:
             v = self.stored.values
             step = max(1, (8 << 20) // max(1, v.shape[1]))
             self._signs = np.concatenate([pack_signs(v[i:i + step]) for i in range(0, len(v), step)])
+            release_pages(v)   # the pass read every stored row: a memory-mapped map need not stay resident
         return self._signs
 
     def agreement(self, q: np.ndarray) -> np.ndarray:

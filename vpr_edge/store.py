@@ -5,6 +5,7 @@ import contextlib
 import hashlib
 import io
 import json
+import mmap as mmap_module
 import os
 import struct
 import tempfile
@@ -104,6 +105,22 @@ def _mapped_members(path: Path, z: zipfile.ZipFile) -> dict[str, np.ndarray]:
             out[name] = np.memmap(path, dtype=dtype, mode="r", offset=f.tell(), shape=shape,
                                   order="F" if fortran else "C")
     return out
+
+
+def release_pages(arr: np.ndarray) -> bool:
+    """Drop the resident pages of a memory-mapped array (one from ``read_npz(..., mmap=True)``) from this
+    process (``madvise(MADV_DONTNEED)``): a pass over the whole array, such as packing a large map's signs,
+    would otherwise leave every page it read counted in the process's RSS. The data stay in the file (and
+    the OS page cache) and are read again when next touched. Returns False (nothing done) for an array in
+    RAM or where the OS has no such call."""
+    base = arr
+    while base is not None and not isinstance(getattr(base, "_mmap", None), mmap_module.mmap):
+        base = getattr(base, "base", None)
+    dontneed = getattr(mmap_module, "MADV_DONTNEED", None)
+    if base is None or dontneed is None:
+        return False
+    base._mmap.madvise(dontneed)
+    return True
 
 
 def read_npz(path: str | os.PathLike[str], kind: str, schema: int | tuple[int, ...], mmap: bool = False

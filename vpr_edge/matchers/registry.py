@@ -18,8 +18,9 @@ _SEQSLAM = {"ds": 10, "vmin": 0.5, "vmax": 3.0, "r_window": 10, "match_window": 
 MATCHERS: dict[str, Matcher] = {m.name: m for m in (
     Matcher("stream", "trajectories over (position, speed) with contrast-normalised similarities: any speed "
             "0-4 places/frame, lock-on anywhere, lost state (online, default)", start=RoadMatcher,
-            params={"vmax": 4.0, "grid": 2, "decay": 0.9, "bias": 1.0, "turn": 1.0, "memory": 50.0, "lock": 5.0,
-                    "rival_window": 10, "window": 100, "probe": 512, "check": 100, "span": 5, "hold": 2.0},
+            params={"vmax": 4.0, "grid": 2, "decay": 0.9, "bias": 1.0, "turn": 1.0, "memory": 50.0, "lock": 6.0,
+                    "rival_window": 10, "window": 100, "probe": 512, "check": 100, "span": 5, "hold": 2.0,
+                    "stop_gain": 0.3, "stop_decay": 0.95},
             min_confidence=1.0),
     Matcher("single", "best single match per frame, no sequence information (online)", start=BestMatch),
     Matcher("stream-dtw", "decayed streaming DTW over 1 - cos (online; the first streaming matcher, kept "
