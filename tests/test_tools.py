@@ -17,14 +17,17 @@ def tool(name: str, *args: str) -> str:
     return proc.stdout
 
 
-def test_bench_matcher_reports_each_checkpoint() -> None:
+@pytest.mark.parametrize("mapped", [False, True])
+def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> None:
+    extra = ["--mmap", str(tmp_path / "refs.npz"), "--coarse"] if mapped else []
     out = tool("bench_matcher.py", "--refs", "300", "--frames", "2000", "--dim", "32", "--checkpoints",
-               "500,2000", "--storage", "int8", "--window", "20")
-    rows = [line.split() for line in out.splitlines()[2:]]
+               "500,2000", "--storage", "int8", "--window", "20", *extra)
+    rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
     assert [r[0] for r in rows] == ["500", "2000"]
     assert all(float(r[-2]) > 0.8 for r in rows)          # synthetic route is followed
     assert all(float(r[-1]) > 0.3 for r in rows)          # mostly by the local search
-    assert all(float(r[4]) > 0 and float(r[5]) > 0 for r in rows)   # RSS columns are filled
+    assert all(float(r[4]) > 0 and float(r[5]) > 0 and float(r[7]) > 0 for r in rows)   # RSS columns filled
+    assert ("memory-mapped from" in out) == mapped and (tmp_path / "refs.npz").is_file() == mapped
 
 
 def test_bench_map_reports_each_size(tmp_path: Path, small_refs: Path) -> None:

@@ -25,8 +25,8 @@ repeat in full let a trajectory parked on a look-alike (a hub, a station outside
 moving one and lock on where nothing is mapped. So at speed 0 a frame's excess z - bias counts only
 ``stop_gain`` of itself when positive (in full when negative), and the state decays by ``stop_decay``
 instead of ``decay``, holding a lock through a stop rather than rebuilding it. (Measured with
-``tools/eval_streams.py``: on nordland-dev stream R@1 rose on all nine streams, stop-and-go 0.615 -> 0.694,
-and 90% instead of 81% of the detour's unmapped frames came out lost.)
+``tools/eval_streams.py``: on nordland-dev stream R@1 rose on all seven derived streams, stop-and-go
+0.615 -> 0.694, and 90% instead of 81% of the detour's unmapped frames came out lost.)
 
 The answer is the position of the best state. Its score does two jobs, so it has two parts:
 
