@@ -46,6 +46,17 @@ def test_help() -> None:
     assert "--codebook" in run("build-map", "--help").stdout
 
 
+@pytest.mark.parametrize("argv, needle", [(["localize", "--bogus"], "--bogus"),
+                                          (["build-map"], "Missing argument"),
+                                          (["localize", "-m", "a", "-s", "b", "--window", "-1"], "--window"),
+                                          (["evaluate", "--modes"], "--modes")])
+def test_usage_errors_are_one_line(argv: list[str], needle: str) -> None:
+    proc = run(*argv)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert_one_line_error(proc, needle, "-h'")
+    assert len(proc.stderr.splitlines()) == 1, proc.stderr
+
+
 def test_map_contents(small_map: Path, model_path: Path) -> None:
     pm = PlaceMap.load(small_map)
     assert pm.encodings.shape == (24, 2 * 8 * 32)

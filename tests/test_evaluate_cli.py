@@ -13,7 +13,7 @@ from test_cli import assert_one_line_error, run
 from vpr_edge.streams import write_ground_truth
 
 JSON_KEYS = {"recall_at_1", "recall_at_5", "recall_at_10", "auc", "ap", "precision_at_full_recall",
-             "recall_at_full_precision", "median_error"}
+             "recall_at_full_precision", "median_error", "lost_unmapped", "lost_mapped", "ms_per_frame", "settings"}
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +47,8 @@ def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_qu
                "--plot", png, "--save-similarity", sim, "--modes", "single,stream,dtw,seqslam-online")
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(js.read_text())
-    assert set(doc) == {"n_queries", "n_refs", "modes"} and doc["n_queries"] == 24 and doc["n_refs"] == 24
+    assert set(doc) == {"schema_version", "n_queries", "n_refs", "tolerance", "modes"}
+    assert doc["n_queries"] == 24 and doc["n_refs"] == 24 and doc["tolerance"] == 1
     assert set(doc["modes"]) == {"single", "stream", "dtw", "seqslam-online"}
     assert all(set(m) == JSON_KEYS for m in doc["modes"].values())
     assert doc["modes"]["dtw"]["recall_at_1"] > 0.9            # aligned sequences: fixed-end DTW is right
@@ -81,7 +82,10 @@ def test_evaluate_gt_matrix_and_positions(tmp_path: Path) -> None:
     b = run("evaluate", "--similarity", s, "--gt-positions", tmp_path / "r.csv", tmp_path / "q.csv", "--radius", "2",
             "--modes", "single", "--json", tmp_path / "b.json")
     assert a.returncode == 0 and b.returncode == 0, a.stderr + b.stderr
-    assert (json.loads((tmp_path / "a.json").read_text()) == json.loads((tmp_path / "b.json").read_text()))
+    docs = [json.loads((tmp_path / f).read_text()) for f in ("a.json", "b.json")]
+    for doc in docs:                                                      # timings differ run to run
+        assert doc["modes"]["single"].pop("ms_per_frame") >= 0
+    assert docs[0] == docs[1]
 
 
 def test_evaluate_pixels_front_end(tmp_path: Path, small_refs: Path, small_queries: Path, aligned_gt: Path) -> None:
@@ -123,3 +127,27 @@ def test_evaluate_bad_input(tmp_path: Path, eval_map: Path, small_queries: Path,
                           text=True, timeout=300, env={"PYTHONPATH": str(fake), "PATH": "/usr/bin:/bin"})
     assert_one_line_error(proc, "matplotlib")
     assert proc.returncode == 2 and existing.read_text() == "{}" and not (tmp_path / "pr.png").exists()
+
+
+def test_evaluate_window_reaches_the_stream_matcher(tmp_path: Path) -> None:
+    """--window sets the stream's local search as localize's does: each run equals the matcher called directly
+    with that window (1,000 references: above the 400 where the default window engages)."""
+    from vpr_edge.evaluate import evaluate_mode
+    from vpr_edge.groundtruth import pad
+    from vpr_edge.matchers import get_matcher
+
+    s, gt = planted_similarity(tmp_path, q=200, r=1000)
+    sim, truth = np.load(s), pad([[p] for p in np.arange(200) + 10])
+    for window in (None, 0, 20):
+        js = tmp_path / f"w{window}.json"
+        extra = [] if window is None else ["--window", str(window)]
+        proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream,single", "--json", js, *extra)
+        assert proc.returncode == 0 and "does not apply" not in proc.stderr, proc.stderr
+        got = json.loads(js.read_text())["modes"]["stream"]
+        matcher = get_matcher("stream") if window is None else get_matcher("stream").with_params(window=window)
+        want = evaluate_mode(matcher, sim, truth)
+        assert got["recall_at_1"] == pytest.approx(want.recall[1]) and got["auc"] == pytest.approx(want.auc)
+        assert got["settings"] == json.loads(json.dumps(want.settings))     # the window it ran with, recorded
+        assert got["settings"]["window"] == (get_matcher("stream").params["window"] if window is None else window)
+    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single", "--window", "5")
+    assert proc.returncode == 0 and "--window does not apply" in proc.stderr

@@ -118,7 +118,8 @@ def main() -> int:
              + " | ".join(cols) + " |",
              "|---" * (9 + len(cols)) + "|"]
     for r in rows:
-        lines.append(f"| {r['pca'] or 'none'} | {r['components']} | {r['fit']} | {r['seed']} | {r['storage']} | {r['dim']:,} | "
+        lines.append(f"| {r['pca'] or 'none'} | {r['components']} | {r['fit']} | {r['seed']} | {r['storage']} | "
+                     f"{r['dim']:,} | "
                      f"{r['bytes']:,} | {r['bytes'] * 100_000 / 1e6:,.0f} MB | {r['fit_s']} | "
                      + " | ".join(f"{r[c][0]:.3f} / {r[c][1]:.3f}" for c in cols) + " |")
     (a.out / "size.md").write_text("\n".join(lines) + "\n")

@@ -284,8 +284,9 @@ _MODE_HELP = ("Matcher. Online (a result per frame): " + ", ".join(n for n, m in
 @app.command("localize")
 def localize_cmd(
     map_path: Path = typer.Option(..., "--map", "-m", help="Map file written by build-map."),
-    stream: str = typer.Option(..., "--stream", "-s", metavar="SOURCE", help="Folder of frames (file-name order), a video file, "
-                                "a camera (0, 1, ... or /dev/video0) or a network stream (rtsp://...)."),
+    stream: str = typer.Option(..., "--stream", "-s", metavar="SOURCE",
+                               help="Folder of frames (file-name order), a video file, "
+                                    "a camera (0, 1, ... or /dev/video0) or a network stream (rtsp://...)."),
     model: Optional[Path] = typer.Option(None, help="ONNX feature model; must be the map's model (default: "
                                          "$VPR_EDGE_MODEL if set, else the file the map was built with if it "
                                          "still exists, else the bundled one)."),
@@ -401,6 +402,9 @@ def evaluate_cmd(
                                         "similarity matrix: " + ", ".join(MATCHERS) + " (default: all that "
                                         "apply; svm with a map built with --svm)."),
     tolerance: int = typer.Option(1, min=0, help="Frames of slack around the true references (thesis: 1)."),
+    window: Optional[int] = typer.Option(None, min=0, help="stream: local search window, as localize's "
+                                         "(default %d; 0 = every reference every frame)."
+                                         % MATCHERS["stream"].params["window"]),
     min_confidence: Optional[float] = typer.Option(None, help="Lost threshold for modes with a lost state "
                                                    "(default: each mode's own)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the figures as JSON here."),
@@ -433,6 +437,10 @@ def evaluate_cmd(
         matchers = {name: get_matcher(name) for name in chosen}
         if not matchers:
             raise VprError("--modes names no matcher")
+        if window is not None:
+            if not any("window" in m.params for m in matchers.values()):
+                warn(f"--window does not apply to modes {','.join(matchers)}; ignored")
+            matchers = {n: m.with_params(window=window) if "window" in m.params else m for n, m in matchers.items()}
         for target in (json_out, plot_out, save_similarity):
             if target:
                 check_writable(target)
@@ -514,7 +522,7 @@ def evaluate_cmd(
                    f"{'-' if encode_ms != encode_ms else f'{encode_ms:.1f}'} ms/frame")
         typer.echo(report.table(reports))
         if json_out:
-            report.write_json(json_out, sim.shape[0], sim.shape[1], reports)
+            report.write_json(json_out, sim.shape[0], sim.shape[1], reports, tolerance)
         if plot_out:
             report.plot(plot_out, reports, f"{queries or similarity} ({sim.shape[0]} queries, {sim.shape[1]} refs)")
 
@@ -530,9 +538,29 @@ def info_cmd(map_path: Path = typer.Argument(..., help="Map file written by buil
         typer.echo(json.dumps(summary | meta, indent=1, sort_keys=True))
 
 
+# click's UsageError and ClickException, whether typer vendors click or depends on it
+_USAGE_ERROR, _CLICK_ERROR = typer.BadParameter.__mro__[1:3]
+
+
 def main() -> None:
-    """Console-script entry point."""
-    app()
+    """Console-script entry point: a usage error (unknown option, missing argument) is one line on stderr,
+    ``vpr-edge: error: COMMAND: problem (see 'COMMAND -h')``, exit code 2, like every other refusal."""
+    try:
+        rc = app(prog_name="vpr-edge", standalone_mode=False)
+    except _USAGE_ERROR as e:
+        if type(e).__name__ == "NoArgsIsHelpError":          # bare `vpr-edge` or `vpr-edge CMD`: the help
+            e.show()
+            sys.exit(e.exit_code)
+        where = e.ctx.command_path if e.ctx is not None else "vpr-edge"
+        print(f"vpr-edge: error: {where}: {e.format_message().rstrip('.')} (see '{where} -h')", file=sys.stderr)
+        sys.exit(2)
+    except _CLICK_ERROR as e:
+        print(f"vpr-edge: error: {e.format_message()}", file=sys.stderr)
+        sys.exit(e.exit_code)
+    except typer.Abort:
+        print("vpr-edge: aborted", file=sys.stderr)
+        sys.exit(1)
+    sys.exit(rc if isinstance(rc, int) else 0)
 
 
 if __name__ == "__main__":

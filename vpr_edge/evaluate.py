@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -15,7 +16,8 @@ RECALL_KS: tuple[int, ...] = (1, 5, 10)
 @dataclass(frozen=True)
 class ModeReport:
     """One matcher's figures. ``lost_unmapped``/``lost_mapped``: share of frames of unmapped / mapped places
-    whose score is below the matcher's lost threshold (NaN where it has none or no such frames)."""
+    whose score is below the matcher's lost threshold (NaN where it has none or no such frames).
+    ``settings``: the matcher's parameters and the lost threshold it was scored with."""
 
     recall: dict[int, float]
     auc: float
@@ -27,6 +29,7 @@ class ModeReport:
     lost_mapped: float
     match_ms: float
     curve: metrics.PRCurve
+    settings: dict[str, Any] = field(default_factory=dict)
 
     def as_json(self) -> dict:
         """The keys of ``evaluate --json`` (NaN as null)."""
@@ -36,7 +39,9 @@ class ModeReport:
             "auc": num(self.auc), "ap": num(self.ap),
             "precision_at_full_recall": num(self.precision_at_full_recall),
             "recall_at_full_precision": num(self.recall_at_full_precision),
-            "median_error": num(self.median_error)}
+            "median_error": num(self.median_error), "lost_unmapped": num(self.lost_unmapped),
+            "lost_mapped": num(self.lost_mapped), "ms_per_frame": num(self.match_ms),
+            "settings": self.settings}
 
 
 def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, tolerance: int = 1,
@@ -46,7 +51,8 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     result = matcher.run(sim, k=max(RECALL_KS))
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)
     threshold = matcher.min_confidence if min_confidence is None else min_confidence
-    return score_result(result, truth, tolerance, threshold, ms)
+    return replace(score_result(result, truth, tolerance, threshold, ms),
+                   settings=matcher.params | {"min_confidence": threshold})
 
 
 def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshold: float | None = None,

@@ -27,9 +27,15 @@ def table(reports: dict[str, ModeReport]) -> str:
     return "\n".join(lines)
 
 
-def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, reports: dict[str, ModeReport]) -> None:
-    """``{"n_queries", "n_refs", "modes": {MODE: {recall_at_1, ..., median_error}}}``, written atomically."""
-    doc = {"n_queries": n_queries, "n_refs": n_refs, "modes": {m: r.as_json() for m, r in reports.items()}}
+JSON_SCHEMA_VERSION = 2   # 2: lost shares, ms_per_frame and each mode's settings; the tolerance
+
+
+def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, reports: dict[str, ModeReport],
+               tolerance: int) -> None:
+    """``{"schema_version", "n_queries", "n_refs", "tolerance", "modes": {MODE: {recall_at_1, ..., settings}}}``,
+    written atomically."""
+    doc = {"schema_version": JSON_SCHEMA_VERSION, "n_queries": n_queries, "n_refs": n_refs,
+           "tolerance": tolerance, "modes": {m: r.as_json() for m, r in reports.items()}}
     with atomic_output(path) as tmp:
         tmp.write_text(json.dumps(doc, indent=1) + "\n")
 

@@ -25,7 +25,8 @@ class DenseSift:
 
     def _grid(self) -> list[cv2.KeyPoint]:
         return [cv2.KeyPoint(float(x), float(y), float(self.size))
-                for y in range(self.step // 2, self.height, self.step) for x in range(self.step // 2, self.width, self.step)]
+                for y in range(self.step // 2, self.height, self.step)
+                for x in range(self.step // 2, self.width, self.step)]
 
     @property
     def n_local(self) -> int:
