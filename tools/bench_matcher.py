@@ -65,6 +65,7 @@ def main() -> int:
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args()
     rng = np.random.default_rng(a.seed)
+    route = np.random.default_rng([a.seed, 1])   # the route's speeds and detours: the same whatever --dim
     refs = rng.normal(size=(a.refs, a.dim)).astype(np.float32)
     refs /= np.linalg.norm(refs, axis=1, keepdims=True)
     checkpoints = sorted(int(c) for c in a.checkpoints.split(",") if int(c) <= a.frames)
@@ -103,7 +104,7 @@ def main() -> int:
 
     noise_scale = a.noise / np.sqrt(a.dim)
     for t in range(1, a.frames + 1):
-        if detour == 0 and rng.random() < 1e-3:
+        if detour == 0 and route.random() < 1e-3:
             detour = 50
         if detour:
             detour -= 1
@@ -111,7 +112,7 @@ def main() -> int:
             true = -1
         else:
             if t >= until:
-                speed, until = float(rng.choice([0.0, 0.5, 1.0, 2.0, 3.0])), t + int(rng.integers(20, 201))
+                speed, until = float(route.choice([0.0, 0.5, 1.0, 2.0, 3.0])), t + int(route.integers(20, 201))
             pos = (pos + speed) % a.refs
             true = int(pos)
             q = stored.dense_row(true) + noise_scale * rng.normal(size=a.dim).astype(np.float32)
