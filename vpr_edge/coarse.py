@@ -69,9 +69,14 @@ class CoarseSearch:
         if self._signs is None:
             v = self.stored.values
             step = max(1, (8 << 20) // max(1, v.shape[1]))
-            self._signs = np.concatenate([pack_signs(v[i:i + step]) for i in range(0, len(v), step)])
-            release_pages(v)   # the pass read every stored row: a memory-mapped map need not stay resident
+            self._signs = np.concatenate([self._pack(v[i:i + step]) for i in range(0, len(v), step)])
         return self._signs
+
+    @staticmethod
+    def _pack(block: np.ndarray) -> np.ndarray:
+        signs = pack_signs(block)
+        release_pages(block)   # a memory-mapped map: the pass keeps no more than a block mapped
+        return signs
 
     def agreement(self, q: np.ndarray) -> np.ndarray:
         """Query (D,) -> sign agreement with every reference (R,) float32 in [-1, 1]."""

@@ -7,9 +7,11 @@ is used and never expanded whole into RAM.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from vpr_edge.store import RowReader, release_pages
 
 DTYPES = {"int8": np.int8, "float16": np.float16, "float32": np.float32}  # storage name -> stored dtype
 STORAGES = tuple(DTYPES)
@@ -38,6 +40,16 @@ class Encodings:
     values: np.ndarray
     storage: str
     scale: np.ndarray | None = None
+    _rows: RowReader | None = field(default=None, init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        # a memory-mapped map: chosen rows are read with pread into a bounded cache, not through the mapping
+        if isinstance(self.values, np.memmap) and self.values.ndim == 2 and self.values.flags.c_contiguous:
+            object.__setattr__(self, "_rows", RowReader(self.values))
+
+    def take(self, rows: np.ndarray) -> np.ndarray:
+        """The stored values of references ``rows`` (n,) int -> (n, D), in the stored dtype."""
+        return self._rows.take(rows) if self._rows is not None else np.asarray(self.values[rows])
 
     @classmethod
     def pack(cls, x: np.ndarray, storage: str) -> "Encodings":
@@ -85,7 +97,7 @@ class Encodings:
 
     def dense_row(self, r: int) -> np.ndarray:
         """Reference ``r`` as float32 (D,)."""
-        row = np.asarray(self.values[r], np.float32)
+        row = self.take(np.array([r]))[0].astype(np.float32)
         return row * self.scale[r] if self.scale is not None else row
 
     def similarity(self, queries: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
@@ -94,7 +106,7 @@ class Encodings:
         BLOCK_BYTES of float32 scratch), from the stored values."""
         q = np.atleast_2d(np.asarray(queries, np.float32))
         if rows is not None:
-            out = q @ np.asarray(self.values[rows], np.float32).T
+            out = q @ self.take(rows).astype(np.float32).T
             return out * self.scale[rows] if self.scale is not None else out
         if self.storage == "float32" and not isinstance(self.values, np.memmap):
             return q @ self.values.T
@@ -105,6 +117,7 @@ class Encodings:
         for i in range(0, r, rows_per_block):
             block = self.values[i:i + rows_per_block]
             np.copyto(scratch[:len(block)], block, casting="unsafe")
+            release_pages(block)            # a memory-mapped map: the pass keeps no more than a block mapped
             out[:, i:i + len(block)] = q @ scratch[:len(block)].T
         if self.scale is not None:
             out *= self.scale
