@@ -139,3 +139,6 @@ def test_row_reader_against_the_array(tmp_path: Path, cache_rows: int) -> None:
             for idx in asks:
                 np.testing.assert_array_equal(reader.take(idx), x[idx])
         assert reader.take(np.arange(0)).shape == (0, 33)
+        np.testing.assert_array_equal(reader.take(np.array([-1, -500])), x[[-1, -500]])
+        with pytest.raises(IndexError):
+            reader.take(np.array([500]))

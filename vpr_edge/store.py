@@ -182,6 +182,9 @@ class RowReader:
     def take(self, idx: np.ndarray) -> np.ndarray:
         """Rows ``idx`` (n,) int, any order, repeats allowed -> (n, D) copies."""
         idx = np.asarray(idx, np.int64).reshape(-1)
+        if idx.size and (idx.min() < -self.shape[0] or idx.max() >= self.shape[0]):
+            raise IndexError(f"row index out of range for {self.shape[0]} rows")
+        idx = np.where(idx < 0, idx + self.shape[0], idx)
         with self._lock:
             slots = self._slot[idx]
             hit = slots >= 0
