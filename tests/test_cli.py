@@ -49,7 +49,8 @@ def test_help() -> None:
 @pytest.mark.parametrize("argv, needle", [(["localize", "--bogus"], "--bogus"),
                                           (["build-map"], "Missing argument"),
                                           (["localize", "-m", "a", "-s", "b", "--window", "-1"], "--window"),
-                                          (["evaluate", "--modes"], "--modes")])
+                                          (["evaluate", "--modes"], "--modes"),
+                                          (["evaluate", "--similarity", "s.npy", "--window", "-1"], "--window")])
 def test_usage_errors_are_one_line(argv: list[str], needle: str) -> None:
     proc = run(*argv)
     assert proc.returncode == 2 and proc.stdout == ""

@@ -21,7 +21,6 @@ from __future__ import annotations
 import numpy as np
 
 from vpr_edge.compact import Encodings
-from vpr_edge.store import release_pages
 
 COARSE_MIN_REFS = 20_000   # Localizer engages it on maps at least this long (shorter ones: exact is cheap)
 SIGN_BLOCK = 8192          # references per block of the Hamming pass (scratch ~ 2 MB at 2,048 dims)
@@ -67,16 +66,9 @@ class CoarseSearch:
     def signs(self) -> np.ndarray:
         """(R, W) uint64 packed signs of the stored encodings (built once, a block at a time)."""
         if self._signs is None:
-            v = self.stored.values
-            step = max(1, (8 << 20) // max(1, v.shape[1]))
-            self._signs = np.concatenate([self._pack(v[i:i + step]) for i in range(0, len(v), step)])
+            step = max(1, (8 << 20) // max(1, self.stored.shape[1]))
+            self._signs = np.concatenate([pack_signs(block) for _, block in self.stored.blocks(step)])
         return self._signs
-
-    @staticmethod
-    def _pack(block: np.ndarray) -> np.ndarray:
-        signs = pack_signs(block)
-        release_pages(block)   # a memory-mapped map: the pass keeps no more than a block mapped
-        return signs
 
     def agreement(self, q: np.ndarray) -> np.ndarray:
         """Query (D,) -> sign agreement with every reference (R,) float32 in [-1, 1]."""

@@ -7,6 +7,7 @@ is used and never expanded whole into RAM.
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -95,6 +96,15 @@ class Encodings:
         out = np.asarray(self.values, np.float32)
         return out * self.scale[:, None] if self.scale is not None else out
 
+    def blocks(self, rows: int) -> Iterator[tuple[int, np.ndarray]]:
+        """(first row, stored values (n <= rows, D)) for every ``rows`` references in order: a pass over the
+        map; on a memory-mapped map each block's pages are dropped once the caller is done with it, so the
+        pass keeps no more than a block mapped."""
+        for i in range(0, self.shape[0], rows):
+            block = self.values[i:i + rows]
+            yield i, block
+            release_pages(block)
+
     def dense_row(self, r: int) -> np.ndarray:
         """Reference ``r`` as float32 (D,)."""
         row = self.take(np.array([r]))[0].astype(np.float32)
@@ -114,10 +124,8 @@ class Encodings:
         out = np.empty((len(q), r), np.float32)
         rows_per_block = max(1, BLOCK_BYTES // (4 * d))
         scratch = np.empty((min(r, rows_per_block), d), np.float32)
-        for i in range(0, r, rows_per_block):
-            block = self.values[i:i + rows_per_block]
+        for i, block in self.blocks(rows_per_block):
             np.copyto(scratch[:len(block)], block, casting="unsafe")
-            release_pages(block)            # a memory-mapped map: the pass keeps no more than a block mapped
             out[:, i:i + len(block)] = q @ scratch[:len(block)].T
         if self.scale is not None:
             out *= self.scale
