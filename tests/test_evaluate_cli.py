@@ -13,7 +13,8 @@ from test_cli import assert_one_line_error, run
 from vpr_edge.streams import write_ground_truth
 
 JSON_KEYS = {"recall_at_1", "recall_at_5", "recall_at_10", "auc", "ap", "precision_at_full_recall",
-             "recall_at_full_precision", "median_error", "lost_unmapped", "lost_mapped", "ms_per_frame", "settings"}
+             "recall_at_full_precision", "median_error", "lost_unmapped", "lost_mapped", "ms_per_frame", "lock_frames",
+             "exit_frames", "settings"}
 
 
 @pytest.fixture(scope="module")

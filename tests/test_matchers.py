@@ -7,6 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from vpr_edge.evaluate import evaluate_mode
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.matchers.contrast import local_contrast
 from vpr_edge.matchers.base import step
@@ -156,6 +157,22 @@ def test_road_matcher_detour_lost_and_restart() -> None:
     online.reset()
     again = [online.update(row)[0] for row in sim[125:]]
     assert np.mean(np.abs(np.array(again[10:]) - places[135:]) <= 1) > 0.95
+
+
+def test_evaluate_reports_lock_on_and_exit_delays() -> None:
+    """evaluate's lock / exit figures on the planted detour: the stream locks on within a few frames at the
+    start and after re-entering, and reports lost within about 1 / (1 - decay) frames of leaving (its evidence
+    fades, it does not vanish); a matcher without a lost state has no exit figure."""
+    rng = np.random.default_rng(9)
+    places = np.concatenate([route([(1.0, 40), (2.0, 30)], start=50), np.full(40, -1),
+                             route([(1.5, 40)], start=400)])
+    truth = places[:, None]
+    sim = planted(rng, 600, places)
+    stream = evaluate_mode(get_matcher("stream"), sim, truth)
+    assert len(stream.lock_frames) == 2 and max(stream.lock_frames) <= 8
+    assert len(stream.exit_frames) == 1 and stream.exit_frames[0] <= 12
+    single = evaluate_mode(get_matcher("single"), sim, truth)
+    assert single.exit_frames == () and len(single.lock_frames) == 2
 
 
 def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, stop_gain, stop_decay):

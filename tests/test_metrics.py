@@ -73,3 +73,37 @@ def test_recall_at_k_and_tolerance() -> None:
     err = metrics.localisation_error(ranked[:, 0], truth)
     np.testing.assert_array_equal(err[[0, 1, 3]], [1, 7, 9])
     assert np.isnan(err[2])
+
+
+def naive_delays(region: np.ndarray, event: np.ndarray) -> list[float]:
+    """Frame by frame: at each run start of ``region``, count frames until ``event`` or the run's end."""
+    out, i = [], 0
+    while i < len(region):
+        if region[i] and (i == 0 or not region[i - 1]):
+            j = i
+            while j < len(region) and region[j] and not event[j]:
+                j += 1
+            out.append(float(j - i) if j < len(region) and region[j] else float("nan"))
+        i += 1
+    return out
+
+
+def test_transition_delays_against_naive_loop() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        q = int(rng.integers(1, 40))
+        mapped = rng.random(q) < rng.uniform(0.2, 1.0)
+        found, lost = rng.random(q) < 0.3, rng.random(q) < 0.3
+        lock, exits = metrics.transition_delays(mapped, found, lost)
+        np.testing.assert_array_equal(lock, naive_delays(mapped, found))
+        np.testing.assert_array_equal(exits, naive_delays(~mapped, lost))
+
+
+def test_transition_delays_by_hand() -> None:
+    mapped = np.array([1, 1, 1, 0, 0, 0, 1, 1, 0, 0], bool)
+    found = np.array([0, 0, 1, 0, 0, 0, 0, 0, 0, 0], bool)     # locks at frame 2; never after the re-entry
+    lost = np.array([0, 0, 0, 0, 1, 1, 0, 0, 1, 0], bool)      # lost one frame after leaving; at once the 2nd time
+    lock, exits = metrics.transition_delays(mapped, found, lost)
+    np.testing.assert_array_equal(lock, [2.0, np.nan])
+    np.testing.assert_array_equal(exits, [1.0, 0.0])
+    assert metrics.runs(np.array([], bool)) == [] and metrics.runs(np.ones(3, bool)) == [(0, 3)]

@@ -7,7 +7,8 @@
 
 For each stream OUT/KIND (with OUT/KIND.csv) it runs `vpr-edge evaluate --map OUT/map.npz` and
 `vpr-edge evaluate --features pixels --refs OUT/ref`, each writing OUT/eval/KIND.{map,pixels}.json, then prints
-Markdown tables of R@1 and AUC (rows: front end + mode; columns: streams) and the stream mode's lost shares.
+Markdown tables of R@1 and AUC (rows: front end + mode; columns: streams) and the stream mode's lost shares
+and lock-on / exit frames on the detour.
 """
 from __future__ import annotations
 
@@ -53,11 +54,17 @@ def main() -> int:
                 vals = [results[k, front]["modes"][mode][key] for k in KINDS]
                 print(f"| {'IFV' if front == 'map' else 'pixels'} {mode} | " +
                       " | ".join("-" if v is None else f"{v:.3f}" for v in vals) + " |")
-    print("\nstream mode, share of frames reported lost (unmapped places / mapped places), detour stream:")
+    print("\nstream mode, detour stream: share of frames reported lost (unmapped places / mapped places); frames "
+          "to lock on (start / re-entry) and to report lost after leaving the map:")
     for front in ("map", "pixels"):
-        txt = (out / f"detour.{front}.txt").read_text().splitlines()
-        row = next(line for line in txt if line.startswith("stream "))
-        print(f"  {front}: {row.split()[-3]} / {row.split()[-2]}")
+        r = results["detour", front]["modes"].get("stream")
+        if r is None:
+            continue
+
+        def frames(v: list) -> str:
+            return "/".join("never" if d is None else f"{d:.0f}" for d in v)
+        print(f"  {front}: lost {r['lost_unmapped']:.3f} / {r['lost_mapped']:.3f}; lock {frames(r['lock_frames'])}; "
+              f"exit {frames(r['exit_frames'])}")
     return 0
 
 

@@ -17,7 +17,10 @@ RECALL_KS: tuple[int, ...] = (1, 5, 10)
 class ModeReport:
     """One matcher's figures. ``lost_unmapped``/``lost_mapped``: share of frames of unmapped / mapped places
     whose score is below the matcher's lost threshold (NaN where it has none or no such frames).
-    ``settings``: the matcher's parameters and the lost threshold it was scored with."""
+    ``settings``: the matcher's parameters and the lost threshold it was scored with. ``lock_frames``: per run
+    of mapped frames (the stream's start, each re-entry), frames until the first confident correct answer;
+    ``exit_frames``: per run of unmapped frames, frames until the first lost one (empty without a lost state);
+    NaN where it did not happen within the run (``metrics.transition_delays``)."""
 
     recall: dict[int, float]
     auc: float
@@ -30,6 +33,8 @@ class ModeReport:
     match_ms: float
     curve: metrics.PRCurve
     settings: dict[str, Any] = field(default_factory=dict)
+    lock_frames: tuple[float, ...] = ()
+    exit_frames: tuple[float, ...] = ()
 
     def as_json(self) -> dict:
         """The keys of ``evaluate --json`` (NaN as null)."""
@@ -41,6 +46,7 @@ class ModeReport:
             "recall_at_full_precision": num(self.recall_at_full_precision),
             "median_error": num(self.median_error), "lost_unmapped": num(self.lost_unmapped),
             "lost_mapped": num(self.lost_mapped), "ms_per_frame": num(self.match_ms),
+            "lock_frames": [num(v) for v in self.lock_frames], "exit_frames": [num(v) for v in self.exit_frames],
             "settings": self.settings}
 
 
@@ -68,8 +74,10 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
     def share(mask: np.ndarray) -> float:
         return float(lost[mask].mean()) if threshold is not None and mask.any() else float("nan")
 
+    lock, exits = metrics.transition_delays(mapped, correct[:, 0] & ~lost, lost)
     return ModeReport({k: metrics.recall_at_k(correct, mapped, k) for k in RECALL_KS},
                       metrics.auc_trapezoid(curve), metrics.average_precision(curve),
                       metrics.precision_at_full_recall(curve), metrics.recall_at_full_precision(curve),
                       float(np.nanmedian(err)) if mapped.any() else float("nan"),
-                      share(~mapped), share(mapped), match_ms, curve)
+                      share(~mapped), share(mapped), match_ms, curve, lock_frames=tuple(lock.tolist()),
+                      exit_frames=tuple(exits.tolist()) if threshold is not None else ())

@@ -1,5 +1,6 @@
 """Place-recognition metrics over matcher results: recall@K, the precision-recall curve, AUC (thesis eq. 5.1),
-AP (eq. 5.2), precision at full recall, recall at full precision, localisation error.
+AP (eq. 5.2), precision at full recall, recall at full precision, localisation error, and the delays of a stream
+matcher at the route's transitions (lock-on after entering mapped places, lost after leaving them).
 
 Ground truth is a padded int array ``truth`` (Q, T): per query its correct references, -1 as padding; a
 query with no correct reference (a place not in the map) has a row of -1. A candidate is correct if it is
@@ -95,3 +96,29 @@ def localisation_error(refs: np.ndarray, truth: np.ndarray) -> np.ndarray:
     err = dist.min(axis=1).astype(np.float64)
     err[~valid.any(axis=1)] = np.nan
     return err
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """The runs of True in ``mask`` (Q,) bool as [start, stop) frame pairs, in order."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[False], np.asarray(mask, bool), [False]]).astype(np.int8)))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+def first_event_delays(region: np.ndarray, event: np.ndarray) -> np.ndarray:
+    """For each run of ``region`` (Q,) bool: frames from its first frame to the first frame in it where
+    ``event`` (Q,) bool holds (0 = at once) -> (number of runs,) float; NaN where it never holds in the run."""
+    out = []
+    for a, b in runs(region):
+        hit = np.flatnonzero(event[a:b])
+        out.append(float(hit[0]) if len(hit) else float("nan"))
+    return np.asarray(out, np.float64)
+
+
+def transition_delays(mapped: np.ndarray, found: np.ndarray, lost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A stream's behaviour where the route enters and leaves the map, per frame (Q,) bool: ``mapped`` (the
+    frame's place is in the map), ``found`` (a confident, correct answer), ``lost`` (reported lost) ->
+    (lock-on delays: per run of mapped frames, including one at the stream's start, frames until the first
+    found one; exit delays: per run of unmapped frames, frames until the first lost one), NaN where it never
+    happened within the run."""
+    mapped = np.asarray(mapped, bool)
+    return first_event_delays(mapped, np.asarray(found, bool)), first_event_delays(~mapped, np.asarray(lost, bool))

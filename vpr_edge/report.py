@@ -8,26 +8,33 @@ from vpr_edge.errors import VprError
 from vpr_edge.evaluate import ModeReport
 from vpr_edge.store import atomic_output
 
-_COLUMNS = ("R@1", "R@5", "R@10", "AUC", "AP", "P@R=1", "R@P=1", "med.err", "lost-off", "lost-on", "ms/frame")
+_COLUMNS = ("R@1", "R@5", "R@10", "AUC", "AP", "P@R=1", "R@P=1", "med.err", "lost-off", "lost-on", "lock", "exit",
+            "ms/frame")
 
 
 def table(reports: dict[str, ModeReport]) -> str:
     """A fixed-width table, one row per mode. lost-off / lost-on: share of frames of unmapped / mapped
-    places reported lost ('-' where the mode has no lost state or there are no such frames)."""
+    places reported lost ('-' where the mode has no lost state or there are no such frames). lock / exit: frames
+    a stream took to answer correctly after entering mapped places (its start, then each re-entry) / to report
+    lost after leaving them, one figure per entry / exit joined by '/' ('never': not within that stretch)."""
     def cell(v: float, fmt: str = "{:.3f}") -> str:
         return "-" if v != v else fmt.format(v)
+
+    def delays(frames: tuple[float, ...]) -> str:
+        return "/".join("never" if d != d else f"{d:.0f}" for d in frames) or "-"
 
     width = max([len(m) for m in reports] + [4])
     lines = [f"{'mode':<{width}} " + " ".join(f"{c:>8s}" for c in _COLUMNS)]
     for name, r in reports.items():
         vals = [*r.recall.values(), r.auc, r.ap, r.precision_at_full_recall, r.recall_at_full_precision]
         cells = [cell(v) for v in vals] + [cell(r.median_error, "{:.1f}"), cell(r.lost_unmapped),
-                                           cell(r.lost_mapped), cell(r.match_ms, "{:.2f}")]
+                                           cell(r.lost_mapped), delays(r.lock_frames), delays(r.exit_frames),
+                                           cell(r.match_ms, "{:.2f}")]
         lines.append(f"{name:<{width}} " + " ".join(f"{c:>8s}" for c in cells))
     return "\n".join(lines)
 
 
-JSON_SCHEMA_VERSION = 2   # 2: lost shares, ms_per_frame and each mode's settings; the tolerance
+JSON_SCHEMA_VERSION = 3   # 2: lost shares, ms_per_frame, each mode's settings, the tolerance; 3: lock/exit frames
 
 
 def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, reports: dict[str, ModeReport],
