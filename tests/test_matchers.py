@@ -219,6 +219,24 @@ def test_road_matcher_against_plain_loops(grid: int, vmax: float, stop_gain: flo
     assert any(c >= 1 for _, c in got) and any(c < 1 for _, c in got)   # both locked and unlocked frames
 
 
+@pytest.mark.parametrize("n_refs", [2, 3, 4])
+def test_road_matcher_route_shorter_than_its_fastest_step(n_refs: int) -> None:
+    """Maps with fewer positions than the top speed's step (4 places/frame x grid 2) run, as the loops do; a
+    one-place map answers that place and never locks (a z-score over one reference is 0)."""
+    one = get_matcher("stream").run(np.random.default_rng(0).normal(size=(8, 1)))
+    assert (one.refs == 0).all() and (one.scores < 1).all()
+    sim = np.random.default_rng(n_refs).normal(size=(8, n_refs))
+    sim[:, 0] += 1e-3   # no row is constant (its z-score would be 0/0)
+    params = dict(MATCHERS["stream"].params)
+    params = {k: params[k] for k in ("vmax", "grid", "decay", "bias", "turn", "memory", "lock", "rival_window",
+                                     "stop_gain", "stop_decay")} | {"bias": 0.5, "lock": 1.0}  # no all-0 states
+    m = RoadMatcher(n_refs, **params)
+    got = [m.update(row) for row in sim]
+    want = naive_road(sim, **params)
+    assert [r for r, _ in got] == [r for r, _ in want]
+    np.testing.assert_allclose([c for _, c in got], [c for _, c in want], atol=1e-5)
+
+
 def test_road_matcher_state_is_bounded() -> None:
     m = RoadMatcher(50)
     rng = np.random.default_rng(0)
