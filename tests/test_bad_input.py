@@ -164,6 +164,11 @@ CASES = [
     Case("loc-model-env-missing", LOC, ("gone.onnx", "VPR_EDGE_MODEL"), env=(("VPR_EDGE_MODEL", "{w}/gone.onnx"),)),
     Case("loc-svm-without-svm", LOC + " --mode svm", ("good.npz", "build-map --svm")),
     Case("loc-format-contradicts-out", LOC + " --format jsonl -o {w}/old_results.csv", ("old_results.csv", "--format")),
+    Case("loc-param-unknown", LOC + " --param speed=3", ("--param", "speed=3", "lock")),
+    Case("loc-param-bad-value", LOC + " --param lock=high", ("--param", "lock=high", "not a number")),
+    Case("loc-param-refused", LOC + " --param decay=1.5", ("--param", "decay must be in (0, 1)")),
+    Case("loc-param-twice", LOC + " --decay 0.8 --param decay=0.7", ("--param decay", "--decay")),
+    Case("loc-param-other-mode", LOC + " --mode single --param lock=3", ("--param", "single takes")),
     # info
     Case("info-missing", "info {w}/none.npz", ("none.npz", "no such file")),
     Case("info-text", "info {w}/notes.txt", ("notes.txt", "not a vpr-edge map")),

@@ -50,7 +50,8 @@ def test_help() -> None:
                                           (["build-map"], "Missing argument"),
                                           (["localize", "-m", "a", "-s", "b", "--window", "-1"], "--window"),
                                           (["evaluate", "--modes"], "--modes"),
-                                          (["evaluate", "--similarity", "s.npy", "--window", "-1"], "--window")])
+                                          (["evaluate", "--similarity", "s.npy", "--window", "-1"], "--window"),
+                                          (["localize", "-m", "a", "-s", "b", "--param"], "--param")])
 def test_usage_errors_are_one_line(argv: list[str], needle: str) -> None:
     proc = run(*argv)
     assert proc.returncode == 2 and proc.stdout == ""
@@ -70,7 +71,7 @@ def test_map_contents(small_map: Path, model_path: Path) -> None:
 
 
 @pytest.mark.parametrize("mode", ["stream", "stream --min-confidence 0", "stream --window 3", "dtw", "single",
-                                  "dtw --variant distance --open-ends"])
+                                  "dtw --variant distance --open-ends", "stream --param lock=5 --param turn=0.5"])
 def test_localize_matches_real_frames(small_map: Path, small_queries: Path, mode: str) -> None:
     proc = run("localize", "--map", small_map, "--stream", small_queries, "--mode", *mode.split())
     assert proc.returncode == 0, proc.stderr

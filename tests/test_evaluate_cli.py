@@ -152,3 +152,27 @@ def test_evaluate_window_reaches_the_stream_matcher(tmp_path: Path) -> None:
         assert got["settings"]["window"] == (get_matcher("stream").params["window"] if window is None else window)
     proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single", "--window", "5")
     assert proc.returncode == 0 and "--window does not apply" in proc.stderr
+
+
+def test_evaluate_param_sets_matcher_parameters(tmp_path: Path) -> None:
+    """--param KEY=VALUE reaches every chosen mode that has KEY (here the stream's bias and lock, and dtw-open's
+    hub removal), runs as the matcher called directly with it, and is recorded in the settings."""
+    from vpr_edge.evaluate import evaluate_mode
+    from vpr_edge.groundtruth import pad
+    from vpr_edge.matchers import get_matcher
+
+    s, gt = planted_similarity(tmp_path)
+    sim, truth = np.load(s), pad([[p] for p in np.arange(40) + 10])
+    js = tmp_path / "p.json"
+    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single,stream,dtw-open", "--json", js,
+               "--param", "bias=1.5", "--param", "lock=4", "--param", "hubs=false")
+    assert proc.returncode == 0, proc.stderr
+    got = json.loads(js.read_text())["modes"]
+    for name, over in (("stream", {"bias": 1.5, "lock": 4.0}), ("dtw-open", {"hubs": False})):
+        want = evaluate_mode(get_matcher(name).with_params(**over), sim, truth)
+        assert got[name]["recall_at_1"] == pytest.approx(want.recall[1]) and got[name]["auc"] == pytest.approx(want.auc)
+        assert got[name]["settings"] == json.loads(json.dumps(want.settings))
+    assert got["stream"]["settings"]["bias"] == 1.5 and got["single"]["settings"] == {"min_confidence": None}
+    for args, needle in ((["--param", "nope=1"], "nope"), (["--param", "lock=x"], "not a number"),
+                         (["--param", "decay=3"], "decay"), (["--modes", "single", "--param", "lock=3"], "lock")):
+        assert_one_line_error(run("evaluate", "--similarity", s, "--gt", gt, *args), needle)

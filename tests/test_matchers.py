@@ -341,3 +341,20 @@ def test_local_search_is_off_on_small_routes() -> None:
         assert m.wanted() is None
     with pytest.raises(ValueError):
         RoadMatcher(3000, window=50).update(np.zeros(10), np.arange(10))   # refs not asked for
+
+
+def test_parse_params_reads_each_default_type_and_refuses_bad_items() -> None:
+    stream, dtw = get_matcher("stream"), get_matcher("dtw-open")
+    assert stream.parse_params(["bias=1.6", "lock = 7", "window=0", "stop-gain=0.5"]) == \
+        {"bias": 1.6, "lock": 7.0, "window": 0, "stop_gain": 0.5}
+    assert dtw.parse_params(["hubs=false", "open_ends=1", "variant=similarity"]) == \
+        {"hubs": False, "open_ends": True, "variant": "similarity"}
+    assert stream.parse_params([]) == {}
+    for bad, needle in ((["bias"], "KEY=VALUE"), (["nope=1"], "KEY=VALUE"), (["lock=abc"], "not a number"),
+                        (["grid=1.5"], "not an int"), (["bias=nan"], "not a number"), (["decay=2"], "decay"),
+                        (["hubs=maybe"], "not a bool")):
+        matcher = dtw if bad[0].startswith("hubs") else stream
+        with pytest.raises(ValueError, match=needle):
+            matcher.parse_params(bad)
+    with pytest.raises(ValueError, match="unknown DTW variant"):
+        dtw.parse_params(["variant=fastest"])

@@ -24,7 +24,7 @@ from vpr_edge.extract import RESIZE
 from vpr_edge.images import Frame, list_images, load_image, open_stream
 from vpr_edge.api import Localizer, Match, encode_frames
 from vpr_edge.mapfile import FIT_DESCRIPTORS, FIT_ITERATIONS, PlaceMap, build_map
-from vpr_edge.matchers import MATCHERS, get_matcher
+from vpr_edge.matchers import MATCHERS, Matcher, get_matcher
 from vpr_edge.store import atomic_output, check_writable
 from vpr_edge.threads import use_threads
 
@@ -275,6 +275,39 @@ def _params_for(name: str, given: dict) -> dict:
     return {k: v for k, v in given.items() if v is not None and k in matcher.params}
 
 
+_PARAM_HELP = ("Set one of the matcher's parameters (repeatable), e.g. --param bias=1.6 --param lock=6: "
+               "calibrating the stream's lost state on a drive of your own route (README, Lost state). "
+               "The names and defaults: README, Matchers; the chosen values are recorded in evaluate --json.")
+
+
+def _with_param_options(matcher: Matcher, params: dict, items: list[str]) -> dict:
+    """``params`` (from the named options) plus ``--param KEY=VALUE`` items for ``matcher``; VprError for an
+    item it does not take or a key given both ways."""
+    try:
+        extra = matcher.parse_params(items)
+    except ValueError as e:
+        raise VprError(str(e)) from None
+    both = sorted(set(extra) & set(params))
+    if both:
+        raise VprError(f"--param {both[0]} repeats --{both[0].replace('_', '-')}; give it once")
+    return params | extra
+
+
+def _param_options_for_all(matchers: dict[str, Matcher], items: list[str]) -> dict[str, Matcher]:
+    """Each of ``matchers`` with the ``--param`` items whose key it has; VprError for a key none has."""
+    keys = [item.partition("=")[0].strip().replace("-", "_") for item in items]
+    for item, key in zip(items, keys):
+        if not any(key in m.params for m in matchers.values()):
+            raise VprError(f"--param {item!r}: none of the modes {','.join(matchers)} has a parameter {key!r}")
+    out = {}
+    for name, m in matchers.items():
+        try:
+            out[name] = m.with_params(**m.parse_params([i for i, k in zip(items, keys) if k in m.params]))
+        except ValueError as e:
+            raise VprError(str(e)) from None
+    return out
+
+
 _MODE_HELP = ("Matcher. Online (a result per frame): " + ", ".join(n for n, m in MATCHERS.items() if m.online)
               + ". Offline (results after the last frame): " + ", ".join(n for n, m in MATCHERS.items()
                                                                          if not m.online)
@@ -303,6 +336,7 @@ def localize_cmd(
     min_confidence: Optional[float] = typer.Option(
         None, help="Frames scoring below this are reported lost (ref_index -1). Default: the mode's own "
                    "(stream: %.1f; other modes: never lost)." % MATCHERS["stream"].min_confidence),
+    param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE", help=_PARAM_HELP),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write results here instead of stdout "
                                        "(written to a temporary file, renamed when the stream is done)."),
     fmt: Optional[FormatOpt] = typer.Option(None, "--format", help="csv or jsonl (default: from --out's "
@@ -321,6 +355,7 @@ def localize_cmd(
             raise VprError(f"{out}: --format {fmt.value} contradicts the file's {out.suffix} suffix")
         params = _params_for(mode.value, {"variant": variant.value if variant else None, "open_ends": open_ends,
                                           "decay": decay, "window": window})
+        params = _with_param_options(get_matcher(mode.value), params, param or [])
         frames, count = open_stream(stream)
         localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
                               min_confidence=min_confidence, threads=threads)
@@ -407,6 +442,8 @@ def evaluate_cmd(
                                          % MATCHERS["stream"].params["window"]),
     min_confidence: Optional[float] = typer.Option(None, help="Lost threshold for modes with a lost state "
                                                    "(default: each mode's own)."),
+    param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE",
+                                              help=_PARAM_HELP + " Applies to every chosen mode that has KEY."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the figures as JSON here."),
     plot_out: Optional[Path] = typer.Option(None, "--plot", help="Write all modes' PR curves to this PNG "
                                             "(needs matplotlib: the plot extra)."),
@@ -441,6 +478,8 @@ def evaluate_cmd(
             if not any("window" in m.params for m in matchers.values()):
                 warn(f"--window does not apply to modes {','.join(matchers)}; ignored")
             matchers = {n: m.with_params(window=window) if "window" in m.params else m for n, m in matchers.items()}
+        if param:
+            matchers = _param_options_for_all(matchers, param)
         for target in (json_out, plot_out, save_similarity):
             if target:
                 check_writable(target)

@@ -15,7 +15,7 @@ Localizer computes only the similarities asked for and ``evaluate`` measures exa
 """
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
@@ -121,6 +121,25 @@ class Matcher:
             raise ValueError(f"matcher {self.name!r} has no parameter(s) {', '.join(sorted(unknown))}")
         return replace(self, params=self.params | overrides)
 
+    def parse_params(self, items: Sequence[str]) -> dict[str, Any]:
+        """``["key=value", ...]`` (the CLI's ``--param``) -> overrides of this matcher's parameters, each value
+        read as its default's type (bool: true/false/1/0). ValueError naming the item for an unknown key, a
+        value that does not read, or one the matcher refuses (checked by a run on a small random matrix)."""
+        out: dict[str, Any] = {}
+        for item in items:
+            key, sep, text = item.partition("=")
+            key = key.strip().replace("-", "_")
+            if not sep or key not in self.params:
+                raise ValueError(f"--param {item!r}: {self.name} takes KEY=VALUE with KEY one of "
+                                 f"{', '.join(self.params) or '(none)'}")
+            out[key] = _read_value(text.strip(), self.params[key], item)
+        if out:
+            try:
+                self.with_params(**out).run(np.random.default_rng(0).random((3, 3)), 1)
+            except ValueError as e:
+                raise ValueError(f"--param {' '.join(items)}: {self.name}: {e}") from None
+        return out
+
     def stream(self, n_refs: int) -> OnlineMatcher:
         """A fresh online matcher over ``n_refs`` references."""
         if self.start is None:
@@ -135,3 +154,23 @@ class Matcher:
         if self.align is not None:
             return self.align(sim, k, **self.params)
         return run_online(self.stream(sim.shape[1]), sim, k)
+
+
+def _read_value(text: str, default: Any, item: str) -> Any:
+    """``text`` read as the type of ``default`` (bool, int, float or str); ValueError naming ``item``."""
+    try:
+        if isinstance(default, bool):
+            if text.lower() not in ("true", "false", "1", "0"):
+                raise ValueError
+            return text.lower() in ("true", "1")
+        if isinstance(default, int):
+            return int(text)
+        if isinstance(default, float):
+            value = float(text)
+            if value != value or value in (float("inf"), float("-inf")):
+                raise ValueError
+            return value
+        return text
+    except ValueError:
+        kind = {"bool": "a bool (true/false)", "int": "an int", "float": "a number"}.get(type(default).__name__, "text")
+        raise ValueError(f"--param {item!r}: {text!r} is not {kind}") from None
