@@ -79,7 +79,8 @@ def test_evaluate_gt_matrix_and_positions(tmp_path: Path) -> None:
     np.save(tmp_path / "gt.npy", m)
     (tmp_path / "r.csv").write_text("x,y\n" + "".join(f"{5 * i},0\n" for i in range(60)))
     (tmp_path / "q.csv").write_text("x,y\n" + "".join(f"{5 * (i + 10) + 1},0\n" for i in range(40)))
-    a = run("evaluate", "--similarity", s, "--gt", tmp_path / "gt.npy", "--modes", "single", "--json", tmp_path / "a.json")
+    a = run("evaluate", "--similarity", s, "--gt", tmp_path / "gt.npy", "--modes", "single",
+            "--json", tmp_path / "a.json")
     b = run("evaluate", "--similarity", s, "--gt-positions", tmp_path / "r.csv", tmp_path / "q.csv", "--radius", "2",
             "--modes", "single", "--json", tmp_path / "b.json")
     assert a.returncode == 0 and b.returncode == 0, a.stderr + b.stderr

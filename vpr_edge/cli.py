@@ -276,7 +276,8 @@ def _params_for(name: str, given: dict) -> dict:
 
 
 _PARAM_HELP = ("Set one of the matcher's parameters (repeatable), e.g. --param bias=1.6 --param lock=6: "
-               "calibrating the stream's lost state on a drive of your own route (README, Lost state). "
+               "calibrating the stream's lost state on a drive of your own route (README: Calibrating the lost "
+               "state). "
                "Names and defaults: vpr_edge/matchers/registry.py (an unknown KEY's error lists them); "
                "evaluate --json records the values run.")
 
