@@ -18,6 +18,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from vpr_edge.report import delays_text  # noqa: E402
+
 KINDS = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
 
 
@@ -58,13 +62,9 @@ def main() -> int:
           "to lock on (start / re-entry) and to report lost after leaving the map:")
     for front in ("map", "pixels"):
         r = results["detour", front]["modes"].get("stream")
-        if r is None:
-            continue
-
-        def frames(v: list) -> str:
-            return "/".join("never" if d is None else f"{d:.0f}" for d in v)
-        print(f"  {front}: lost {r['lost_unmapped']:.3f} / {r['lost_mapped']:.3f}; lock {frames(r['lock_frames'])}; "
-              f"exit {frames(r['exit_frames'])}")
+        if r is not None:
+            print(f"  {front}: lost {r['lost_unmapped']:.3f} / {r['lost_mapped']:.3f}; lock "
+                  f"{delays_text(r['lock_frames'])}; exit {delays_text(r['exit_frames'])}")
     return 0
 
 

@@ -24,7 +24,7 @@ from vpr_edge.extract import RESIZE
 from vpr_edge.images import Frame, list_images, load_image, open_stream
 from vpr_edge.api import Localizer, Match, encode_frames
 from vpr_edge.mapfile import FIT_DESCRIPTORS, FIT_ITERATIONS, PlaceMap, build_map
-from vpr_edge.matchers import MATCHERS, Matcher, get_matcher
+from vpr_edge.matchers import MATCHERS, Matcher, get_matcher, param_key
 from vpr_edge.store import atomic_output, check_writable
 from vpr_edge.threads import use_threads
 
@@ -283,12 +283,9 @@ _PARAM_HELP = ("Set one of the matcher's parameters (repeatable), e.g. --param b
 
 
 def _with_param_options(matcher: Matcher, params: dict, items: list[str]) -> dict:
-    """``params`` (from the named options) plus ``--param KEY=VALUE`` items for ``matcher``; VprError for an
-    item it does not take or a key given both ways."""
-    try:
-        extra = matcher.parse_params(items)
-    except ValueError as e:
-        raise VprError(str(e)) from None
+    """``params`` (from the named options) plus ``--param KEY=VALUE`` items for ``matcher``; ValueError for an
+    item it does not take, VprError for a key given both ways."""
+    extra = matcher.parse_params(items)
     both = sorted(set(extra) & set(params))
     if both:
         raise VprError(f"--param {both[0]} repeats --{both[0].replace('_', '-')}; give it once")
@@ -296,18 +293,14 @@ def _with_param_options(matcher: Matcher, params: dict, items: list[str]) -> dic
 
 
 def _param_options_for_all(matchers: dict[str, Matcher], items: list[str]) -> dict[str, Matcher]:
-    """Each of ``matchers`` with the ``--param`` items whose key it has; VprError for a key none has."""
-    keys = [item.partition("=")[0].strip().replace("-", "_") for item in items]
+    """Each of ``matchers`` with the ``--param`` items whose key it has; VprError for a key none has (and
+    ``parse_params``'s ValueError for a value one refuses)."""
+    keys = [param_key(item) for item in items]
     for item, key in zip(items, keys):
         if not any(key in m.params for m in matchers.values()):
             raise VprError(f"--param {item!r}: none of the modes {','.join(matchers)} has a parameter {key!r}")
-    out = {}
-    for name, m in matchers.items():
-        try:
-            out[name] = m.with_params(**m.parse_params([i for i, k in zip(items, keys) if k in m.params]))
-        except ValueError as e:
-            raise VprError(str(e)) from None
-    return out
+    return {name: m.with_params(**m.parse_params([i for i, k in zip(items, keys) if k in m.params]))
+            for name, m in matchers.items()}
 
 
 _MODE_HELP = ("Matcher. Online (a result per frame): " + ", ".join(n for n, m in MATCHERS.items() if m.online)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 
 from vpr_edge.errors import VprError
 from vpr_edge.evaluate import ModeReport
@@ -20,18 +21,21 @@ def table(reports: dict[str, ModeReport]) -> str:
     def cell(v: float, fmt: str = "{:.3f}") -> str:
         return "-" if v != v else fmt.format(v)
 
-    def delays(frames: tuple[float, ...]) -> str:
-        return "/".join("never" if d != d else f"{d:.0f}" for d in frames) or "-"
-
     width = max([len(m) for m in reports] + [4])
     lines = [f"{'mode':<{width}} " + " ".join(f"{c:>8s}" for c in _COLUMNS)]
     for name, r in reports.items():
         vals = [*r.recall.values(), r.auc, r.ap, r.precision_at_full_recall, r.recall_at_full_precision]
         cells = [cell(v) for v in vals] + [cell(r.median_error, "{:.1f}"), cell(r.lost_unmapped),
-                                           cell(r.lost_mapped), delays(r.lock_frames), delays(r.exit_frames),
+                                           cell(r.lost_mapped), delays_text(r.lock_frames), delays_text(r.exit_frames),
                                            cell(r.match_ms, "{:.2f}")]
         lines.append(f"{name:<{width}} " + " ".join(f"{c:>8s}" for c in cells))
     return "\n".join(lines)
+
+
+def delays_text(frames: Sequence[float | None]) -> str:
+    """Lock-on or exit delays in frames, as the table shows them: '2/7', 'never' for NaN or None (as JSON
+    holds it), '-' for none."""
+    return "/".join("never" if d is None or d != d else f"{d:.0f}" for d in frames) or "-"
 
 
 JSON_SCHEMA_VERSION = 3   # 2: lost shares, ms_per_frame, each mode's settings, the tolerance; 3: lock/exit frames

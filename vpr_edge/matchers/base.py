@@ -15,6 +15,7 @@ Localizer computes only the similarities asked for and ``evaluate`` measures exa
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
@@ -128,7 +129,7 @@ class Matcher:
         out: dict[str, Any] = {}
         for item in items:
             key, sep, text = item.partition("=")
-            key = key.strip().replace("-", "_")
+            key = param_key(item)
             if not sep or key not in self.params:
                 raise ValueError(f"--param {item!r}: {self.name} takes KEY=VALUE with KEY one of "
                                  f"{', '.join(self.params) or '(none)'}")
@@ -156,6 +157,11 @@ class Matcher:
         return run_online(self.stream(sim.shape[1]), sim, k)
 
 
+def param_key(item: str) -> str:
+    """The parameter name of a ``--param`` item ``"key=value"`` (dashes read as underscores)."""
+    return item.partition("=")[0].strip().replace("-", "_")
+
+
 def _read_value(text: str, default: Any, item: str) -> Any:
     """``text`` read as the type of ``default`` (bool, int, float or str); ValueError naming ``item``."""
     try:
@@ -167,7 +173,7 @@ def _read_value(text: str, default: Any, item: str) -> Any:
             return int(text)
         if isinstance(default, float):
             value = float(text)
-            if value != value or value in (float("inf"), float("-inf")):
+            if not math.isfinite(value):
                 raise ValueError
             return value
         return text

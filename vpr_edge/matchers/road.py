@@ -149,8 +149,8 @@ class RoadMatcher:
             if k >= 0:
                 new[v] = m[v, k:k + w]
             else:                        # before the route's start: nothing
-                new[v, : min(-k, w)] = 0.0
-                new[v, -k:] = m[v, : max(0, w + k)]
+                new[v, :-k] = 0.0
+                new[v, -k:] = m[v, : max(0, w + k)]   # nothing when the step is longer than the columns
         new[1:] *= self.decay
         new[0] *= self.stop_decay
         np.maximum(new, 0.0, out=new)
