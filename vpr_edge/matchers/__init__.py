@@ -2,5 +2,5 @@
 from vpr_edge.matchers.base import Matcher, OnlineMatcher, Result, param_key, run_online, run_rows, step, top_k
 from vpr_edge.matchers.registry import MATCHERS, get_matcher
 
-__all__ = ["MATCHERS", "Matcher", "OnlineMatcher", "Result", "get_matcher", "param_key", "run_online", "run_rows", "step",
-           "top_k"]
+__all__ = ["MATCHERS", "Matcher", "OnlineMatcher", "Result", "get_matcher", "param_key", "run_online", "run_rows",
+           "step", "top_k"]
