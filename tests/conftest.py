@@ -6,13 +6,15 @@ from pathlib import Path
 
 import pytest
 
+from vpr_edge.resources import sample_folder
+
 ROOT = Path(__file__).resolve().parent.parent
-SAMPLE = ROOT / "samples" / "corridor"
+SAMPLE = sample_folder("corridor")   # the bundled sample, inside the package
 
 
 @pytest.fixture(scope="session")
 def model_path() -> Path:
-    from vpr_edge.extract import default_model_path
+    from vpr_edge.features.cnn import default_model_path
 
     return default_model_path()
 

@@ -18,7 +18,7 @@ from vpr_edge.images import load_image, open_stream
 @pytest.fixture(scope="module")
 def api_map(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Path:
     out = tmp_path_factory.mktemp("api") / "m.npz"
-    proc = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "build-map", str(small_refs), "-o", str(out),
+    proc = subprocess.run([sys.executable, "-m", "vpr_edge", "build-map", str(small_refs), "-o", str(out),
                            "--components", "4"], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     return out
@@ -28,7 +28,7 @@ def test_push_matches_the_cli(api_map: Path, small_queries: Path) -> None:
     loc = Localizer(api_map, threads=1)
     files = sorted(small_queries.iterdir())
     pushed = [loc.push(load_image(f), f.name) for f in files]
-    proc = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "localize", "-m", str(api_map), "-s",
+    proc = subprocess.run([sys.executable, "-m", "vpr_edge", "localize", "-m", str(api_map), "-s",
                            str(small_queries)], capture_output=True, text=True, timeout=600)
     rows = list(csv.DictReader(proc.stdout.splitlines()))
     assert [m.ref_index for m in pushed] == [int(r["ref_index"]) for r in rows]

@@ -22,10 +22,10 @@ import pytest
 from typer.testing import CliRunner
 
 from vpr_edge.cli import app
-from vpr_edge.extract import BUNDLED_MODEL
-from vpr_edge.mapfile import MAP_SCHEMA
-from vpr_edge.store import read_npz, write_npz
-from vpr_edge.streams import write_ground_truth
+from vpr_edge.resources import bundled_model, sample_folder
+from vpr_edge.map import MAP_SCHEMA
+from vpr_edge.files import read_npz, write_npz
+from vpr_edge.evaluation.streams import write_ground_truth
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -45,7 +45,7 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     (w / "empty.npz").write_bytes(b"")
     (w / "old_results.csv").write_text("frame_index,frame,ref_index,ref,score,lost\n0,a.jpg,3,b.jpg,9.0,0\n")
     (w / "old.npz").write_bytes(b"a previous map the user cares about")
-    shutil.copy(BUNDLED_MODEL, w / "model.onnx")
+    shutil.copy(bundled_model(), w / "model.onnx")
     (w / "fake.onnx").write_bytes(b"\x08\x07 not really a model")
     good = (w / "good.npz").read_bytes()
     (w / "truncated.npz").write_bytes(good[: len(good) // 2])
@@ -223,13 +223,13 @@ def test_bad_input(case: Case, ws: Path, monkeypatch: pytest.MonkeyPatch) -> Non
 
 
 def _run(*args: str, **kw) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "vpr_edge.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "vpr_edge", *args], capture_output=True, text=True,
                           timeout=300, **kw)
 
 
 def test_unwritable_out_fails_before_any_work() -> None:
     t0 = time.perf_counter()
-    proc = _run("build-map", str(ROOT / "samples" / "corridor" / "ref"), "-o", "/proc/vpr-edge/m.npz")
+    proc = _run("build-map", str(sample_folder() / "ref"), "-o", "/proc/vpr-edge/m.npz")
     elapsed = time.perf_counter() - t0
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.strip().splitlines()[-1].startswith("vpr-edge: error: /proc/vpr-edge/m.npz")
@@ -240,7 +240,7 @@ def test_full_disk_behind_stdout(ws: Path) -> None:
     if not Path("/dev/full").exists():
         pytest.skip("no /dev/full here")
     with open("/dev/full", "w") as full:
-        proc = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "localize", "-m", str(ws / "good.npz"),
+        proc = subprocess.run([sys.executable, "-m", "vpr_edge", "localize", "-m", str(ws / "good.npz"),
                                "-s", str(ws / "queries")], stdout=full, stderr=subprocess.PIPE, text=True,
                               timeout=300)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr

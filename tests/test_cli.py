@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vpr_edge.mapfile import MAP_SCHEMA, PlaceMap
-from vpr_edge.store import read_npz, write_npz
+from vpr_edge.map import MAP_SCHEMA, load_map
+from vpr_edge.files import read_npz, write_npz
 
 
 def run(*args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "vpr_edge.cli", *map(str, args)], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "vpr_edge", *map(str, args)], capture_output=True, text=True,
                           timeout=600)
 
 
@@ -60,7 +60,7 @@ def test_usage_errors_are_one_line(argv: list[str], needle: str) -> None:
 
 
 def test_map_contents(small_map: Path, model_path: Path) -> None:
-    pm = PlaceMap.load(small_map)
+    pm = load_map(small_map)
     assert pm.encodings.shape == (24, 2 * 8 * 32)
     np.testing.assert_allclose(np.linalg.norm(pm.encodings, axis=1), 1.0, rtol=1e-5)
     assert pm.names[0] == "0000000.jpg" and pm.meta["model"]["tap"] == "stage5"
@@ -94,7 +94,7 @@ def test_localize_jsonl_file_and_reused_codebook(tmp_path: Path, small_map: Path
     assert run("build-map", small_refs, "-o", first, "--components", "4", "--save-codebook", cb).returncode == 0
     second = tmp_path / "b.map.npz"
     assert run("build-map", small_refs, "-o", second, "--codebook", cb).returncode == 0
-    np.testing.assert_allclose(PlaceMap.load(first).encodings, PlaceMap.load(second).encodings, atol=1e-6)
+    np.testing.assert_allclose(load_map(first).encodings, load_map(second).encodings, atol=1e-6)
     out = tmp_path / "res.jsonl"
     proc = run("localize", "-m", second, "-s", small_queries, "-o", out, "--batch-size", "4")
     assert proc.returncode == 0, proc.stderr
@@ -218,7 +218,7 @@ def test_map_from_other_model(tmp_path: Path, small_map: Path, small_queries: Pa
 
 def test_runtime_imports_neither_torch_nor_sklearn(small_map: Path, small_queries: Path) -> None:
     code = ("import sys, runpy; sys.argv = ['vpr-edge', 'localize', '-m', sys.argv[1], '-s', sys.argv[2]];\n"
-            "try: runpy.run_module('vpr_edge.cli', run_name='__main__')\nexcept SystemExit: pass\n"
+            "try: runpy.run_module('vpr_edge', run_name='__main__')\nexcept SystemExit: pass\n"
             "heavy = sorted(m for m in ('torch', 'sklearn', 'onnx', 'scipy') if m in sys.modules)\n"
             "print('HEAVY', heavy, file=sys.stderr)")
     proc = subprocess.run([sys.executable, "-c", code, str(small_map), str(small_queries)], capture_output=True,
@@ -235,10 +235,10 @@ def test_append_grows_the_map_with_its_codebook(tmp_path: Path, small_refs: Path
         shutil.copy(f, (first if i < 14 else second) / f.name)
     grown = tmp_path / "grown.npz"
     assert run("build-map", first, "-o", grown, "--components", "4", "--storage", "float32").returncode == 0
-    before = PlaceMap.load(grown)
+    before = load_map(grown)
     proc = run("build-map", second, "-o", grown, "--append")
     assert proc.returncode == 0 and "(10 appended)" in proc.stderr and "float32" in proc.stderr, proc.stderr
-    after = PlaceMap.load(grown)
+    after = load_map(grown)
     assert after.names == sorted(p.name for p in small_refs.iterdir())
     np.testing.assert_array_equal(after.encodings[:14], before.encodings)          # old references untouched
     np.testing.assert_array_equal(after.encoder.gmm.means, before.encoder.gmm.means)
@@ -248,13 +248,13 @@ def test_append_grows_the_map_with_its_codebook(tmp_path: Path, small_refs: Path
     before.encoder.save(cb, {"model_sha256": before.meta["model_sha256"]})
     whole = tmp_path / "whole.npz"
     assert run("build-map", small_refs, "-o", whole, "--codebook", cb, "--storage", "float32").returncode == 0
-    np.testing.assert_allclose(PlaceMap.load(whole).encodings, after.encodings, atol=1e-6)
+    np.testing.assert_allclose(load_map(whole).encodings, after.encodings, atol=1e-6)
     # int8 (the default storage): the old rows' stored bytes are copied, not expanded and requantised
     small = tmp_path / "int8.npz"
     assert run("build-map", first, "-o", small, "--components", "4").returncode == 0
-    old = PlaceMap.load(small).stored
+    old = load_map(small).stored
     assert run("build-map", second, "-o", small, "--append").returncode == 0
-    new = PlaceMap.load(small).stored
+    new = load_map(small).stored
     assert new.storage == "int8" and new.shape[0] == 24
     np.testing.assert_array_equal(new.values[:14], old.values)
     np.testing.assert_array_equal(new.scale[:14], old.scale)

@@ -7,13 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vpr_edge.coarse import CoarseSearch, hamming, pack_signs
-from vpr_edge.compact import Encodings
+from vpr_edge.index.coarse import CoarseSearch, hamming, pack_signs
+from vpr_edge.index.encodings import Encodings
 
 
 @pytest.mark.parametrize("d", [64, 100, 2048])
 def test_signs_and_hamming_against_plain_loops(d: int, monkeypatch: pytest.MonkeyPatch) -> None:
-    import vpr_edge.coarse as coarse
+    import vpr_edge.index.coarse as coarse
 
     rng = np.random.default_rng(d)
     x = rng.normal(size=(37, d)).astype(np.float32)
@@ -94,7 +94,8 @@ def _rss_file_mb() -> float | None:
 def test_sign_pass_releases_a_memory_mapped_map(tmp_path: Path) -> None:
     """Packing the signs reads every stored row; on a memory-mapped map those pages are then dropped from
     the process (store.release_pages), the values still read the same, and an in-RAM map is left alone."""
-    from vpr_edge.store import read_npz, release_pages, write_npz
+    from vpr_edge.files import read_npz, write_npz
+    from vpr_edge.index.rows import release_pages
 
     rng = np.random.default_rng(1)
     stored = Encodings.pack(rng.normal(size=(16_000, 1024)).astype(np.float32), "int8")   # 16 MB
@@ -125,7 +126,8 @@ def test_sign_pass_releases_a_memory_mapped_map(tmp_path: Path) -> None:
 def test_row_reader_against_the_array(tmp_path: Path, cache_rows: int) -> None:
     """RowReader.take equals plain indexing for runs, scattered rows, repeats and any order, whatever the
     cache's size (a small cache evicts between and within calls), for every stored dtype."""
-    from vpr_edge.store import RowReader, read_npz, write_npz
+    from vpr_edge.index.rows import RowReader
+    from vpr_edge.files import read_npz, write_npz
 
     rng = np.random.default_rng(cache_rows)
     for dtype in (np.int8, np.float16, np.float32):

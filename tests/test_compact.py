@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vpr_edge.compact import STORAGES, Encodings, quantise_rows
-from vpr_edge.mapfile import MAP_SCHEMA, PlaceMap
-from vpr_edge.store import read_npz, write_npz
+from vpr_edge.index.encodings import Encodings, STORAGES, quantise_rows
+from vpr_edge.map import MAP_SCHEMA, PlaceMap, load_map
+from vpr_edge.files import read_npz, write_npz
 
 
 def naive_quantise(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -57,7 +57,7 @@ def test_pack_round_trip_keeps_cosines(storage: str) -> None:
 
 
 def test_similarity_in_blocks_from_a_memory_map(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import vpr_edge.compact as compact
+    import vpr_edge.index.encodings as compact
 
     rng = np.random.default_rng(2)
     x = rng.normal(size=(1000, 64)).astype(np.float32)
@@ -87,11 +87,11 @@ def test_map_storage_and_schema_1(tmp_path: Path, small_refs: Path) -> None:
         assert res.exit_code == 0, res.stderr
         arrays, _ = read_npz(out, "map", MAP_SCHEMA)
         sizes[storage] = sum(arrays[k].nbytes for k in arrays if k.startswith("encodings"))
-    full = PlaceMap.load(tmp_path / "float32.npz")
-    small = PlaceMap.load(tmp_path / "int8.npz")
+    full = load_map(tmp_path / "float32.npz")
+    small = load_map(tmp_path / "int8.npz")
     assert small.meta["storage"] == "int8" and small.encodings.dtype == np.float32
     np.testing.assert_allclose(small.encodings, full.encodings, atol=np.abs(full.encodings).max() / 100)
-    mapped = PlaceMap.load(tmp_path / "int8.npz", mmap=True)
+    mapped = load_map(tmp_path / "int8.npz", mmap=True)
     assert isinstance(mapped.stored.values, np.memmap)
     np.testing.assert_array_equal(mapped.encodings, small.encodings)
     assert sizes["int8"] < 0.26 * sizes["float32"] and sizes["float16"] == 0.5 * sizes["float32"]
@@ -103,7 +103,7 @@ def test_map_storage_and_schema_1(tmp_path: Path, small_refs: Path) -> None:
         old = {k: v for k, v in meta.items() if k not in ("storage", "features", "encoding", "descriptor_dim")}
         old |= {"schema": 2, "storage": storage} if storage else {"schema": 1}
         write_npz(tmp_path / "old.npz", arrays | {}, old | {"alpha": meta["encoding"]["params"]["alpha"]})
-        back, now = PlaceMap.load(tmp_path / "old.npz"), PlaceMap.load(tmp_path / f"{name}.npz")
+        back, now = load_map(tmp_path / "old.npz"), load_map(tmp_path / f"{name}.npz")
         np.testing.assert_array_equal(back.encodings, now.encodings)
         assert back.encoder.name == "ifv" and back.features["name"] == "cnn"
         x = np.random.default_rng(0).random((2, 5, back.encoder.input_dim)).astype(np.float32)

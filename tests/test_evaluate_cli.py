@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from test_cli import assert_one_line_error, run
-from vpr_edge.streams import write_ground_truth
+from vpr_edge.evaluation.streams import write_ground_truth
 
 JSON_KEYS = {"recall_at_1", "recall_at_5", "recall_at_10", "auc", "ap", "precision_at_full_recall",
              "recall_at_full_precision", "median_error", "lost_unmapped", "lost_mapped", "ms_per_frame", "lock_frames",
@@ -61,7 +61,7 @@ def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_qu
 def test_evaluate_similarity_needs_no_model_nor_torch(tmp_path: Path) -> None:
     s, gt = planted_similarity(tmp_path)
     code = ("import sys, runpy; sys.argv = ['vpr-edge', 'evaluate', '--similarity', %r, '--gt', %r, '--json', %r]\n"
-            "try:\n    runpy.run_module('vpr_edge.cli', run_name='__main__')\nexcept SystemExit as e:\n"
+            "try:\n    runpy.run_module('vpr_edge', run_name='__main__')\nexcept SystemExit as e:\n"
             "    assert not e.code, e.code\n"
             "bad = [m for m in ('torch', 'onnx', 'sklearn', 'vpr_edge_export') if m in sys.modules]\n"
             "assert not bad, bad\n") % (str(s), str(gt), str(tmp_path / "r.json"))
@@ -124,7 +124,7 @@ def test_evaluate_bad_input(tmp_path: Path, eval_map: Path, small_queries: Path,
     for args, needle in cases:
         assert_one_line_error(run("evaluate", *args), needle)
     # --plot without matplotlib: one line, before any work, and nothing written
-    proc = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "evaluate", "--similarity", str(s), "--gt", str(gt),
+    proc = subprocess.run([sys.executable, "-m", "vpr_edge", "evaluate", "--similarity", str(s), "--gt", str(gt),
                            "--plot", str(tmp_path / "pr.png"), "--json", str(existing)], capture_output=True,
                           text=True, timeout=300, env={"PYTHONPATH": str(fake), "PATH": "/usr/bin:/bin"})
     assert_one_line_error(proc, "matplotlib")
@@ -134,8 +134,8 @@ def test_evaluate_bad_input(tmp_path: Path, eval_map: Path, small_queries: Path,
 def test_evaluate_window_reaches_the_stream_matcher(tmp_path: Path) -> None:
     """--window sets the stream's local search as localize's does: each run equals the matcher called directly
     with that window (1,000 references: above the 400 where the default window engages)."""
-    from vpr_edge.evaluate import evaluate_mode
-    from vpr_edge.groundtruth import pad
+    from vpr_edge.evaluation.scoring import evaluate_mode
+    from vpr_edge.evaluation.truth import pad
     from vpr_edge.matchers import get_matcher
 
     s, gt = planted_similarity(tmp_path, q=200, r=1000)
@@ -158,8 +158,8 @@ def test_evaluate_window_reaches_the_stream_matcher(tmp_path: Path) -> None:
 def test_evaluate_param_sets_matcher_parameters(tmp_path: Path) -> None:
     """--param KEY=VALUE reaches every chosen mode that has KEY (here the stream's bias and lock, and dtw-open's
     hub removal), runs as the matcher called directly with it, and is recorded in the settings."""
-    from vpr_edge.evaluate import evaluate_mode
-    from vpr_edge.groundtruth import pad
+    from vpr_edge.evaluation.scoring import evaluate_mode
+    from vpr_edge.evaluation.truth import pad
     from vpr_edge.matchers import get_matcher
 
     s, gt = planted_similarity(tmp_path)

@@ -6,14 +6,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from vpr_edge.resources import sample_folder
+
 torch = pytest.importorskip("torch")
 
-from vpr_edge.extract import FeatureExtractor  # noqa: E402
-from vpr_edge.store import file_sha256  # noqa: E402
+from vpr_edge.features.cnn import FeatureExtractor  # noqa: E402
+from vpr_edge.files import file_sha256  # noqa: E402
 from vpr_edge_export.backbones import BACKBONES, build_backbone  # noqa: E402
 from vpr_edge_export.onnx_export import compare_with_torch, default_weights, export_onnx, load_state_dict  # noqa: E402
 
-SAMPLE_REFS = Path(__file__).resolve().parent.parent / "samples" / "corridor" / "ref"
+SAMPLE_REFS = sample_folder() / "ref"
 
 
 def test_bundled_model_matches_torch_on_real_images(model_path: Path) -> None:

@@ -21,10 +21,10 @@ from vpr_edge.features.ldb import Ldb, all_bits, select_bits
 from vpr_edge.features.patches import Patches
 from vpr_edge.features.sift import DenseSift, KeypointSift
 from vpr_edge.images import load_image
-from vpr_edge.mapfile import PlaceMap
+from vpr_edge.map import PlaceMap, load_map, map_front_end, save_map
 from vpr_edge.matchers import MATCHERS
-from vpr_edge.pixels import pixel_descriptor
-from vpr_edge.streams import write_ground_truth
+from vpr_edge.features.patches import pixel_descriptor
+from vpr_edge.evaluation.streams import write_ground_truth
 
 
 @pytest.fixture(scope="module")
@@ -147,7 +147,7 @@ def test_every_front_end_encoding_and_matcher_runs(tmp_path: Path, small_refs: P
             assert code == 2 and "fixed grid" in err and err.count("\n") == 1 and not out.exists()
             continue
         assert code == 0, err
-        pm = PlaceMap.load(out)
+        pm = load_map(out)
         assert pm.features["name"] == front and pm.encoder.name == encoding and pm.svm is not None
         code, stdout, err = invoke("evaluate", "-m", out, "-q", small_queries, "--gt", gt, "--json",
                                    tmp_path / "r.json")
@@ -164,8 +164,8 @@ def test_every_front_end_encoding_and_matcher_runs(tmp_path: Path, small_refs: P
 def test_ldb_bits_recorded_and_reused(tmp_path: Path, small_refs: Path, images: list[np.ndarray]) -> None:
     out = tmp_path / "ldb.npz"
     assert invoke("build-map", small_refs, "-o", out, "--features", "ldb", "--encoding", "none")[0] == 0
-    pm = PlaceMap.load(out)
-    front = pm.front_end(out)
+    pm = load_map(out)
+    front = map_front_end(pm, out)
     assert len(front.bits) == 256 and pm.stored.shape[1] == 256
     refs = pm.encode(*front.local(images[:2]))
     np.testing.assert_allclose(refs, pm.encodings[:2], atol=1e-6)   # queries described as the references were
@@ -175,7 +175,7 @@ def test_svm_round_trips_and_scores_by_one_product(tmp_path: Path, small_refs: P
     out = tmp_path / "svm.npz"
     assert invoke("build-map", small_refs, "-o", out, "--features", "hog", "--encoding", "vlad", "--components",
                   "4", "--svm", "--storage", "float32")[0] == 0
-    pm = PlaceMap.load(out)
+    pm = load_map(out)
     q = pm.encodings[:5]
     w, b = pm.svm.weights.dense(), pm.svm.bias
     naive = np.array([[float(np.dot(w[r], q[i]) + b[r]) for r in range(24)] for i in range(5)])
@@ -184,8 +184,8 @@ def test_svm_round_trips_and_scores_by_one_product(tmp_path: Path, small_refs: P
     assert np.mean(np.abs(own - np.arange(24)) <= 1) > 0.9
     assert pm.svm.meta["tolerance"] == 1
     small = tmp_path / "svm8.npz"
-    pm.save(small, "int8")
-    np.testing.assert_allclose(PlaceMap.load(small, mmap=True).scores(q, "svm"), naive, atol=0.05)
+    save_map(pm, small, "int8")
+    np.testing.assert_allclose(load_map(small, mmap=True).scores(q, "svm"), naive, atol=0.05)
 
 
 def test_maps_refuse_queries_described_another_way(tmp_path: Path, small_refs: Path, small_queries: Path,
@@ -210,13 +210,13 @@ def test_maps_refuse_queries_described_another_way(tmp_path: Path, small_refs: P
         assert code == 2 and err.count("\n") == 1 and all(n in err for n in needles), (args, err)
     assert not (tmp_path / "x.npz").exists()
     # the API refuses encodings of another size with one line too
-    pm = PlaceMap.load(hog)
+    pm = load_map(hog)
     with pytest.raises(Exception, match="hog \\+ none encodings have 3780"):
         pm.similarity(np.zeros((1, 100), np.float32))
     # a codebook from the same front end is reused: sift + vlad with it gives the same map
     again = tmp_path / "again.npz"
     assert invoke("build-map", small_refs, "-o", again, "--features", "sift", "--codebook", cb)[0] == 0
-    np.testing.assert_allclose(PlaceMap.load(again).encodings, PlaceMap.load(sift).encodings, atol=1e-2)
+    np.testing.assert_allclose(load_map(again).encodings, load_map(sift).encodings, atol=1e-2)
 
 
 @pytest.mark.parametrize("recipe", [("ldb", "none", "--svm"), ("sift-kp", "vlad", "--no-tfidf")])
@@ -229,7 +229,7 @@ def test_runtime_imports_no_heavy_module_for_any_map(tmp_path: Path, small_refs:
     mode = "svm" if extra == "--svm" else "stream"
     code = ("import sys, runpy; sys.argv = ['vpr-edge', 'localize', '-m', sys.argv[1], '-s', sys.argv[2], "
             f"'--mode', '{mode}'];\n"
-            "try: runpy.run_module('vpr_edge.cli', run_name='__main__')\nexcept SystemExit: pass\n"
+            "try: runpy.run_module('vpr_edge', run_name='__main__')\nexcept SystemExit: pass\n"
             "heavy = sorted(m for m in ('torch', 'sklearn', 'onnx', 'scipy') if m in sys.modules)\n"
             "print('HEAVY', heavy, file=sys.stderr)")
     proc = subprocess.run([sys.executable, "-c", code, str(out), str(small_queries)], capture_output=True,
@@ -243,13 +243,16 @@ def test_bundled_small_model(tmp_path: Path, small_refs: Path) -> None:
     import subprocess
     import sys
 
-    from vpr_edge.extract import BUNDLED_MODEL, SMALL_MODEL, FeatureExtractor
+    from vpr_edge.features.cnn import FeatureExtractor
+    from vpr_edge.resources import SMALL_MODEL_FILE, bundled_model
+
+    SMALL_MODEL, BUNDLED_MODEL = bundled_model(SMALL_MODEL_FILE), bundled_model()
 
     small, big = FeatureExtractor(SMALL_MODEL, threads=1), FeatureExtractor(BUNDLED_MODEL, threads=1)
     assert small.size == (160, 120) and big.size == (320, 240)
     assert small.dim == big.dim == 112 and (small.n_local, big.n_local) == (10 * 8, 20 * 15)
     out = tmp_path / "small.map.npz"
-    cli = [sys.executable, "-m", "vpr_edge.cli"]
+    cli = [sys.executable, "-m", "vpr_edge"]
     proc = subprocess.run(cli + ["build-map", str(small_refs), "-o", str(out), "--model", str(SMALL_MODEL),
                                  "--components", "4"], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
@@ -283,7 +286,7 @@ def naive_fit(img: np.ndarray, size: tuple[int, int], policy: str, fill: tuple[i
 @pytest.mark.parametrize("policy", ["stretch", "pad", "crop"])
 @pytest.mark.parametrize("shape", [(32, 64), (120, 160), (100, 40), (61, 97)])
 def test_resize_policies_against_plain_loops(policy: str, shape: tuple[int, int]) -> None:
-    from vpr_edge.extract import fit_to_input
+    from vpr_edge.features.resize import fit_to_input
 
     img = np.random.default_rng(shape[0]).integers(0, 256, shape + (3,), dtype=np.uint8)
     fill = np.array([124, 116, 104], np.uint8)
@@ -293,7 +296,7 @@ def test_resize_policies_against_plain_loops(policy: str, shape: tuple[int, int]
 
 
 def test_pad_masks_the_cells_that_see_only_padding() -> None:
-    from vpr_edge.extract import content_cells
+    from vpr_edge.features.resize import content_cells
 
     size, grid = (320, 240), (20, 15)                  # 16-pixel cells
     for shape in [(32, 64), (240, 100), (120, 160), (10, 4000)]:
@@ -307,15 +310,18 @@ def test_pad_masks_the_cells_that_see_only_padding() -> None:
 
 def test_resize_policy_recorded_in_the_map(tmp_path: Path, small_refs: Path) -> None:
     """build-map --resize pad: the map records it, its queries go through it; old maps (no record) stretch."""
-    from vpr_edge.extract import BUNDLED_MODEL, FeatureExtractor
+    from vpr_edge.features.cnn import FeatureExtractor
+    from vpr_edge.resources import bundled_model
+
+    BUNDLED_MODEL = bundled_model()
 
     out = tmp_path / "pad.npz"
     res = CliRunner().invoke(app, ["build-map", str(small_refs), "-o", str(out), "--resize", "pad",
                                    "--components", "4"])
     assert res.exit_code == 0, res.output
-    pm = PlaceMap.load(out)
+    pm = load_map(out)
     assert pm.features == {"name": "cnn", "params": {"resize": "pad"}}
-    front = pm.front_end(out)
+    front = map_front_end(pm, out)
     assert front.resize == "pad"                                       # type: ignore[attr-defined]
     wide = np.full((32, 64, 3), 200, np.uint8)                         # 2:1 into the model's 4:3: bands padded
     x = front.preprocess(wide)                                         # type: ignore[attr-defined]
@@ -323,5 +329,5 @@ def test_resize_policy_recorded_in_the_map(tmp_path: Path, small_refs: Path) -> 
     _, mask = front.local([wide, np.full((240, 320, 3), 9, np.uint8)])    # type: ignore[attr-defined]
     assert mask is not None and mask[0].sum() == 20 * 10 and mask[1].all()  # 2:1 into 4:3: 10 of 15 rows
     old = PlaceMap(pm.stored, pm.names, pm.encoder, pm.meta | {"features": {"name": "cnn", "params": {}}})
-    assert old.front_end(out).resize == "stretch"                      # type: ignore[attr-defined]
+    assert map_front_end(old, out).resize == "stretch"                      # type: ignore[attr-defined]
     assert FeatureExtractor(BUNDLED_MODEL).describe() == {"name": "cnn", "params": {"resize": "stretch"}}

@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vpr_edge import groundtruth
+from vpr_edge.evaluation import truth as groundtruth
 from vpr_edge.errors import VprError
-from vpr_edge.streams import KINDS, derive_stream, sensor_noise, write_stream
+from vpr_edge.evaluation.streams import KINDS, derive_stream, sensor_noise, write_stream
 
 
 def test_csv_with_unmapped_rows(tmp_path) -> None:

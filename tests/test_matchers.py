@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from vpr_edge.evaluate import evaluate_mode
+from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.matchers.contrast import local_contrast
 from vpr_edge.matchers.base import step
@@ -211,7 +211,7 @@ def test_road_matcher_against_plain_loops(grid: int, vmax: float, stop_gain: flo
     sim = planted(rng, 20, route([(1.0, 12), (0.0, 5), (0.5, 8)], start=1), noise=0.6)
     params = {"vmax": vmax, "grid": grid, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 6.0, "lock": 3.0,
               "rival_window": 2, "stop_gain": stop_gain, "stop_decay": stop_decay}
-    m = RoadMatcher(20, **params)
+    m = RoadMatcher(20, **MATCHERS["stream"].params | params)
     got = [m.update(row) for row in sim]
     want = naive_road(sim, **params)
     assert [r for r, _ in got] == [r for r, _ in want]
@@ -230,7 +230,7 @@ def test_road_matcher_route_shorter_than_its_fastest_step(n_refs: int) -> None:
     params = dict(MATCHERS["stream"].params)
     params = {k: params[k] for k in ("vmax", "grid", "decay", "bias", "turn", "memory", "lock", "rival_window",
                                      "stop_gain", "stop_decay")} | {"bias": 0.5, "lock": 1.0}  # no all-0 states
-    m = RoadMatcher(n_refs, **params)
+    m = RoadMatcher(n_refs, **MATCHERS["stream"].params | params)
     got = [m.update(row) for row in sim]
     want = naive_road(sim, **params)
     assert [r for r, _ in got] == [r for r, _ in want]
@@ -238,7 +238,7 @@ def test_road_matcher_route_shorter_than_its_fastest_step(n_refs: int) -> None:
 
 
 def test_road_matcher_state_is_bounded() -> None:
-    m = RoadMatcher(50)
+    m = RoadMatcher(50, **MATCHERS["stream"].params)
     rng = np.random.default_rng(0)
     before = m.h.nbytes
     for _ in range(300):
@@ -335,12 +335,12 @@ def test_local_search_follows_a_long_route_and_finds_a_jump() -> None:
 
 
 def test_local_search_is_off_on_small_routes() -> None:
-    m = RoadMatcher(400, window=100)
+    m = RoadMatcher(400, **MATCHERS["stream"].params | {"window": 100})
     for row in planted(np.random.default_rng(0), 400, np.arange(100, 150)):
         m.update(row)
         assert m.wanted() is None
     with pytest.raises(ValueError):
-        RoadMatcher(3000, window=50).update(np.zeros(10), np.arange(10))   # refs not asked for
+        RoadMatcher(3000, **MATCHERS["stream"].params | {"window": 50}).update(np.zeros(10), np.arange(10))   # refs not asked for
 
 
 def test_parse_params_reads_each_default_type_and_refuses_bad_items() -> None:

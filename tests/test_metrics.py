@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vpr_edge import metrics
-from vpr_edge.groundtruth import pad
+from vpr_edge.evaluation import metrics
+from vpr_edge.evaluation.truth import pad
 
 
 def curve_of(scores, correct, n_mapped):

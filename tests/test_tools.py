@@ -32,7 +32,7 @@ def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> 
 
 def test_bench_map_reports_each_size(tmp_path: Path, small_refs: Path) -> None:
     m = tmp_path / "m.npz"
-    build = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "build-map", str(small_refs), "-o", str(m),
+    build = subprocess.run([sys.executable, "-m", "vpr_edge", "build-map", str(small_refs), "-o", str(m),
                             "--components", "2"], capture_output=True, text=True, timeout=600)
     assert build.returncode == 0, build.stderr
     out = tool("bench_map.py", "--map", str(m), "--refs", "50,300")
@@ -67,7 +67,7 @@ def test_thesis_grid_writes_tables_and_curves(tmp_path: Path, small_refs: Path, 
 
 def test_bench_frame_reports_each_stage(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
     m = tmp_path / "m.npz"
-    build = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "build-map", str(small_refs), "-o", str(m),
+    build = subprocess.run([sys.executable, "-m", "vpr_edge", "build-map", str(small_refs), "-o", str(m),
                             "--components", "2"], capture_output=True, text=True, timeout=600)
     assert build.returncode == 0, build.stderr
     out = tool("bench_frame.py", "--map", str(m), "--frames", str(small_queries), "--threads", "1", "--repeat", "1")
@@ -97,7 +97,7 @@ def test_size_sweep_reports_each_configuration(tmp_path: Path, small_refs: Path,
 
 def test_coarse_check_compares_exact_and_coarse(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
     m = tmp_path / "m.npz"
-    build = subprocess.run([sys.executable, "-m", "vpr_edge.cli", "build-map", str(small_refs), "-o", str(m),
+    build = subprocess.run([sys.executable, "-m", "vpr_edge", "build-map", str(small_refs), "-o", str(m),
                             "--components", "4"], capture_output=True, text=True, timeout=600)
     assert build.returncode == 0, build.stderr
     streams = tmp_path / "streams"

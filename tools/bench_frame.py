@@ -21,10 +21,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from vpr_edge.extract import FeatureExtractor, default_model_path  # noqa: E402
+from vpr_edge.features.cnn import FeatureExtractor, default_model_path  # noqa: E402
 from vpr_edge.images import list_images, load_image  # noqa: E402
-from vpr_edge.mapfile import PlaceMap, build_map  # noqa: E402
+from vpr_edge.map import build_map, load_map, map_front_end  # noqa: E402
+from vpr_edge.map.front import map_model_path  # noqa: E402
 from vpr_edge.matchers import get_matcher  # noqa: E402
+from vpr_edge.resources import sample_folder  # noqa: E402
 from vpr_edge.threads import use_threads  # noqa: E402
 
 
@@ -32,16 +34,16 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--map", type=Path, default=None)
     p.add_argument("--model", type=Path, default=None)
-    p.add_argument("--frames", type=Path, default=ROOT / "samples" / "corridor" / "query")
+    p.add_argument("--frames", type=Path, default=sample_folder() / "query")
     p.add_argument("--threads", default="1,2", help="onnxruntime thread counts to try")
     p.add_argument("--matcher", default="stream", help="registered online matcher")
     p.add_argument("--repeat", type=int, default=2, help="passes over the frames (the first is warm-up)")
     p.add_argument("--blas", choices=("held", "default"), default="held")
     a = p.parse_args()
-    place_map = (PlaceMap.load(a.map) if a.map else
-                 build_map(list_images(ROOT / "samples" / "corridor" / "ref"),
+    place_map = (load_map(a.map) if a.map else
+                 build_map(list_images(sample_folder() / "ref"),
                            FeatureExtractor(a.model or default_model_path())))
-    model = place_map.model_path(a.model)     # a given --model, else the map's own (as localize chooses)
+    model = map_model_path(place_map, a.model)     # a given --model, else the map's own (as localize chooses)
     files = list_images(a.frames)
     print(f"{len(files)} frames from {a.frames}; map {len(place_map.names)} refs x {place_map.stored.shape[1]} "
           f"dims; model {model.name}")
@@ -49,7 +51,7 @@ def main() -> int:
     heads = ("threads", "decode", "prep", "infer", "encode", "match", "total")
     print(" ".join(f"{h:>7s}" for h in heads) + "  ms/frame")
     for threads in (int(t) for t in a.threads.split(",")):
-        ex = place_map.front_end(a.map or "built map", model, use_threads(threads) if a.blas == "held" else threads)
+        ex = map_front_end(place_map, a.map or "built map", model, use_threads(threads) if a.blas == "held" else threads)
         times = np.zeros(5)
         for rep in range(a.repeat):
             dtw = get_matcher(a.matcher).stream(len(place_map.names))

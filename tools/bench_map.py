@@ -5,8 +5,8 @@
 
 Each synthetic map copies the encoder and metadata of the given real map (so its encodings have the real
 IFV size, 2 x components x channels) and fills R references with random unit rows, written through
-``PlaceMap.save`` (the values are staged in a memory-mapped temporary file, never whole in RAM). Then, each
-in a fresh process so that RSS means something: open with ``PlaceMap.load(mmap=True)`` (what ``localize``
+``map.save_map`` (the values are staged in a memory-mapped temporary file, never whole in RAM). Then, each
+in a fresh process so that RSS means something: open with ``load_map(mmap=True)`` (what ``localize``
 does) and with ``mmap=False`` (everything read into RAM), and time one similarity row (one query against
 every reference), cold (first touch, pages read from the file cache or disk) and warm (mean of 3 more).
 """
@@ -25,21 +25,21 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from vpr_edge.compact import DTYPES, Encodings  # noqa: E402
-from vpr_edge.mapfile import PlaceMap  # noqa: E402
+from vpr_edge.index.encodings import DTYPES, Encodings  # noqa: E402
+from vpr_edge.map import PlaceMap, load_map, save_map  # noqa: E402
 
 PROBE = r"""
 import json, resource, sys, time
 import numpy as np
 sys.path.insert(0, sys.argv[3])
-from vpr_edge.mapfile import PlaceMap
+from vpr_edge.map import load_map
 def rss():
     for line in open("/proc/self/status"):
         if line.startswith("VmRSS:"):
             return int(line.split()[1]) / 1024
 base = rss()
 t0 = time.perf_counter()
-pm = PlaceMap.load(sys.argv[1], mmap=sys.argv[2] == "mmap")
+pm = load_map(sys.argv[1], mmap=sys.argv[2] == "mmap")
 t_open = time.perf_counter() - t0
 rss_open = rss() - base
 q = np.random.default_rng(0).normal(size=(1, pm.stored.shape[1])).astype(np.float32)
@@ -67,7 +67,7 @@ def synthetic_map(real: PlaceMap, refs: int, storage: str, out: Path, scratch: P
         if enc.scale is not None:
             scales.append(enc.scale)
     stored = Encodings(values, storage, np.concatenate(scales) if scales else None)
-    PlaceMap(stored, [f"{i:06d}.jpg" for i in range(refs)], real.encoder, dict(real.meta)).save(out, storage)
+    save_map(PlaceMap(stored, [f"{i:06d}.jpg" for i in range(refs)], real.encoder, dict(real.meta)), out, storage)
     del values
 
 
@@ -78,7 +78,7 @@ def main() -> int:
     p.add_argument("--storage", default="int8")
     p.add_argument("--out", type=Path, default=None, help="folder for the synthetic maps (default: a temp dir)")
     a = p.parse_args()
-    real = PlaceMap.load(a.map)
+    real = load_map(a.map)
     with tempfile.TemporaryDirectory(prefix="vpr-bench-") as tmp:
         folder = a.out or Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)

@@ -27,10 +27,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from vpr_edge.coarse import CoarseSearch  # noqa: E402
-from vpr_edge.compact import STORAGES, Encodings  # noqa: E402
+from vpr_edge.index.coarse import CoarseSearch  # noqa: E402
+from vpr_edge.index.encodings import Encodings, STORAGES  # noqa: E402
 from vpr_edge.matchers import get_matcher, step  # noqa: E402
-from vpr_edge.store import read_npz, write_npz  # noqa: E402
+from vpr_edge.files import read_npz, write_npz  # noqa: E402
 
 
 def rss_mb(field: str = "VmRSS") -> float:

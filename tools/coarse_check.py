@@ -22,10 +22,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from vpr_edge import groundtruth  # noqa: E402
+from vpr_edge.evaluation import truth as groundtruth  # noqa: E402
 from vpr_edge.api import Localizer  # noqa: E402
-from vpr_edge.coarse import CoarseSearch  # noqa: E402
-from vpr_edge.evaluate import score_result  # noqa: E402
+from vpr_edge.index.coarse import CoarseSearch  # noqa: E402
+from vpr_edge.evaluation.scoring import score_result  # noqa: E402
 from vpr_edge.images import list_images, load_image  # noqa: E402
 from vpr_edge.matchers import run_online, run_rows  # noqa: E402
 

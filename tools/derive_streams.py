@@ -24,7 +24,7 @@ import numpy as np  # noqa: E402
 
 from vpr_edge.errors import VprError, one_line_errors  # noqa: E402
 from vpr_edge.images import list_images  # noqa: E402
-from vpr_edge.streams import KINDS, derive_stream, write_stream  # noqa: E402
+from vpr_edge.evaluation.streams import KINDS, derive_stream, write_stream  # noqa: E402
 
 
 def main() -> int:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from vpr_edge.report import delays_text  # noqa: E402
+from vpr_edge.evaluation.report import delays_text  # noqa: E402
 
 KINDS = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
 

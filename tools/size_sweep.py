@@ -26,14 +26,17 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from vpr_edge import groundtruth  # noqa: E402
-from vpr_edge.compact import Encodings  # noqa: E402
+from vpr_edge.evaluation import truth as groundtruth  # noqa: E402
+from vpr_edge.index.encodings import Encodings  # noqa: E402
 from vpr_edge.encoders import FitSettings  # noqa: E402
-from vpr_edge.evaluate import evaluate_mode  # noqa: E402
-from vpr_edge.extract import BUNDLED_MODEL  # noqa: E402
+from vpr_edge.evaluation.scoring import evaluate_mode  # noqa: E402
+from vpr_edge.resources import bundled_model  # noqa: E402
+
+BUNDLED_MODEL = bundled_model()
 from vpr_edge.features import make_front_end  # noqa: E402
 from vpr_edge.images import list_images  # noqa: E402
-from vpr_edge.mapfile import extract_all, map_from_local  # noqa: E402
+from vpr_edge.map.build import extract_all  # noqa: E402
+from vpr_edge.map import map_from_local  # noqa: E402
 from vpr_edge.matchers import get_matcher  # noqa: E402
 from vpr_edge.threads import use_threads  # noqa: E402
 

@@ -18,8 +18,8 @@ Query sets: the aligned pair (query i is place i; the thesis's 1-frame tolerance
 derived stream (tools/derive_streams.py with --map-places = all references, so that the stream runs the
 whole route and fixed-end DTW's ends are right: its frames and KIND.csv, place indices into the same
 references).
-Every figure comes from ``vpr_edge.evaluate.evaluate_mode``, the function behind ``vpr-edge evaluate``;
-maps are made by ``vpr_edge.mapfile.map_from_local``, the function behind ``vpr-edge build-map`` (local
+Every figure comes from ``vpr_edge.evaluation.evaluate_mode``, the function behind ``vpr-edge evaluate``;
+maps are made by ``vpr_edge.map.map_from_local``, the map building behind ``vpr-edge build-map`` (local
 features are extracted once per front end and reused across encodings). Writes OUT/grid.md, OUT/grid.json
 and OUT/<group>.<queries>.pr.png.
 """
@@ -37,13 +37,18 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from vpr_edge import groundtruth, report  # noqa: E402
+from vpr_edge.evaluation import truth as groundtruth  # noqa: E402
+
+from vpr_edge.evaluation import report  # noqa: E402
 from vpr_edge.encoders import ENCODERS, FitSettings  # noqa: E402
-from vpr_edge.evaluate import ModeReport, evaluate_mode  # noqa: E402
-from vpr_edge.extract import BUNDLED_MODEL  # noqa: E402
+from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode  # noqa: E402
+from vpr_edge.resources import bundled_model  # noqa: E402
+
+BUNDLED_MODEL = bundled_model()
 from vpr_edge.features import make_front_end  # noqa: E402
 from vpr_edge.images import list_images  # noqa: E402
-from vpr_edge.mapfile import extract_all, map_from_local  # noqa: E402
+from vpr_edge.map.build import extract_all  # noqa: E402
+from vpr_edge.map import map_from_local  # noqa: E402
 from vpr_edge.matchers import get_matcher  # noqa: E402
 from vpr_edge.threads import use_threads  # noqa: E402
 

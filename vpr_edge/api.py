@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.errors import VprError
 from vpr_edge.features import FrontEnd
 from vpr_edge.images import MIN_SIDE, Frame
-from vpr_edge.mapfile import PlaceMap
+from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
+from vpr_edge.map import PlaceMap, load_map, map_front_end
 from vpr_edge.matchers import Matcher, get_matcher, step
 from vpr_edge.threads import use_threads
 
@@ -85,17 +85,18 @@ class Localizer:
                  mode: str = "stream", params: dict | None = None, min_confidence: float | None = None,
                  threads: int | None = None, coarse: bool | None = None) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
-        self.map = PlaceMap.load(map_path, mmap=True)
+        self.map = load_map(map_path, mmap=True)
         ort_threads = 0 if threads is None else use_threads(threads)
-        self.front = self.map.front_end(map_path, Path(model) if model else None, ort_threads)
+        self.front = map_front_end(self.map, map_path, Path(model) if model else None, ort_threads)
         if self.matcher.scores == "svm" and self.map.svm is None:
             raise VprError(f"{map_path}: mode svm needs a map built with build-map --svm")
         self.threshold = self.matcher.min_confidence if min_confidence is None else min_confidence
         self._online = self.matcher.stream(len(self.map.names)) if self.matcher.online else None
         if coarse is None:
             coarse = len(self.map.names) >= COARSE_MIN_REFS
-        self._coarse = CoarseSearch(self.map.stored) if (coarse and self.matcher.scores == "cosine" and hasattr(
-            self._online, "wanted")) else None
+        self._coarse = CoarseSearch(self.map.stored) if (coarse and self.matcher.scores == "cosine" and
+                                                         self._online is not None and
+                                                         self._online.searches_locally) else None
         self._lock = threading.Lock()
         self._count = 0
 

@@ -14,7 +14,7 @@ from typing import ClassVar
 import numpy as np
 
 from vpr_edge.errors import VprError
-from vpr_edge.store import read_npz, write_npz
+from vpr_edge.files import write_npz
 
 CODEBOOK_SCHEMA = 2        # 2: any encoder (meta "encoding"); 1: the IFV's PCA + GMM only
 READS_CODEBOOK = (1, 2)
@@ -98,6 +98,19 @@ class Encoder:
         """JSON-serialisable parameters (with ``to_arrays`` they rebuild the encoder)."""
         raise NotImplementedError
 
+    @classmethod
+    def fit(cls, x: np.ndarray, s: FitSettings, input_dim: int, local: np.ndarray | None = None,
+            mask: np.ndarray | None = None, n_local: int | None = None) -> "Encoder":
+        """Fit on descriptors ``x`` (n, input_dim) sampled from the references; ``local`` (R, N, K) and
+        ``mask`` (R, N) are every reference's descriptors (bow's tf-idf counts them), ``n_local`` the front
+        end's fixed N (None when it varies). Encoders that fit nothing use only ``input_dim``/``n_local``."""
+        raise NotImplementedError
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], params: dict, input_dim: int) -> "Encoder":
+        """Rebuild a fitted encoder from ``to_arrays()`` and ``params()`` (KeyError/ValueError if inconsistent)."""
+        raise NotImplementedError
+
     def to_arrays(self) -> dict[str, np.ndarray]:
         raise NotImplementedError
 
@@ -131,12 +144,3 @@ class Encoder:
         meta = {"kind": "codebook", "schema": CODEBOOK_SCHEMA, "input_dim": self.input_dim,
                 "encoding": {"name": self.name, "params": self.params()}}
         write_npz(path, self.to_arrays(), meta | (extra_meta or {}))
-
-
-def load_codebook(path: str | os.PathLike[str]) -> tuple[Encoder, dict]:
-    """Read a standalone codebook file; returns (encoder, metadata). Schema-1 files are IFV codebooks."""
-    from vpr_edge.encoders.registry import encoder_from_arrays
-
-    arrays, meta = read_npz(path, "codebook", READS_CODEBOOK)
-    spec = meta.get("encoding") or {"name": "ifv", "params": {"alpha": 0.5}}
-    return encoder_from_arrays(spec, arrays, int(meta.get("input_dim", 0)), str(path)), meta

@@ -98,7 +98,8 @@ class FisherVector(Encoder):
         return cls(gmm, pca, input_dim, float(params.get("alpha", cls.alpha)))
 
     @classmethod
-    def fit(cls, x: np.ndarray, s: FitSettings, input_dim: int, **_: object) -> "FisherVector":
+    def fit(cls, x: np.ndarray, s: FitSettings, input_dim: int, local: np.ndarray | None = None,
+            mask: np.ndarray | None = None, n_local: int | None = None) -> "FisherVector":
         """Fit on sampled descriptors ``x`` (n, input_dim)."""
         from vpr_edge.encoders.fit import fit_gmm, fit_pca
 

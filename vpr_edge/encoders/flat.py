@@ -38,8 +38,8 @@ class Flatten(Encoder):
         return cls(input_dim, int(params["n_local"]))
 
     @classmethod
-    def fit(cls, x: np.ndarray, s: FitSettings, input_dim: int, n_local: int | None = None,
-            **_: object) -> "Flatten":
+    def fit(cls, x: np.ndarray, s: FitSettings, input_dim: int, local: np.ndarray | None = None,
+            mask: np.ndarray | None = None, n_local: int | None = None) -> "Flatten":
         if n_local is None:
             raise VprError("encoding none needs a front end with a fixed grid of descriptors; this one detects "
                            "keypoints (a varying number per image): choose bow, vlad, fv or ifv")

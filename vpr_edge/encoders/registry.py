@@ -3,11 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from vpr_edge.encoders.base import Encoder, FitSettings
+from vpr_edge.encoders.base import Encoder, FitSettings, READS_CODEBOOK
 from vpr_edge.encoders.fisher import FisherVector, ImprovedFisherVector
 from vpr_edge.encoders.flat import Flatten
 from vpr_edge.encoders.words import BagOfWords, Vlad
 from vpr_edge.errors import VprError
+from vpr_edge.files import read_npz
 
 ENCODERS: dict[str, type[Encoder]] = {c.name: c for c in (Flatten, BagOfWords, Vlad, FisherVector,
                                                           ImprovedFisherVector)}
@@ -31,7 +32,7 @@ def fit_encoder(name: str, local: np.ndarray, mask: np.ndarray | None, settings:
     k = local.shape[-1]
     x = sample_descriptors(local, mask, settings.max_descriptors, settings.seed) if cls.needs_fit else \
         np.zeros((0, k))
-    return cls.fit(x, settings, k, local=local, mask=mask, n_local=n_local)  # type: ignore[attr-defined]
+    return cls.fit(x, settings, k, local=local, mask=mask, n_local=n_local)
 
 
 def encoder_from_arrays(spec: dict, arrays: dict[str, np.ndarray], input_dim: int, source: str) -> Encoder:
@@ -42,8 +43,15 @@ def encoder_from_arrays(spec: dict, arrays: dict[str, np.ndarray], input_dim: in
     except ValueError as e:
         raise VprError(f"{source}: {e}") from None
     try:
-        return cls.from_arrays(arrays, dict(spec.get("params") or {}), input_dim)  # type: ignore[attr-defined]
+        return cls.from_arrays(arrays, dict(spec.get("params") or {}), input_dim)
     except KeyError as e:
         raise VprError(f"{source}: {cls.name} codebook array {e} missing") from None
     except (ValueError, TypeError) as e:
         raise VprError(f"{source}: codebook arrays are inconsistent ({e})") from None
+
+
+def load_codebook(path: str | os.PathLike[str]) -> tuple[Encoder, dict]:
+    """Read a standalone codebook file; returns (encoder, metadata). Schema-1 files are IFV codebooks."""
+    arrays, meta = read_npz(path, "codebook", READS_CODEBOOK)
+    spec = meta.get("encoding") or {"name": "ifv", "params": {"alpha": 0.5}}
+    return encoder_from_arrays(spec, arrays, int(meta.get("input_dim", 0)), str(path)), meta

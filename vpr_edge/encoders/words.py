@@ -79,7 +79,7 @@ class BagOfWords(_Centres):
 
     @classmethod
     def fit(cls, x: np.ndarray, s: FitSettings, input_dim: int, local: np.ndarray | None = None,
-            mask: np.ndarray | None = None, **_: object) -> "BagOfWords":
+            mask: np.ndarray | None = None, n_local: int | None = None) -> "BagOfWords":
         """Vocabulary from sampled descriptors ``x``; with ``s.tfidf`` the idf log((1+R)/(1+df)) from every
         reference image in ``local`` (R, N, K) (df: references holding the word)."""
         from vpr_edge.encoders.fit import fit_kmeans, fit_pca
@@ -128,7 +128,8 @@ class Vlad(_Centres):
         return cls(centres, pca, input_dim, float(params.get("alpha", 0.5)))
 
     @classmethod
-    def fit(cls, x: np.ndarray, s: FitSettings, input_dim: int, **_: object) -> "Vlad":
+    def fit(cls, x: np.ndarray, s: FitSettings, input_dim: int, local: np.ndarray | None = None,
+            mask: np.ndarray | None = None, n_local: int | None = None) -> "Vlad":
         from vpr_edge.encoders.fit import fit_kmeans, fit_pca
 
         pca, y = fit_pca(x, s)

@@ -7,11 +7,11 @@ from dataclasses import asdict, dataclass, field
 import cv2
 import numpy as np
 
-from vpr_edge.features import grey, spec_fingerprint
+from vpr_edge.features.base import Handcrafted, grey
 
 
 @dataclass(frozen=True)
-class Hog:
+class Hog(Handcrafted):
     """Grey image resized to width x height; blocks of ``block`` px every ``stride`` px, cells of ``cell``
     px, ``bins`` orientation bins, L2-Hys per block (OpenCV's defaults). N = blocks, K = (block/cell)^2 bins."""
 
@@ -32,9 +32,6 @@ class Hog:
     def n_local(self) -> int:
         return ((self.width - self.block) // self.stride + 1) * ((self.height - self.block) // self.stride + 1)
 
-    @property
-    def fingerprint(self) -> str:
-        return spec_fingerprint(self.describe())
 
     def describe(self) -> dict:
         return {"name": self.name, "params": {k: v for k, v in asdict(self).items() if k not in ("name", "binary")}}

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from vpr_edge.features import grey, spec_fingerprint
+from vpr_edge.features.base import Handcrafted, grey
 
 LEVELS = (2, 3, 4, 5)
 
@@ -91,7 +91,7 @@ def select_bits(bits: np.ndarray, n_bits: int, method: str = "entropy", seed: in
 
 
 @dataclass(frozen=True)
-class Ldb:
+class Ldb(Handcrafted):
     """LDB front end. ``bits`` None: not fitted yet, ``local`` returns all L bits (build-map then calls
     ``fit`` on the references' and ``select``); otherwise the chosen bit indices (recorded in the map)."""
 
@@ -125,9 +125,6 @@ class Ldb:
     def n_local(self) -> int:
         return self.patches * self.patches
 
-    @property
-    def fingerprint(self) -> str:
-        return spec_fingerprint(self.describe())
 
     def describe(self) -> dict:
         return {"name": self.name, "params": {"size": self.size, "patches": self.patches, "levels": list(self.levels),

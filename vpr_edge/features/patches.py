@@ -1,4 +1,7 @@
-"""SeqSLAM's front end as local descriptors: grey 64x32, each 8x8 patch normalised (``vpr_edge.pixels``)."""
+"""SeqSLAM's front end (Milford & Wyeth 2012): grey images downsampled to 64x32, every 8x8 patch normalised.
+
+``pixel_descriptor`` is one image as a flat vector (what ``evaluate --features pixels`` compares by the mean
+absolute difference); ``Patches`` gives the same values as 32 local 64-dim descriptors for the encoders."""
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -6,12 +9,24 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vpr_edge.features import spec_fingerprint
-from vpr_edge.pixels import PATCH, SIZE, pixel_descriptor
+from vpr_edge.features.base import Handcrafted, grey
+
+SIZE = (64, 32)     # width, height (SeqSLAM's Nordland setting)
+PATCH = 8           # patch normalisation: PATCH x PATCH blocks
+
+
+def pixel_descriptor(rgb: np.ndarray, size: tuple[int, int] = SIZE, patch: int = PATCH) -> np.ndarray:
+    """RGB uint8 (H, W, 3) -> float32 (h*w,): grey, resized (area), every patch x patch block z-scored."""
+    x = grey(rgb, size).astype(np.float32)
+    h, w = size[1] // patch, size[0] // patch
+    blocks = x[: h * patch, : w * patch].reshape(h, patch, w, patch)
+    mean = blocks.mean(axis=(1, 3), keepdims=True)
+    std = blocks.std(axis=(1, 3), keepdims=True)
+    return ((blocks - mean) / np.maximum(std, 1e-3)).reshape(-1).astype(np.float32)
 
 
 @dataclass(frozen=True)
-class Patches:
+class Patches(Handcrafted):
     """N = (64/8) * (32/8) = 32 patches, K = 64 normalised grey values each."""
 
     width: int = SIZE[0]
@@ -28,9 +43,6 @@ class Patches:
     def n_local(self) -> int:
         return (self.width // self.patch) * (self.height // self.patch)
 
-    @property
-    def fingerprint(self) -> str:
-        return spec_fingerprint(self.describe())
 
     def describe(self) -> dict:
         return {"name": self.name, "params": {"width": self.width, "height": self.height, "patch": self.patch}}

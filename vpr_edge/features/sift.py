@@ -7,11 +7,11 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from vpr_edge.features import grey, spec_fingerprint
+from vpr_edge.features.base import Handcrafted, grey
 
 
 @dataclass(frozen=True)
-class DenseSift:
+class DenseSift(Handcrafted):
     """128-dim SIFT descriptors at keypoints of diameter ``size`` px every ``step`` px on the grey image at
     width x height (no detection: the same grid in every image, N fixed)."""
 
@@ -32,9 +32,6 @@ class DenseSift:
     def n_local(self) -> int:
         return len(range(self.step // 2, self.height, self.step)) * len(range(self.step // 2, self.width, self.step))
 
-    @property
-    def fingerprint(self) -> str:
-        return spec_fingerprint(self.describe())
 
     def describe(self) -> dict:
         return {"name": self.name, "params": {k: getattr(self, k) for k in ("width", "height", "step", "size")}}
@@ -50,7 +47,7 @@ class DenseSift:
 
 
 @dataclass(frozen=True)
-class KeypointSift:
+class KeypointSift(Handcrafted):
     """SIFT on the ``max_keypoints`` strongest detected keypoints of the grey image at width x height;
     images with fewer are padded with zeros and the mask marks the real ones."""
 
@@ -62,9 +59,6 @@ class KeypointSift:
     dim: int = field(default=128, init=False, repr=False)
     n_local: None = field(default=None, init=False, repr=False)
 
-    @property
-    def fingerprint(self) -> str:
-        return spec_fingerprint(self.describe())
 
     def describe(self) -> dict:
         return {"name": self.name, "params": {k: getattr(self, k) for k in ("width", "height", "max_keypoints")}}

@@ -10,8 +10,12 @@ An *online* matcher sees one row at a time, past frames only: ``update(row) -> (
 offline form, so every matcher, online or not, can be evaluated with ``run(sim)``.
 
 An online matcher may search locally: ``wanted()`` names the references whose similarities its next frame
-needs (None: all), and ``update(values, refs)`` takes just those. ``step`` drives either kind, so that the
-Localizer computes only the similarities asked for and ``evaluate`` measures exactly what it runs.
+needs (None: all, what ``WholeRoute`` matchers always answer), and ``update(values, refs)`` takes just those.
+``step`` drives every online matcher that way, so that the Localizer computes only the similarities asked for
+and ``evaluate`` measures exactly what it runs.
+
+A matcher's parameters are defined once, with their meaning, in ``params``; the registry's presets and the
+CLI's help read them there.
 """
 from __future__ import annotations
 
@@ -22,18 +26,37 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from vpr_edge.matchers.params import Param
+
 
 class OnlineMatcher(Protocol):
-    """A matcher fed one frame at a time, with memory bounded independently of the stream's length."""
+    """A matcher fed one frame at a time, with memory bounded independently of the stream's length.
+    ``searches_locally``: some frames read only part of the route (``wanted()``), so whole-route frames may
+    be approximated on large maps (``index.coarse``); False: every frame reads every reference exactly."""
 
-    def update(self, sim_row: np.ndarray) -> tuple[int, float]:
-        """Similarities (R,) of the new frame to every reference -> (best reference, score)."""
+    searches_locally: bool
+
+    def wanted(self) -> np.ndarray | None:
+        """References (sorted int array) whose similarities the next ``update`` needs; None: all of them."""
+
+    def update(self, sim_row: np.ndarray, refs: np.ndarray | None = None) -> tuple[int, float]:
+        """Similarities of the new frame to the references ``refs`` (what ``wanted()`` asked for; None: all
+        R, ``sim_row`` (R,)) -> (best reference, score)."""
 
     def ranking(self) -> np.ndarray:
         """Per-reference preference (R,) after the last update (higher = better); ties broken by index."""
 
     def reset(self) -> None:
         """Forget the stream."""
+
+
+class WholeRoute:
+    """Base of online matchers that read every reference every frame (``wanted()`` is always None)."""
+
+    searches_locally = False
+
+    def wanted(self) -> None:
+        return None
 
 
 @dataclass(frozen=True)
@@ -68,11 +91,8 @@ def lead_with(refs: np.ndarray, cand: np.ndarray) -> np.ndarray:
 def step(matcher: OnlineMatcher, similarity: Callable[[np.ndarray | None], np.ndarray]) -> tuple[int, float]:
     """One frame: ``similarity(refs)`` gives the frame's similarities to the references ``refs`` (sorted int
     array; None = all, (R,)); ``refs`` is what the matcher's ``wanted()`` asks for, if it has one."""
-    wanted = getattr(matcher, "wanted", None)
-    refs = wanted() if wanted is not None else None
-    if refs is None:
-        return matcher.update(similarity(None))
-    return matcher.update(similarity(refs), refs)  # type: ignore[call-arg]
+    refs = matcher.wanted()
+    return matcher.update(similarity(refs), refs)
 
 
 def run_online(matcher: OnlineMatcher, sim: np.ndarray, k: int = 10) -> Result:
@@ -97,8 +117,9 @@ def run_rows(matcher: OnlineMatcher, rows: Callable[[int, np.ndarray | None], np
 @dataclass(frozen=True)
 class Matcher:
     """A registered matcher: a name, a one-line summary, and either ``start(n_refs, **params)`` making an
-    online matcher or ``align(sim, k, **params)`` computing a Result offline. ``params`` are its preset
-    keyword arguments; ``with_params`` overrides some of them. ``min_confidence``: the default score below
+    online matcher or ``align(sim, k, **params)`` computing a Result offline. ``definitions`` defines its
+    parameters (``params.Param``: default and meaning); ``params`` are the values it runs with (default: the
+    definitions' defaults; a preset changes some); ``with_params`` overrides some of them. ``min_confidence``: the default score below
     which a frame is reported lost (None: the matcher has no lost state). ``scores``: the (Q, R) matrix it
     runs on: ``cosine`` similarities of encodings, or ``svm`` decision values (a map built with --svm)."""
 
@@ -106,9 +127,21 @@ class Matcher:
     summary: str
     start: Callable[..., OnlineMatcher] | None = None
     align: Callable[..., Result] | None = None
+    definitions: dict[str, Param] = field(default_factory=dict)
     params: dict[str, Any] = field(default_factory=dict)
     min_confidence: float | None = None
     scores: str = "cosine"
+
+    def __post_init__(self) -> None:
+        if not self.params:
+            object.__setattr__(self, "params", {k: p.default for k, p in self.definitions.items()})
+        if set(self.params) != set(self.definitions):
+            raise ValueError(f"matcher {self.name!r}: parameters {sorted(self.params)} do not match their "
+                             f"definitions {sorted(self.definitions)}")
+
+    def params_help(self) -> str:
+        """One line per parameter: name, value and meaning (``localize --list-params``)."""
+        return "\n".join(f"  {k} = {v!r}: {self.definitions[k].meaning}" for k, v in self.params.items())
 
     @property
     def online(self) -> bool:

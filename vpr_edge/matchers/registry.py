@@ -5,6 +5,7 @@ entries with other parameters, as hloc names its configurations.
 """
 from __future__ import annotations
 
+from vpr_edge.matchers import params as P
 from vpr_edge.matchers.base import Matcher
 from vpr_edge.matchers.dtw import dtw_match
 from vpr_edge.matchers.road import RoadMatcher
@@ -12,31 +13,26 @@ from vpr_edge.matchers.seqslam import SeqSLAMOnline, seqslam_match
 from vpr_edge.matchers.single import BestMatch
 from vpr_edge.matchers.stream_dtw import StreamingDTW
 
-_DTW = {"variant": "distance", "open_ends": False, "max_step": 4, "rival_window": 5, "hubs": False}
-_SEQSLAM = {"ds": 10, "vmin": 0.5, "vmax": 3.0, "r_window": 10, "match_window": 10}
 
 MATCHERS: dict[str, Matcher] = {m.name: m for m in (
     Matcher("stream", "trajectories over (position, speed) with contrast-normalised similarities: any speed "
             "0-4 places/frame, lock-on anywhere, lost state (online, default)", start=RoadMatcher,
-            params={"vmax": 4.0, "grid": 2, "decay": 0.9, "bias": 1.0, "turn": 1.0, "memory": 50.0, "lock": 6.0,
-                    "rival_window": 10, "window": 100, "probe": 512, "check": 100, "span": 5, "hold": 2.0,
-                    "stop_gain": 0.3, "stop_decay": 0.95},
-            min_confidence=1.0),
+            definitions=P.STREAM, min_confidence=1.0),
     Matcher("single", "best single match per frame, no sequence information (online)", start=BestMatch),
     Matcher("stream-dtw", "decayed streaming DTW over 1 - cos (online; the first streaming matcher, kept "
-            "as a baseline)", start=StreamingDTW, params={"decay": 0.9}),
-    Matcher("dtw", "offline DTW, fixed ends (0,0)->(Q-1,R-1), distance form", align=dtw_match, params=_DTW),
+            "as a baseline)", start=StreamingDTW, definitions=P.STREAM_DTW),
+    Matcher("dtw", "offline DTW, fixed ends (0,0)->(Q-1,R-1), distance form", align=dtw_match, definitions=P.DTW),
     Matcher("dtw-thesis", "offline DTW, fixed ends, similarity form (the thesis's)", align=dtw_match,
-            params=_DTW | {"variant": "similarity"}),
+            definitions=P.DTW, params=P.defaults(P.DTW, variant="similarity")),
     Matcher("dtw-open", "offline subsequence DTW, open ends, 0-4 references per frame, distance form, "
             "hubs removed (similarities z-scored per frame, each reference's mean subtracted)",
-            align=dtw_match, params=_DTW | {"open_ends": True, "hubs": True}),
+            align=dtw_match, definitions=P.DTW, params=P.defaults(P.DTW, open_ends=True, hubs=True)),
     Matcher("svm", "one linear SVM per reference place, trained at build time (build-map --svm); the place with "
             "the highest decision value (the thesis's classifier baseline, online)", start=BestMatch, scores="svm"),
     Matcher("seqslam", "SeqSLAM (Milford & Wyeth 2012), window centred on each frame (offline)",
-            align=seqslam_match, params=_SEQSLAM),
+            align=seqslam_match, definitions=P.SEQSLAM),
     Matcher("seqslam-online", "SeqSLAM over the past ds frames only (online)", start=SeqSLAMOnline,
-            params=_SEQSLAM),
+            definitions=P.SEQSLAM),
 )}
 
 

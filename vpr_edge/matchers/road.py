@@ -68,10 +68,12 @@ def _beyond(per_ref: np.ndarray, i: int, w: int) -> float:
 class RoadMatcher:
     """Online matcher over (position, speed) trajectories; see the module docstring."""
 
-    def __init__(self, n_refs: int, vmax: float = 4.0, grid: int = 2, decay: float = 0.9, bias: float = 1.0,
-                 turn: float = 1.0, memory: float = 50.0, lock: float = 6.0, rival_window: int = 10,
-                 window: int = 0, probe: int = 512, check: int = 100, span: int = 5, hold: float = 2.0,
-                 stop_gain: float = 0.3, stop_decay: float = 0.95) -> None:
+    searches_locally = True
+
+    def __init__(self, n_refs: int, *, vmax: float, grid: int, decay: float, bias: float, turn: float,
+                 memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
+                 hold: float, stop_gain: float, stop_decay: float) -> None:
+        """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``)."""
         if n_refs < 1:
             raise ValueError("need at least one reference")
         if not 0.0 < decay < 1.0:

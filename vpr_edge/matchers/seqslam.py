@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vpr_edge.matchers.base import Result, lead_with, top_k
+from vpr_edge.matchers.base import Result, WholeRoute, lead_with, top_k
 from vpr_edge.matchers.contrast import local_contrast
 
 
@@ -76,11 +76,11 @@ def seqslam_match(sim: np.ndarray, k: int = 10, ds: int = 10, vmin: float = 0.5,
     return Result(refs, scores, lead_with(refs, ranked))
 
 
-class SeqSLAMOnline:
+class SeqSLAMOnline(WholeRoute):
     """SeqSLAM over the past ``ds`` + 1 frames only: trajectories end at the current frame."""
 
-    def __init__(self, n_refs: int, ds: int = 10, vmin: float = 0.5, vmax: float = 3.0, r_window: int = 10,
-                 match_window: int = 10) -> None:
+    def __init__(self, n_refs: int, *, ds: int, vmin: float, vmax: float, r_window: int,
+                 match_window: int) -> None:
         self.n_refs, self.r_window, self.match_window = n_refs, r_window, match_window
         off = _offsets(ds, vmin, vmax)                                           # (V, ds+1), k frames back
         self._ys = np.maximum(np.arange(n_refs)[None, None, :] - off[:, :, None], 0)  # (V, ds+1, R)
@@ -88,7 +88,7 @@ class SeqSLAMOnline:
         self._frames = 0
         self._values = np.zeros(n_refs)
 
-    def update(self, sim_row: np.ndarray) -> tuple[int, float]:
+    def update(self, sim_row: np.ndarray, refs: None = None) -> tuple[int, float]:
         """Similarities (R,) of the new frame -> (reference at the end of the best trajectory, ratio score)."""
         d = -local_contrast(sim_row, self.r_window)
         self._ring[1:] = self._ring[:-1]

@@ -3,10 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from vpr_edge.matchers.base import WholeRoute
+
 from vpr_edge.matchers.dtw import row_scan
 
 
-class StreamingDTW:
+class StreamingDTW(WholeRoute):
     """DTW over an unbounded stream with O(R) work and O(R) memory per frame.
 
     The distance form is used (step term 1 - cos): every step costs, so paths cannot run ahead along the
@@ -22,7 +24,7 @@ class StreamingDTW:
     similarity along that path (1 = perfect, lower = less confident).
     """
 
-    def __init__(self, n_refs: int, decay: float = 0.9) -> None:
+    def __init__(self, n_refs: int, *, decay: float) -> None:
         if n_refs < 1:
             raise ValueError("need at least one reference")
         if not 0.0 < decay < 1.0:
@@ -33,7 +35,7 @@ class StreamingDTW:
         self.weight = np.zeros(n_refs, np.float64)    # decayed number of steps on that path
         self.frames = 0
 
-    def update(self, sim_row: np.ndarray) -> tuple[int, float]:
+    def update(self, sim_row: np.ndarray, refs: None = None) -> tuple[int, float]:
         """Advance by one query frame given its similarity to every reference (R,); return (ref, score)."""
         s = np.asarray(sim_row, np.float64)
         if s.shape != (self.n_refs,):

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from vpr_edge.errors import VprError, one_line_errors
-from vpr_edge.store import check_writable, file_sha256
+from vpr_edge.files import check_writable, file_sha256
 from vpr_edge_export.backbones import BACKBONES, build_backbone
 
 MODEL_SCHEMA = 1
@@ -106,7 +106,7 @@ def export_onnx(backbone: str, tap: str, weights: Path, width: int, height: int,
 
 def compare_with_torch(model: torch.nn.Module, onnx_path: Path, image_dir: Path, limit: int = 8) -> float:
     """Max abs difference between torch and onnxruntime feature maps on up to ``limit`` real images."""
-    from vpr_edge.extract import FeatureExtractor
+    from vpr_edge.features.cnn import FeatureExtractor
     from vpr_edge.images import list_images, load_image
 
     extractor = FeatureExtractor(onnx_path)

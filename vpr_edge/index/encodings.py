@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vpr_edge.store import RowReader, release_pages
+from vpr_edge.index.rows import RowReader, release_pages
 
 DTYPES = {"int8": np.int8, "float16": np.float16, "float32": np.float32}  # storage name -> stored dtype
 STORAGES = tuple(DTYPES)

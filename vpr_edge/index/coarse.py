@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vpr_edge.compact import Encodings
+from vpr_edge.index.encodings import Encodings
 
 COARSE_MIN_REFS = 20_000   # Localizer engages it on maps at least this long (shorter ones: exact is cheap)
 SIGN_BLOCK = 8192          # references per block of the Hamming pass (scratch ~ 2 MB at 2,048 dims)

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from vpr_edge.matchers import Matcher, Result
-from vpr_edge import metrics
+from vpr_edge.evaluation import metrics
 
 RECALL_KS: tuple[int, ...] = (1, 5, 10)
 

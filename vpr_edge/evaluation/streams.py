@@ -17,7 +17,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError
 from vpr_edge.images import load_image
-from vpr_edge.store import atomic_output
+from vpr_edge.files import atomic_output
 
 KINDS: tuple[str, ...] = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
 

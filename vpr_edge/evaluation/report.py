@@ -6,8 +6,8 @@ import os
 from collections.abc import Sequence
 
 from vpr_edge.errors import VprError
-from vpr_edge.evaluate import ModeReport
-from vpr_edge.store import atomic_output
+from vpr_edge.evaluation.scoring import ModeReport
+from vpr_edge.files import atomic_output
 
 _COLUMNS = ("R@1", "R@5", "R@10", "AUC", "AP", "P@R=1", "R@P=1", "med.err", "lost-off", "lost-on", "lock", "exit",
             "ms/frame")

@@ -6,72 +6,20 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from vpr_edge.errors import VprError, warn
-from vpr_edge.store import file_sha256
+from vpr_edge.features.resize import RESIZE, content_cells, fit_to_input
+from vpr_edge.files import file_sha256
+from vpr_edge.resources import SMALL_MODEL_FILE, bundled_model
 
 MODEL_SCHEMA = 1
 _REQUIRED = ("backbone", "tap", "input_width", "input_height", "mean", "std", "channels", "grid_width",
              "grid_height", "weights_sha256")
 
 
-RESIZE = {
-    "stretch": "resize to the model's input whatever the image's aspect (the default)",
-    "pad": "keep the aspect: resize to fit inside the input, pad the rest with the normalisation mean (zero input)",
-    "crop": "keep the aspect: resize to cover the input, cut the centre",
-}
-
-
-def _scaled(shape: tuple[int, ...], size: tuple[int, int], policy: str) -> tuple[int, int]:
-    """(width, height) an image of ``shape`` (H, W, ...) is resized to before padding or cropping."""
-    (w, h), (iw, ih) = size, (shape[1], shape[0])
-    if policy == "stretch" or iw * h == ih * w:
-        return w, h
-    if (policy == "pad") == (iw * h > ih * w):   # pad a wide image / crop a tall one: match the widths
-        return w, max(1, round(ih * w / iw))
-    return max(1, round(iw * h / ih)), h
-
-
-def fit_to_input(rgb: np.ndarray, size: tuple[int, int], policy: str, fill: np.ndarray) -> np.ndarray:
-    """RGB uint8 (H, W, 3) -> uint8 (height, width, 3) at ``size`` = (width, height) by ``policy`` (``RESIZE``):
-    area-averaged when shrinking, bilinear when enlarging; ``pad`` fills with ``fill`` (3,) uint8."""
-    (w, h), iw = size, rgb.shape[1]
-    tw, th = _scaled(rgb.shape, size, policy)
-    x = cv2.resize(rgb, (tw, th), interpolation=cv2.INTER_AREA if iw > tw else cv2.INTER_LINEAR)
-    if (tw, th) == (w, h):
-        return x
-    if policy == "crop":
-        top, left = (th - h) // 2, (tw - w) // 2
-        return np.ascontiguousarray(x[top:top + h, left:left + w])
-    top, left = (h - th) // 2, (w - tw) // 2
-    return cv2.copyMakeBorder(x, top, h - th - top, left, w - tw - left, cv2.BORDER_CONSTANT,
-                              value=[int(v) for v in fill])
-
-
-def content_cells(shape: tuple[int, ...], size: tuple[int, int], grid: tuple[int, int]) -> np.ndarray:
-    """Which cells of a (grid_width x grid_height) tap grid see the image under ``pad`` -> (N,) bool in
-    row-major grid order: cells whose centre lies in the resized image, not in the padding (at least the
-    cell at the image's centre)."""
-    (w, h), (gw, gh) = size, grid
-    tw, th = _scaled(shape, size, "pad")
-    left, top = (w - tw) // 2, (h - th) // 2
-    cx = (np.arange(gw) + 0.5) * w / gw
-    cy = (np.arange(gh) + 0.5) * h / gh
-    inside = ((cy >= top) & (cy < top + th))[:, None] & ((cx >= left) & (cx < left + tw))[None, :]
-    if not inside.any():
-        inside[min(int((top + th / 2) * gh / h), gh - 1), min(int((left + tw / 2) * gw / w), gw - 1)] = True
-    return inside.reshape(-1)
-
-
-BUNDLED_MODEL = Path(__file__).resolve().parent.parent / "models" / "efficientnet_lite0_stage5_320x240.onnx"
-# the same tap exported at a quarter of the pixels, for small cameras (README, "Input size")
-SMALL_MODEL = BUNDLED_MODEL.with_name("efficientnet_lite0_stage5_160x120.onnx")
-
-
 def default_model_path() -> Path:
-    """The default model: ``$VPR_EDGE_MODEL`` if set, else the bundled one in ``models/``."""
+    """The default model: ``$VPR_EDGE_MODEL`` if set, else the bundled one (``resources.bundled_model``)."""
     return resolve_model(None)
 
 
@@ -88,7 +36,8 @@ def resolve_model(given: Path | None, recorded: Path | None = None) -> Path:
         return Path(env)
     if recorded is not None and recorded.name and recorded.is_file():
         return recorded
-    return BUNDLED_MODEL
+    return bundled_model()
+
 
 
 class FeatureExtractor:
@@ -103,6 +52,7 @@ class FeatureExtractor:
 
     name = "cnn"
     binary = False
+    needs_fit = False
 
     def __init__(self, model_path: str | os.PathLike[str], threads: int = 0, resize: str | None = None) -> None:
         import onnxruntime as ort
@@ -157,8 +107,20 @@ class FeatureExtractor:
         return int(self.info["grid_width"]) * int(self.info["grid_height"])
 
     def describe(self) -> dict:
-        """The front-end record of a map (the model's identity is recorded beside it, see ``mapfile``)."""
+        """The front-end record of a map (the model's identity is recorded beside it: ``identity``)."""
         return {"name": self.name, "params": {"resize": self.resize}}
+
+    def identity(self) -> dict:
+        """The model a map was built with: its metadata, file name, absolute path and SHA-256."""
+        return {"model": self.info, "model_file": self.path.name, "model_path": str(self.path.resolve()),
+                "model_sha256": self.fingerprint}
+
+    def fit(self, local: np.ndarray, seed: int = 0) -> "FeatureExtractor":
+        """Nothing to fit: the model is trained."""
+        return self
+
+    def select(self, local: np.ndarray) -> np.ndarray:
+        return local
 
     def local(self, images: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
         """RGB uint8 images (H, W, 3) -> local descriptors (B, N, K) float32 in one model run, and under
@@ -175,7 +137,7 @@ class FeatureExtractor:
         if 4 * rgb.shape[1] < self.size[0] or 4 * rgb.shape[0] < self.size[1]:
             warn(f"{rgb.shape[1]}x{rgb.shape[0]} images are upsampled more than 4x per side to the model's "
                  f"{self.size[0]}x{self.size[1]} input ({self.path.name}); a model with a smaller input suits them"
-                 + (f" (bundled: --model {SMALL_MODEL})" if self.size[0] > 160 else ""))
+                 + (f" (bundled: --model {bundled_model(SMALL_MODEL_FILE)})" if self.size[0] > 160 else ""))
         x = fit_to_input(rgb, self.size, self.resize, self._fill)
         out = np.empty((3,) + x.shape[:2], np.float32)
         for c in range(3):  # one plane at a time, in place: 4x faster than whole-image float temporaries

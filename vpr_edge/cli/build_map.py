@@ -1,0 +1,81 @@
+"""``vpr-edge build-map``: options in, ``map.make.plan_map`` and ``write_map`` called, a summary line out."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from vpr_edge.cli.common import (MODEL_HELP, THREADS_HELP, EncodingOpt, FrontOpt, ResizeOpt, StorageOpt, app,
+                                 user_errors)
+from vpr_edge.encoders import ENCODERS, FitSettings
+from vpr_edge.features import FRONT_ENDS
+from vpr_edge.features.resize import RESIZE
+from vpr_edge.map.make import DEFAULT_ENCODING, DEFAULT_FRONT_END, DEFAULT_STORAGE, BuildOptions, plan_map, write_map
+
+_FIT = FitSettings()
+
+
+def _value(opt):
+    return None if opt is None else opt.value
+
+
+@app.command("build-map")
+def build_map_cmd(
+    refs: Path = typer.Argument(..., help="Folder of reference images, taken in file-name order."),
+    out: Path = typer.Option(..., "--out", "-o", help="Map file to write (.npz); written atomically."),
+    features: Optional[FrontOpt] = typer.Option(None, metavar="FRONT_END", help="Local descriptors: "
+                                                + ", ".join(FRONT_ENDS) + f" (default {DEFAULT_FRONT_END}). "
+                                                "docs/design.md, Front ends."),
+    encoding: Optional[EncodingOpt] = typer.Option(None, metavar="ENCODING", help="How an image's local "
+                                                   "descriptors become one vector: " + ", ".join(ENCODERS)
+                                                   + f" (default {DEFAULT_ENCODING}, the thesis's). "
+                                                   "docs/design.md, Encodings."),
+    model: Optional[Path] = typer.Option(None, help=MODEL_HELP + " cnn only."),
+    resize: Optional[ResizeOpt] = typer.Option(None, help="cnn only: how images are brought to the model's "
+                                               "input: " + "; ".join(f"{k}: {v}" for k, v in RESIZE.items())
+                                               + ". Recorded in the map; queries are resized the same way."),
+    codebook: Optional[Path] = typer.Option(
+        None, help="Reuse this codebook (.npz from --save-codebook) instead of fitting one on the references."),
+    components: Optional[int] = typer.Option(None, min=1, help="Codebook size when fitting: GMM components "
+                                             "(fv, ifv) or k-means centres (bow, vlad); default "
+                                             f"{_FIT.n_components}, as the thesis."),
+    pca_dim: Optional[int] = typer.Option(None, min=1, help="Reduce descriptors to this many dims by PCA "
+                                                            "before the codebook (default: no PCA)."),
+    whiten: Optional[bool] = typer.Option(None, "--whiten/--no-whiten", help="Whiten the PCA output "
+                                          "(default: whiten; with --pca-dim only)."),
+    alpha: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Signed power normalisation exponent "
+                                          f"of ifv and vlad (default {_FIT.alpha}; 1 = off)."),
+    tfidf: Optional[bool] = typer.Option(None, "--tfidf/--no-tfidf", help="bow: weight words by their inverse "
+                                         "document frequency over the references (default off)."),
+    max_descriptors: Optional[int] = typer.Option(None, min=1, help="Local descriptors sampled to fit the "
+                                                                    f"codebook (default {_FIT.max_descriptors})."),
+    fit_iterations: Optional[int] = typer.Option(None, min=1, help="EM / k-means iterations at most when "
+                                                 f"fitting (default {_FIT.iterations})."),
+    svm: bool = typer.Option(False, "--svm", help="Also train one linear SVM per place on the reference "
+                             "encodings (for localize/evaluate --mode svm; doubles the map's size)."),
+    seed: int = typer.Option(0, help="Random seed for sampling and fitting."),
+    save_codebook: Optional[Path] = typer.Option(None, help="Also write the codebook to this .npz file."),
+    storage: Optional[StorageOpt] = typer.Option(None, help=f"How the map stores reference encodings: int8 "
+                                                 f"with a scale per row (default {DEFAULT_STORAGE}; a quarter of "
+                                                 "float32's bytes, docs/results.md), float16 or float32. With "
+                                                 "--append: the map's own unless given."),
+    append: bool = typer.Option(False, "--append", help="Add REFS' images after the references of the map "
+                                "at --out, described and encoded as its own (the map is replaced "
+                                "atomically); the route grows without refitting."),
+    batch_size: int = typer.Option(8, min=1, help="Images per model run."),
+    threads: int = typer.Option(0, min=0, help=THREADS_HELP),
+) -> None:
+    """Build a map from a folder of reference images: describe each (a CNN tap by default, or a handcrafted
+    front end), fit the codebook unless --codebook is given, encode every reference (an Improved Fisher
+    Vector by default), optionally train an SVM per place, and write one map file."""
+    with user_errors():
+        options = BuildOptions(_value(features), _value(encoding), model, _value(resize), codebook, components,
+                               pca_dim, whiten, alpha, tfidf, max_descriptors, fit_iterations, svm, seed,
+                               save_codebook, _value(storage), append, batch_size, threads)
+        plan = plan_map(refs, out, options)
+        with typer.progressbar(length=len(plan.files), label="extracting", file=sys.stderr,
+                               hidden=not sys.stderr.isatty()) as bar:
+            line = write_map(plan, progress=bar.update)
+        typer.echo(line, err=True)

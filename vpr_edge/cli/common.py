@@ -1,0 +1,120 @@
+"""What every command shares: the typer app, one-line errors (exit 2), option enums read from the registries,
+help texts, and the --param parsing."""
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from collections.abc import Iterator
+from enum import Enum
+
+import typer
+
+from vpr_edge import __version__
+from vpr_edge.encoders import ENCODERS
+from vpr_edge.errors import VprError, os_error_line, warn
+from vpr_edge.features import FRONT_ENDS
+from vpr_edge.features.resize import RESIZE
+from vpr_edge.index.encodings import STORAGES
+from vpr_edge.matchers import MATCHERS, Matcher, get_matcher, param_key
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  rich_markup_mode=None, context_settings={"help_option_names": ["-h", "--help"],
+                                                           "max_content_width": 100})
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"vpr-edge {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="Print the version and exit.")) -> None:
+    """Visual place recognition on a CPU: build a map of reference images, then localise a stream of frames
+    against it (ONNX features, Improved Fisher Vectors, sequence matching)."""
+
+
+ModeOpt = Enum("ModeOpt", {name: name for name in MATCHERS}, type=str)  # type: ignore[misc]
+StorageOpt = Enum("StorageOpt", {name: name for name in STORAGES}, type=str)  # type: ignore[misc]
+FrontOpt = Enum("FrontOpt", {name: name for name in FRONT_ENDS}, type=str)  # type: ignore[misc]
+ResizeOpt = Enum("ResizeOpt", {name: name for name in RESIZE}, type=str)  # type: ignore[misc]
+EncodingOpt = Enum("EncodingOpt", {name: name for name in ENCODERS}, type=str)  # type: ignore[misc]
+
+
+@contextlib.contextmanager
+def user_errors() -> Iterator[None]:
+    """Turn VprError into one line on stderr and exit code 2; Ctrl-C into exit code 130."""
+    try:
+        yield
+    except (VprError, ValueError) as e:
+        typer.echo(f"vpr-edge: error: {e}", err=True)
+        raise typer.Exit(2) from None
+    except BrokenPipeError:  # the reader went away (``| head``): stop quietly, as Unix tools do
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        raise typer.Exit(1) from None
+    except OSError as e:  # disk full, permission lost mid-run: name the file and the reason
+        typer.echo(f"vpr-edge: error: {os_error_line(e)}", err=True)
+        raise typer.Exit(2) from None
+    except KeyboardInterrupt:
+        typer.echo("vpr-edge: interrupted", err=True)
+        raise typer.Exit(130) from None
+
+
+MODEL_HELP = ("ONNX feature model exported by vpr_edge_export (default: $VPR_EDGE_MODEL if set, else the "
+              "bundled EfficientNet-Lite0 tap).")
+THREADS_HELP = ("Threads for onnxruntime and NumPy's BLAS together, so the two pools never oversubscribe "
+                "the cores (0 = one per core).")
+PARAM_HELP = ("Set one of the matcher's parameters (repeatable), e.g. --param bias=1.6 --param lock=6: "
+              "calibrating the stream's lost state on a drive of your own route (docs/matchers.md). "
+              "--list-params names them all with their defaults and meanings; evaluate --json records the "
+              "values run.")
+MODE_HELP = ("Matcher. Online (a result per frame): " + ", ".join(n for n, m in MATCHERS.items() if m.online)
+             + ". Offline (results after the last frame): " + ", ".join(n for n, m in MATCHERS.items()
+                                                                        if not m.online)
+             + ". What each does: --list-params, docs/matchers.md.")
+
+
+def _list_params(value: bool) -> None:
+    if value:
+        for m in MATCHERS.values():
+            lost = f"; lost below {m.min_confidence}" if m.min_confidence is not None else ""
+            typer.echo(f"{m.name} ({'online' if m.online else 'offline'}{lost}): {m.summary}")
+            if m.params:
+                typer.echo(m.params_help())
+        raise typer.Exit()
+
+
+LIST_PARAMS = typer.Option(False, "--list-params", callback=_list_params, is_eager=True,
+                           help="Print every matcher with its parameters (--param KEY=VALUE), their defaults "
+                                "and meanings, and exit.")
+
+
+def params_for(name: str, given: dict) -> dict:
+    """The options the user gave that matcher ``name`` takes; a warning for each it ignores."""
+    matcher = get_matcher(name)
+    for k in sorted(k for k, v in given.items() if v not in (None, False) and k not in matcher.params):
+        warn(f"--{k.replace('_', '-')} does not apply to mode {name}; ignored")
+    return {k: v for k, v in given.items() if v is not None and k in matcher.params}
+
+
+def with_param_options(matcher: Matcher, params: dict, items: list[str]) -> dict:
+    """``params`` (from the named options) plus ``--param KEY=VALUE`` items for ``matcher``; ValueError for an
+    item it does not take, VprError for a key given both ways."""
+    extra = matcher.parse_params(items)
+    both = sorted(set(extra) & set(params))
+    if both:
+        raise VprError(f"--param {both[0]} repeats --{both[0].replace('_', '-')}; give it once")
+    return params | extra
+
+
+def param_options_for_all(matchers: dict[str, Matcher], items: list[str]) -> dict[str, Matcher]:
+    """Each of ``matchers`` with the ``--param`` items whose key it has; VprError for a key none has (and
+    ``parse_params``'s ValueError for a value one refuses)."""
+    keys = [param_key(item) for item in items]
+    for item, key in zip(items, keys):
+        if not any(key in m.params for m in matchers.values()):
+            raise VprError(f"--param {item!r}: none of the modes {','.join(matchers)} has a parameter {key!r}")
+    return {name: m.with_params(**m.parse_params([i for i, k in zip(items, keys) if k in m.params]))
+            for name, m in matchers.items()}

@@ -1,0 +1,114 @@
+"""``vpr-edge evaluate``: options in, ``evaluation.evaluate`` called, the table (and --json, --plot) out."""
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from vpr_edge.cli.common import LIST_PARAMS, PARAM_HELP, THREADS_HELP, app, param_options_for_all, user_errors
+from vpr_edge.errors import VprError, warn
+from vpr_edge.evaluation import Source, Truth, evaluate
+from vpr_edge.evaluation.run import default_matchers
+from vpr_edge.files import atomic_output, check_writable
+from vpr_edge.images import Frame
+from vpr_edge.matchers import MATCHERS, get_matcher
+from vpr_edge.threads import use_threads
+
+
+class FeaturesOpt(str, Enum):
+    map = "map"
+    pixels = "pixels"
+
+
+@app.command("evaluate")
+def evaluate_cmd(
+    map_path: Optional[Path] = typer.Option(None, "--map", "-m", help="Map from build-map: the queries are "
+                                            "encoded with its model and codebook."),
+    queries: Optional[Path] = typer.Option(None, "--queries", "-q", help="Query frames: a folder (file-name "
+                                           "order) or a video. Row i of the ground truth is frame i."),
+    similarity: Optional[Path] = typer.Option(None, "--similarity", help="Evaluate a (Q, R) float .npy "
+                                              "similarity matrix instead (rows = queries, higher = more "
+                                              "alike), e.g. from another tool's descriptors; no model needed."),
+    refs: Optional[Path] = typer.Option(None, "--refs", help="With --features pixels: the reference folder."),
+    features: FeaturesOpt = typer.Option(FeaturesOpt.map, help="map: the map's CNN features and encoding; "
+                                         "pixels: SeqSLAM's front end (grey, 64x32, patch-normalised, "
+                                         "mean absolute difference), from --refs and --queries, no map."),
+    gt: Optional[Path] = typer.Option(None, "--gt", help="Ground truth: the project's CSV 'query,references' "
+                                      "(space-separated reference indices, empty = place not in the map) or a "
+                                      "boolean (Q, R) .npy matrix (VPR_Tutorial's GThard/GTsoft)."),
+    gt_positions: Optional[tuple[Path, Path]] = typer.Option(
+        None, "--gt-positions", help="Ground truth from positions: REFS.csv QUERIES.csv with columns x,y "
+                                     "(metres) or lat,lon (degrees); see --radius."),
+    radius: float = typer.Option(25.0, min=0.0, help="With --gt-positions: references within this many "
+                                                    "metres of a query are correct."),
+    modes: Optional[str] = typer.Option(None, help="Comma-separated matchers to run on the same "
+                                        "similarity matrix: " + ", ".join(MATCHERS) + " (default: all that "
+                                        "apply; svm with a map built with --svm)."),
+    tolerance: int = typer.Option(1, min=0, help="Frames of slack around the true references (thesis: 1)."),
+    window: Optional[int] = typer.Option(None, min=0, help="stream: local search window, as localize's "
+                                         "(default %d; 0 = every reference every frame)."
+                                         % MATCHERS["stream"].params["window"]),
+    min_confidence: Optional[float] = typer.Option(None, help="Lost threshold for modes with a lost state "
+                                                   "(default: each mode's own)."),
+    param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE",
+                                              help=PARAM_HELP + " Applies to every chosen mode that has KEY."),
+    list_params: bool = LIST_PARAMS,
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the figures as JSON here."),
+    plot_out: Optional[Path] = typer.Option(None, "--plot", help="Write all modes' PR curves to this PNG "
+                                            "(needs matplotlib: the plot extra)."),
+    save_similarity: Optional[Path] = typer.Option(None, help="Also save the (Q, R) similarity matrix (.npy)."),
+    model: Optional[Path] = typer.Option(None, help="With --map: the map's model, if not where it was."),
+    batch_size: int = typer.Option(8, min=1, help="Frames per model run."),
+    threads: int = typer.Option(0, min=0, help=THREADS_HELP),
+) -> None:
+    """Measure matchers against ground truth: recall@1/5/10, the precision-recall curve with AUC (thesis
+    eq. 5.1) and AP (eq. 5.2), precision at 100% recall, recall at 100% precision, median error in frames,
+    the share of frames reported lost, and matching time per frame. All modes run on one similarity matrix:
+    from --map and --queries, from --features pixels with --refs and --queries, or from --similarity."""
+    import numpy as np
+
+    from vpr_edge.evaluation import report
+
+    with user_errors():
+        # --- everything that can be checked before the work ---
+        source = Source(similarity, map_path, queries, refs, features == FeaturesOpt.pixels, model, batch_size,
+                        threads)
+        source.check()
+        truth = Truth(gt, gt_positions, radius)
+        if modes is None:
+            matchers = default_matchers(source)
+        else:
+            matchers = {name: get_matcher(name) for name in (m.strip() for m in modes.split(",")) if name}
+        if not matchers:
+            raise VprError("--modes names no matcher")
+        if window is not None:
+            if not any("window" in m.params for m in matchers.values()):
+                warn(f"--window does not apply to modes {','.join(matchers)}; ignored")
+            matchers = {n: m.with_params(window=window) if "window" in m.params else m for n, m in matchers.items()}
+        if param:
+            matchers = param_options_for_all(matchers, param)
+        for target in (json_out, plot_out, save_similarity):
+            if target:
+                check_writable(target)
+        if plot_out:
+            report.require_matplotlib()
+        use_threads(threads)
+
+        def skip(frame: Frame) -> None:
+            typer.echo(f"vpr-edge: warning: {frame.error}; frame skipped (and its ground-truth row)", err=True)
+
+        result = evaluate(source, truth, matchers, tolerance, min_confidence, skip)
+        sim = result.similarity
+        if save_similarity:
+            with atomic_output(save_similarity) as tmp, open(tmp, "wb") as f:
+                np.save(f, sim.astype(np.float32), allow_pickle=False)
+        ms = result.encode_ms
+        typer.echo(f"{sim.shape[0]} queries ({result.n_mapped} of mapped places), {sim.shape[1]} references; "
+                   f"correct within {tolerance} frame(s); encoding {'-' if ms != ms else f'{ms:.1f}'} ms/frame")
+        typer.echo(report.table(result.reports))
+        if json_out:
+            report.write_json(json_out, sim.shape[0], sim.shape[1], result.reports, tolerance)
+        if plot_out:
+            report.plot(plot_out, result.reports, f"{source.name} ({sim.shape[0]} queries, {sim.shape[1]} refs)")

@@ -1,0 +1,139 @@
+"""``vpr-edge localize``: options in, ``api.Localizer.run`` over the stream, one result line per frame out."""
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import sys
+from collections.abc import Callable, Iterator
+from enum import Enum
+from pathlib import Path
+from typing import IO, Optional
+
+import typer
+
+from vpr_edge.api import Localizer, Match
+from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, THREADS_HELP, ModeOpt, app, params_for,
+                                 user_errors, with_param_options)
+from vpr_edge.errors import VprError
+from vpr_edge.files import atomic_output, check_writable
+from vpr_edge.images import Frame, open_stream
+from vpr_edge.matchers import MATCHERS, get_matcher
+
+
+class VariantOpt(str, Enum):
+    distance = "distance"
+    similarity = "similarity"
+
+
+class FormatOpt(str, Enum):
+    csv = "csv"
+    jsonl = "jsonl"
+
+
+CSV_COLUMNS = ("frame_index", "frame", "ref_index", "ref", "score", "lost")
+
+
+@contextlib.contextmanager
+def _writing(where: str) -> Iterator[None]:
+    """A failed write (disk full, device gone) becomes one line naming ``where``; a closed pipe passes."""
+    try:
+        yield
+    except BrokenPipeError:
+        raise
+    except OSError as e:
+        raise VprError(f"{where}: cannot write results ({e.strerror or e})") from None
+
+
+def results_writer(fmt: str, stream: IO[str], where: str) -> Callable[[Match], None]:
+    """Write the header now; return a function writing one result line and flushing it (a line per frame,
+    as it happens)."""
+    if fmt == "csv":
+        w = csv.writer(stream, lineterminator="\n")
+        with _writing(where):
+            w.writerow(CSV_COLUMNS)
+
+        def line(m: Match) -> None:
+            w.writerow([m.frame_index, m.frame, m.ref_index, m.ref, f"{m.score:.6f}", int(m.lost)])
+    else:
+        def line(m: Match) -> None:
+            stream.write(json.dumps(m.__dict__ | {"score": round(m.score, 6)}) + "\n")
+
+    def write(m: Match) -> None:
+        with _writing(where):
+            line(m)
+            stream.flush()
+    return write
+
+
+@app.command("localize")
+def localize_cmd(
+    map_path: Path = typer.Option(..., "--map", "-m", help="Map file written by build-map."),
+    stream: str = typer.Option(..., "--stream", "-s", metavar="SOURCE",
+                               help="Folder of frames (file-name order), a video file, "
+                                    "a camera (0, 1, ... or /dev/video0) or a network stream (rtsp://...)."),
+    model: Optional[Path] = typer.Option(None, help="ONNX feature model; must be the map's model (default: "
+                                         "$VPR_EDGE_MODEL if set, else the file the map was built with if it "
+                                         "still exists, else the bundled one)."),
+    mode: ModeOpt = typer.Option("stream", metavar="MATCHER", help=MODE_HELP),
+    variant: Optional[VariantOpt] = typer.Option(None, help="DTW modes: distance (minimise summed 1 - cosine, "
+                                                 "default) or similarity (maximise summed cosine, the thesis)."),
+    open_ends: Optional[bool] = typer.Option(None, "--open-ends/--fixed-ends", help="DTW modes: let the path "
+                                             "start and end anywhere, 0-4 references per frame (dtw-open)."),
+    decay: Optional[float] = typer.Option(None, min=0.01, max=0.999, help="stream / stream-dtw: each frame "
+                                          "discounts the past by this factor (about 1/(1-decay) frames kept)."),
+    window: Optional[int] = typer.Option(None, min=0, help="stream: local search, references either side of a "
+                                         "firm lock read per frame, on routes over 4x this (default %d; 0 = "
+                                         "every reference every frame)." % MATCHERS["stream"].params["window"]),
+    min_confidence: Optional[float] = typer.Option(
+        None, help="Frames scoring below this are reported lost (ref_index -1). Default: the mode's own "
+                   "(stream: %.1f; other modes: never lost)." % MATCHERS["stream"].min_confidence),
+    param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE", help=PARAM_HELP),
+    list_params: bool = LIST_PARAMS,
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write results here instead of stdout "
+                                       "(written to a temporary file, renamed when the stream is done)."),
+    fmt: Optional[FormatOpt] = typer.Option(None, "--format", help="csv or jsonl (default: from --out's "
+                                            "suffix, csv on stdout)."),
+    batch_size: int = typer.Option(1, min=1, help="Frames per model run (1 = lowest latency)."),
+    threads: int = typer.Option(0, min=0, help=THREADS_HELP),
+) -> None:
+    """Localise every frame of a stream against a map. One line per frame: frame index, frame name,
+    matched reference index and name (-1 and empty when lost), score (higher = more confident), lost (0/1).
+    Undecodable frames are reported on stderr and skipped."""
+    with user_errors():
+        if out:
+            check_writable(out)
+        suffix_fmt = {".csv": "csv", ".jsonl": "jsonl", ".json": "jsonl"}.get(out.suffix.lower()) if out else None
+        if fmt and suffix_fmt and fmt.value != suffix_fmt:
+            raise VprError(f"{out}: --format {fmt.value} contradicts the file's {out.suffix} suffix")
+        params = params_for(mode.value, {"variant": variant.value if variant else None, "open_ends": open_ends,
+                                         "decay": decay, "window": window})
+        params = with_param_options(get_matcher(mode.value), params, param or [])
+        frames, count = open_stream(stream)
+        localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
+                              min_confidence=min_confidence, threads=threads)
+        chosen = fmt.value if fmt else (suffix_fmt or "csv")
+        skipped = 0
+
+        def skip(frame: Frame) -> None:
+            nonlocal skipped
+            skipped += 1
+            typer.echo(f"\nvpr-edge: warning: {frame.error}; frame skipped", err=True)  # \n: off the bar
+
+        with contextlib.ExitStack() as stack:
+            if out:
+                sink = stack.enter_context(open(stack.enter_context(atomic_output(out)), "w", newline=""))
+            else:
+                sink = sys.stdout
+            write = results_writer(chosen, sink, str(out or "stdout"))
+            written = 0
+            with typer.progressbar(length=count or 0, label="localizing", file=sys.stderr,
+                                   hidden=count is None or not sys.stderr.isatty()) as bar:
+                for match in localizer.run(frames, batch_size, skip):
+                    write(match)
+                    written += 1
+                    bar.update(1)
+            if written == 0:
+                raise VprError(f"{stream}: none of its frames could be decoded")
+        if skipped:
+            typer.echo(f"vpr-edge: {skipped} undecodable frame(s) skipped", err=True)

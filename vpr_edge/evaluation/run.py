@@ -1,0 +1,139 @@
+"""``evaluate``: one function from a source of frames (or similarities), ground truth and matchers to a report
+per matcher. ``vpr-edge evaluate`` parses options and prints what this returns; the tools call it too."""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from vpr_edge.errors import VprError
+from vpr_edge.evaluation import sources
+from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
+from vpr_edge.matchers import MATCHERS, Matcher, get_matcher
+
+PathLike = str | os.PathLike[str]
+
+
+@dataclass(frozen=True)
+class Source:
+    """Where the (Q, R) similarities come from; exactly one of: ``similarity`` (a .npy matrix), ``map`` with
+    ``queries`` (frames encoded by the map's chain), or ``pixels`` with ``refs`` and ``queries`` (SeqSLAM's
+    front end, no map). ``model``, ``batch_size`` and ``threads`` apply to ``map``."""
+
+    similarity: PathLike | None = None
+    map: PathLike | None = None
+    queries: PathLike | None = None
+    refs: PathLike | None = None
+    pixels: bool = False
+    model: Path | None = None
+    batch_size: int = 8
+    threads: int = 0
+
+    def check(self) -> None:
+        """VprError unless exactly one source is complete (called before any work)."""
+        if sum([self.similarity is not None, self.map is not None, self.pixels]) != 1:
+            raise VprError("give one source: --similarity S.npy, or --map MAP --queries Q, or --features "
+                           "pixels --refs R --queries Q")
+        if self.similarity is None and self.queries is None:
+            raise VprError("--queries is needed with --map or --features pixels")
+        if self.pixels and self.refs is None:
+            raise VprError("--features pixels needs --refs (the reference folder)")
+
+    @property
+    def name(self) -> str:
+        return str(self.queries or self.similarity)
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Ground truth: ``gt`` (the project's CSV, or a boolean (Q, R) .npy matrix) or ``positions`` (reference
+    and query CSVs of x,y or lat,lon; references within ``radius`` metres are correct)."""
+
+    gt: PathLike | None = None
+    positions: tuple[PathLike, PathLike] | None = None
+    radius: float = 25.0
+
+    def load(self) -> tuple[np.ndarray, tuple[int, ...] | None]:
+        """(Q, T) padded correct references, and the (Q, R) shape of a matrix file (else None)."""
+        from vpr_edge.evaluation import truth
+
+        if (self.gt is None) == (self.positions is None):
+            raise VprError("give ground truth: --gt FILE (.csv or .npy) or --gt-positions REFS.csv QUERIES.csv")
+        if self.positions is not None:
+            return truth.from_positions(self.positions[0], self.positions[1], self.radius), None
+        if Path(self.gt).suffix.lower() == ".npy":
+            return truth.load_matrix(self.gt), np.load(self.gt, mmap_mode="r").shape
+        return truth.load_csv(self.gt), None
+
+    @property
+    def name(self) -> str:
+        return str(self.gt if self.gt is not None else self.positions[0])
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """``reports`` per matcher name, over ``similarity`` (Q, R); ``n_mapped`` of the Q frames show a mapped
+    place; ``encode_ms``: encoding time per frame (NaN for a similarity file)."""
+
+    reports: dict[str, ModeReport]
+    similarity: np.ndarray
+    n_mapped: int
+    tolerance: int
+    encode_ms: float
+
+
+def default_matchers(source: Source) -> dict[str, Matcher]:
+    """What ``evaluate`` runs without ``--modes``: every matcher over cosine similarities, and ``svm`` when
+    the source is a map built with ``--svm``."""
+    chosen = {n: m for n, m in MATCHERS.items() if m.scores == "cosine"}
+    if source.map is not None:
+        from vpr_edge.map import load_map
+
+        if load_map(source.map, mmap=True).svm is not None:
+            chosen["svm"] = get_matcher("svm")
+    return chosen
+
+
+def check_truth_fits(truth: np.ndarray, gt_shape: tuple[int, ...] | None, sim: np.ndarray, where: str) -> None:
+    """VprError unless ``truth`` (Q, T) has a row per query of ``sim`` (Q, R) and names only its references."""
+    if len(truth) != sim.shape[0]:
+        raise VprError(f"{where}: ground truth has {len(truth)} rows but there are {sim.shape[0]} queries")
+    if gt_shape is not None and gt_shape[1] != sim.shape[1]:
+        raise VprError(f"{where}: ground-truth matrix has {gt_shape[1]} references, the similarity "
+                       f"matrix {sim.shape[1]}")
+    if truth.max() >= sim.shape[1]:
+        raise VprError(f"{where}: names reference {int(truth.max())} but there are only {sim.shape[1]} references")
+
+
+def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None = None, tolerance: int = 1,
+             min_confidence: float | None = None, on_skip: sources.OnSkip = lambda frame: None) -> Evaluation:
+    """Run every matcher (default: ``default_matchers``) on one similarity matrix from ``source`` and score
+    it against ``truth`` (frames that do not decode go to ``on_skip`` and lose their ground-truth row).
+    VprError, before the work where it can be, for a bad source, ground truth or combination."""
+    source.check()
+    chosen = default_matchers(source) if matchers is None else matchers
+    if not chosen:
+        raise VprError("--modes names no matcher")
+    with_svm = any(m.scores == "svm" for m in chosen.values())
+    if with_svm and source.map is None:
+        raise VprError("mode svm needs --map (a map built with build-map --svm)")
+    rows, gt_shape = truth.load()
+    if source.similarity is not None:
+        sims = sources.from_file(source.similarity)
+    elif source.pixels:
+        sims = sources.from_pixels(source.refs, source.queries, len(rows), truth.name, on_skip)
+    else:
+        sims = sources.from_map(source.map, source.queries, len(rows), truth.name, on_skip, source.model,
+                                source.batch_size, source.threads, with_svm)
+    if sims.kept is not None:
+        if sims.kept.max() >= len(rows):
+            raise VprError(f"{source.queries}: {sims.kept.max() + 1} frames but the ground truth {truth.name} has "
+                           f"{len(rows)} rows")
+        rows = rows[sims.kept]
+    check_truth_fits(rows, gt_shape, sims.cosine, truth.name)
+    by_kind = {"cosine": sims.cosine, "svm": sims.svm}
+    reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence)
+               for name, m in chosen.items()}
+    return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms)

@@ -1,0 +1,108 @@
+"""Where ``evaluate``'s similarity matrix comes from: a map and query frames (the product's own chain), SeqSLAM's
+pixels (reference and query folders, no map), or a (Q, R) ``.npy`` file from any other tool."""
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from vpr_edge.errors import VprError
+from vpr_edge.images import Frame, list_images, load_image, open_stream
+
+OnSkip = Callable[[Frame], None]
+
+
+@dataclass(frozen=True)
+class Similarities:
+    """What the matchers run on: ``cosine`` (Q, R) float64 (higher = more alike), ``svm`` (Q, R) decision
+    values or None, ``kept`` (Q,) the query frame index of each row (frames that did not decode are left out;
+    None: rows are frames 0..Q-1), ``encode_ms`` per frame (NaN when nothing was encoded here)."""
+
+    cosine: np.ndarray
+    svm: np.ndarray | None = None
+    kept: np.ndarray | None = None
+    encode_ms: float = float("nan")
+
+
+def sad_similarity(queries: np.ndarray, refs: np.ndarray, chunk: int = 16) -> np.ndarray:
+    """(Q, D) and (R, D) descriptors -> (Q, R) similarity = minus the mean absolute difference."""
+    out = np.empty((len(queries), len(refs)), np.float32)
+    for i in range(0, len(queries), chunk):
+        out[i:i + chunk] = -np.abs(queries[i:i + chunk, None, :] - refs[None, :, :]).mean(axis=2)
+    return out
+
+
+def from_file(path: str | os.PathLike[str]) -> Similarities:
+    """A (Q, R) numeric ``.npy`` matrix (rows = queries), read without pickle; VprError naming ``path``."""
+    try:
+        sim = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as e:
+        raise VprError(f"{path}: not a readable .npy matrix ({str(e).splitlines()[0][:100]})") from None
+    if sim.ndim != 2 or 0 in sim.shape or not np.issubdtype(sim.dtype, np.number):
+        raise VprError(f"{path}: similarity must be a non-empty 2-D numeric (queries x references) matrix, "
+                       f"got shape {sim.shape} {sim.dtype}")
+    if not np.isfinite(sim).all():
+        raise VprError(f"{path}: similarity matrix holds NaN or infinite values")
+    return Similarities(sim.astype(np.float64))
+
+
+def _count_checked(queries: str | os.PathLike[str], n_truth: int, truth_src: str):
+    frames, count = open_stream(queries)
+    if count is not None and count != n_truth:
+        raise VprError(f"{queries}: {count} frames but the ground truth {truth_src} has {n_truth} rows")
+    return frames
+
+
+def _finish(queries: str | os.PathLike[str], kept: list[int], t0: float, cosine: np.ndarray,
+            svm: np.ndarray | None = None) -> Similarities:
+    if not kept:
+        raise VprError(f"{queries}: none of its frames could be decoded")
+    return Similarities(cosine, svm, np.asarray(kept, np.int64), 1e3 * (time.perf_counter() - t0) / len(kept))
+
+
+def from_pixels(refs: str | os.PathLike[str], queries: str | os.PathLike[str], n_truth: int, truth_src: str,
+                on_skip: OnSkip) -> Similarities:
+    """SeqSLAM's front end (``features.patches.pixel_descriptor``) on the reference folder and the query
+    frames, compared by minus the mean absolute difference."""
+    from vpr_edge.features.patches import pixel_descriptor
+
+    frames = _count_checked(queries, n_truth, truth_src)
+    ref_desc = np.stack([pixel_descriptor(load_image(f)) for f in list_images(refs)])
+    t0 = time.perf_counter()
+    kept, qd = [], []
+    for frame in frames:
+        if frame.image is None:
+            on_skip(frame)
+            continue
+        kept.append(frame.index)
+        qd.append(pixel_descriptor(frame.image))
+    sim = sad_similarity(np.stack(qd), ref_desc).astype(np.float64) if qd else np.zeros((0, 0))
+    return _finish(queries, kept, t0, sim)
+
+
+def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], n_truth: int, truth_src: str,
+             on_skip: OnSkip, model: Path | None = None, batch_size: int = 8, threads: int = 0,
+             svm: bool = False) -> Similarities:
+    """The query frames encoded as the map's references were (``api.Localizer``), their cosine similarities
+    to the map's references, and with ``svm`` the map's per-place SVM decision values."""
+    from vpr_edge.api import Localizer, encode_frames
+
+    frames = _count_checked(queries, n_truth, truth_src)
+    loc = Localizer(map_path, model=model, mode="single", threads=threads)
+    if svm and loc.map.svm is None:
+        raise VprError(f"{map_path}: mode svm needs a map built with build-map --svm")
+    t0 = time.perf_counter()
+    kept, enc = [], []
+    for frame, e in encode_frames(frames, loc.map, loc.front, batch_size, on_skip):
+        kept.append(frame.index)
+        enc.append(e)
+    if not enc:
+        return _finish(queries, kept, t0, np.zeros((0, 0)))
+    stacked = np.stack(enc)
+    cosine = loc.similarity(stacked).astype(np.float64)
+    scores = loc.map.scores(stacked, "svm").astype(np.float64) if svm else None
+    return _finish(queries, kept, t0, cosine, scores)

@@ -1,0 +1,177 @@
+"""Building a map from reference images: describe each once, fit the front end and the codebook on a
+sample of them, encode every reference as it is described, optionally train an SVM per place."""
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from vpr_edge import __version__
+from vpr_edge.encoders import Encoder, FitSettings, fit_encoder
+from vpr_edge.errors import VprError
+from vpr_edge.features import FrontEnd
+from vpr_edge.images import load_image
+from vpr_edge.index.encodings import EncodingWriter, Encodings
+from vpr_edge.map.front import front_end_meta
+from vpr_edge.map.model import PlaceMap, Svm
+
+FIT_DESCRIPTORS = FitSettings.max_descriptors  # local descriptors sampled to fit a codebook (docs/design.md,
+FIT_ITERATIONS = FitSettings.iterations        # "Fitting the codebook")
+Progress = Callable[[int], None]
+
+
+def described(files: Sequence[Path], order: np.ndarray, front: FrontEnd, batch_size: int,
+              progress: Progress | None = None) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray | None]]:
+    """The images ``files[order]``, ``batch_size`` at a time, through ``front``: yields (indices (b,),
+    descriptors (b, N, K), mask (b, N) or None). VprError naming an unreadable file."""
+    for i in range(0, len(order), batch_size):
+        idx = order[i:i + batch_size]
+        x, m = front.local([load_image(files[j]) for j in idx])
+        if progress:
+            progress(len(idx))
+        yield idx, x, m
+
+
+def _svm(encodings: np.ndarray, storage: str, seed: int) -> Svm:
+    """One linear SVM per place trained on the float32 reference encodings (R, D), weights kept as ``storage``."""
+    from vpr_edge.matchers.svm import fit_svm
+
+    weights, bias, svm_meta = fit_svm(encodings, seed=seed)
+    return Svm(Encodings.pack(weights, storage), bias, svm_meta)
+
+
+def extract_all(files: Sequence[Path], front: FrontEnd, folder: Path, batch_size: int = 8,
+                progress: Progress | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Local descriptors of every image into memory-mapped files in ``folder``: (R, N, K) float32 and, for
+    front ends with a varying number of descriptors, the mask (R, N) bool (else None)."""
+    local = mask = None
+    for idx, x, m in described(files, np.arange(len(files)), front, batch_size, progress):
+        if local is None:
+            local = np.lib.format.open_memmap(folder / "local.npy", mode="w+", dtype=np.float32,
+                                              shape=(len(files),) + x.shape[1:])
+            if m is not None:
+                mask = np.lib.format.open_memmap(folder / "mask.npy", mode="w+", dtype=bool,
+                                                 shape=(len(files), x.shape[1]))
+        local[idx] = x
+        if mask is not None:
+            mask[idx] = m
+    assert local is not None
+    return local, mask
+
+
+FIT_POOL = 4   # a codebook is fitted on a random subset of references holding FIT_POOL x max_descriptors local
+               # descriptors (all references on routes smaller than that), kept in RAM while the map is built
+
+
+def _fit_pool(files: Sequence[Path], front: FrontEnd, settings: FitSettings, batch_size: int,
+              progress: Progress | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The references a codebook is fitted on: images drawn at random (``settings.seed``) until they hold
+    ``FIT_POOL * settings.max_descriptors`` real descriptors, or all of them. Returns (indices (P,) sorted,
+    local (P, N, K), mask (P, N) or None), in file order."""
+    order = np.random.default_rng(settings.seed).permutation(len(files))
+    want = FIT_POOL * settings.max_descriptors
+    taken: list[np.ndarray] = []
+    parts: list[tuple[np.ndarray, np.ndarray | None]] = []
+    real = 0
+    for idx, x, m in described(files, order, front, batch_size, progress):
+        taken.append(idx)
+        parts.append((x, m))
+        real += int(m.sum()) if m is not None else x.shape[0] * x.shape[1]
+        if real >= want:
+            break
+    idx = np.concatenate(taken)
+    sort = np.argsort(idx)
+    local = np.concatenate([x for x, _ in parts])[sort]
+    mask = None if parts[0][1] is None else np.concatenate([m for _, m in parts])[sort]
+    return idx[sort], local, mask
+
+
+def _fit(front: FrontEnd, local: np.ndarray, mask: np.ndarray | None, encoding: str, encoder: Encoder | None,
+         settings: FitSettings) -> tuple[FrontEnd, Encoder, np.ndarray]:
+    """Fit the front end (LDB's bit selection) and, unless ``encoder`` is given, the ``encoding`` codebook on
+    reference descriptors ``local`` (R, N, K); returns them and ``local`` as the fitted front end gives it."""
+    if front.needs_fit:
+        front = front.fit(local, settings.seed)
+        local = front.select(local)
+    if encoder is None:
+        encoder = fit_encoder(encoding, local, mask, settings, front.n_local)
+    _check_fits(encoder, front)
+    return front, encoder, local
+
+
+def _check_fits(encoder: Encoder, front: FrontEnd) -> None:
+    """VprError unless ``encoder`` takes the descriptors ``front`` gives."""
+    if encoder.input_dim != front.dim:
+        raise VprError(f"codebook expects {encoder.input_dim}-dim descriptors but the {front.name} front end "
+                       f"gives {front.dim}")
+
+
+def _meta(front: FrontEnd, encoder: Encoder, fitted: bool, settings: FitSettings, n_real: int,
+          refs_folder: str) -> dict:
+    """A new map's metadata: the front end, how the codebook was made, where the references came from."""
+    return front_end_meta(front) | {
+        "codebook": {"fitted_on_refs": fitted, "n_components": encoder.n_components,
+                     "pca_dim": int(encoder.pca.components.shape[0]) if encoder.pca is not None else None,
+                     "seed": settings.seed}
+                    | ({"descriptors": min(settings.max_descriptors, n_real), "iterations": settings.iterations}
+                       if fitted and encoder.needs_fit else {}),
+        "refs_folder": refs_folder,
+        "vpr_edge_version": __version__,
+    }
+
+
+def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = "ifv", encoder: Encoder | None = None,
+              settings: FitSettings = FitSettings(), batch_size: int = 8, svm: bool = False,
+              storage: str = "int8", progress: Progress | None = None) -> PlaceMap:
+    """Describe every reference image in ``files`` (in that order; see ``list_images``) with ``front`` and
+    make the map, encodings kept as ``storage`` (``compact.STORAGES``). Each image is described once: unless
+    ``encoder`` is given, the codebook is first fitted on a random subset of the references (``_fit_pool``;
+    all of them on small routes), then every other reference is encoded as it is extracted, so that memory
+    and disk hold only the stored encodings, whatever the route's length (with ``svm`` also their float32
+    copy, to train on). bow with tf-idf needs every reference's words to fit and goes through
+    ``map_from_local``. Raises VprError on an unreadable image or an encoder that does not fit the front end."""
+    if not files:
+        raise VprError("no reference images given")
+    names, refs_folder = [f.name for f in files], str(Path(files[0]).parent)
+    if encoder is None and encoding == "bow" and settings.tfidf:
+        with tempfile.TemporaryDirectory(prefix="vpr-edge-") as tmp:
+            local, mask = extract_all(files, front, Path(tmp), batch_size, progress)
+            place_map = map_from_local(local, mask, front, names, refs_folder, encoding, None, settings, svm)
+        return place_map if storage == "float32" else place_map.repacked(storage)
+    fitted = encoder is None
+    pool, n_real = np.zeros(0, np.int64), 0
+    if fitted or front.needs_fit:
+        pool, local, mask = _fit_pool(files, front, settings, batch_size, progress)
+        n_real = int(mask.sum()) if mask is not None else local.size // local.shape[-1]
+        front, encoder, local = _fit(front, local, mask, encoding, encoder, settings)
+    assert encoder is not None
+    _check_fits(encoder, front)
+    store = EncodingWriter(len(files), encoder.dim, storage, keep_float=svm)
+    if len(pool):
+        for i in range(0, len(pool), 32):
+            store.put(pool[i:i + 32], encoder.transform(local[i:i + 32], None if mask is None else mask[i:i + 32]))
+        del local, mask
+    rest = np.setdiff1d(np.arange(len(files)), pool)
+    for idx, x, m in described(files, rest, front, batch_size, progress):
+        store.put(idx, encoder.transform(x, m))
+    classifier = _svm(store.floats, storage, settings.seed) if svm else None
+    meta = _meta(front, encoder, fitted, settings, n_real, refs_folder)
+    return PlaceMap(store.encodings(), names, encoder, meta, classifier)
+
+
+def map_from_local(local: np.ndarray, mask: np.ndarray | None, front: FrontEnd, names: list[str], refs_folder: str,
+                   encoding: str = "ifv", encoder: Encoder | None = None, settings: FitSettings = FitSettings(),
+                   svm: bool = False) -> PlaceMap:
+    """The map of references described by ``front`` as ``local`` (R, N, K) (``mask`` (R, N) or None): fit the
+    front end (LDB's bit selection, recorded in the map's ``features``) and the ``encoding`` codebook on them
+    unless ``encoder`` is given, encode each reference (float32), and with ``svm`` train one linear SVM per
+    place. For descriptors already extracted (the tools); ``build_map`` describes images and encodes as it goes."""
+    fitted = encoder is None
+    front, encoder, local = _fit(front, local, mask, encoding, encoder, settings)
+    encodings = encoder.transform_chunked(local, mask)
+    n_real = int(mask.sum()) if mask is not None else local.shape[0] * local.shape[1]
+    meta = _meta(front, encoder, fitted, settings, n_real, refs_folder)
+    classifier = _svm(encodings, "float32", settings.seed) if svm else None
+    return PlaceMap(Encodings.pack(encodings, "float32"), names, encoder, meta, classifier)

@@ -1,0 +1,43 @@
+"""The front end a map's queries must go through: rebuilt from the map's record, its model found and checked."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from vpr_edge.errors import VprError
+from vpr_edge.features import FrontEnd, make_front_end
+from vpr_edge.features.cnn import resolve_model
+from vpr_edge.map.model import PlaceMap
+
+
+def front_end_meta(front: FrontEnd) -> dict:
+    """What a map records of its front end: its description, fingerprint and identity (the model for cnn)."""
+    return {"features": front.describe(), "features_fingerprint": front.fingerprint} | front.identity()
+
+
+def map_model_path(place_map: PlaceMap, given: Path | None) -> Path:
+    """The model to localise with: ``given``, else ``$VPR_EDGE_MODEL``, else the file the map was built
+    with if it is still there, else the bundled default (``features.cnn.resolve_model``)."""
+    return resolve_model(given, Path(place_map.meta.get("model_path") or ""))
+
+
+def map_front_end(place_map: PlaceMap, map_path: str | os.PathLike[str], model: Path | None = None,
+                  threads: int = 0) -> FrontEnd:
+    """The front end this map's queries must go through (its model for cnn, checked: VprError naming
+    ``map_path`` if it is another model; ``model`` given to a handcrafted map is an error too)."""
+    name = place_map.features["name"]
+    if name != "cnn":
+        if model is not None:
+            raise VprError(f"{map_path}: map was built with the {name} front end, which takes no model; "
+                           f"drop --model")
+        return make_front_end(name, spec=place_map.features)
+    front = make_front_end("cnn", map_model_path(place_map, model), threads, spec=place_map.features)
+    if front.fingerprint != place_map.meta.get("model_sha256"):
+        m, given = place_map.meta.get("model", {}), front.identity()
+        info = given.get("model", {})
+        raise VprError(
+            f"{map_path}: map was built with model {m.get('backbone')}/{m.get('tap')} "
+            f"({place_map.meta.get('model_file')}, sha256 {str(place_map.meta.get('model_sha256'))[:12]}) but "
+            f"{given.get('model_path', '?')} is {info.get('backbone')}/{info.get('tap')} "
+            f"(sha256 {front.fingerprint[:12]}); pass --model with the map's model")
+    return front

@@ -1,0 +1,175 @@
+"""The build-map command as library functions: ``plan_map`` decides every default and checks every option
+against the others, the references and the files before any work; ``write_map`` does the work. The CLI
+and the tools call these two, so each default lives here once."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from vpr_edge.encoders import ENCODERS, Encoder, FitSettings, load_codebook
+from vpr_edge.errors import VprError, warn
+from vpr_edge.features import FrontEnd, make_front_end
+from vpr_edge.files import check_writable
+from vpr_edge.images import list_images
+from vpr_edge.map.build import Progress, build_map
+from vpr_edge.map.front import map_front_end
+from vpr_edge.map.io import load_map, save_map
+from vpr_edge.map.model import PlaceMap
+from vpr_edge.threads import use_threads
+
+DEFAULT_FRONT_END = "cnn"
+DEFAULT_ENCODING = "ifv"       # the thesis's Improved Fisher Vector
+DEFAULT_STORAGE = "int8"       # a quarter of float32's bytes (docs/results.md, "Map size")
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    """build-map's options; None = not given (the default applies, or with ``append`` the map's own)."""
+
+    features: str | None = None
+    encoding: str | None = None
+    model: Path | None = None
+    resize: str | None = None
+    codebook: Path | None = None
+    components: int | None = None
+    pca_dim: int | None = None
+    whiten: bool | None = None
+    alpha: float | None = None
+    tfidf: bool | None = None
+    max_descriptors: int | None = None
+    fit_iterations: int | None = None
+    svm: bool = False
+    seed: int = 0
+    save_codebook: Path | None = None
+    storage: str | None = None
+    append: bool = False
+    batch_size: int = 8
+    threads: int = 0
+
+
+@dataclass
+class MapPlan:
+    """What ``write_map`` will do: the reference ``files``, the ``front`` end, the encoder (``given``: a
+    codebook or the appended map's; None: fitted on the references), the fit ``settings``, the storage, and
+    with ``append`` the map ``base`` the references go after."""
+
+    refs: Path
+    out: Path
+    files: list[Path]
+    front: FrontEnd
+    encoding: str
+    given: Encoder | None
+    settings: FitSettings
+    storage: str
+    options: BuildOptions
+    base: PlaceMap | None = None
+    codebook_meta: dict = field(default_factory=dict)
+
+
+def _fit_options(o: BuildOptions) -> dict:
+    return {"--components": o.components, "--pca-dim": o.pca_dim, "--whiten/--no-whiten": o.whiten,
+            "--max-descriptors": o.max_descriptors, "--fit-iterations": o.fit_iterations, "--tfidf": o.tfidf}
+
+
+def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
+    """Every check that can be made before the work (VprError, one line), and every default decided."""
+    from vpr_edge.encoders.fit import require_sklearn
+
+    fit_options = _fit_options(o)
+    fixed = f"--codebook {o.codebook}" if o.codebook else \
+        f"--append (the map {out} has its codebook)" if o.append else None
+    if o.append:
+        given_opts = [k for k, v in (("--codebook", o.codebook), ("--alpha", o.alpha), ("--features", o.features),
+                                     ("--resize", o.resize), ("--encoding", o.encoding), ("--svm", o.svm or None))
+                      if v is not None]
+        if given_opts:
+            raise VprError(f"{o.codebook or out}: --append describes and encodes as the map does; drop "
+                           f"{', '.join(given_opts)}")
+    if fixed and any(v is not None for v in fit_options.values()):
+        given_opts = ", ".join(k for k, v in fit_options.items() if v is not None)
+        raise VprError(f"{given_opts}: options for fitting a codebook, but {fixed} is given")
+    if o.whiten is not None and o.pca_dim is None:
+        warn("--whiten/--no-whiten applies only with --pca-dim; ignored")
+    for target in (out, o.save_codebook):
+        if target:
+            check_writable(target)
+    if o.save_codebook and o.save_codebook.resolve() == out.resolve():
+        raise VprError(f"{out}: --out and --save-codebook name the same file")
+    files = list_images(refs)
+    base = load_map(out, mmap=True) if o.append else None
+    given, cb_meta = None, {}
+    if o.codebook:
+        given, cb_meta = load_codebook(o.codebook)
+        if o.encoding is not None and o.encoding != given.name:
+            raise VprError(f"{o.codebook}: codebook is for encoding {given.name}, not --encoding {o.encoding}")
+    enc_name = base.encoder.name if base else given.name if given else o.encoding or DEFAULT_ENCODING
+    if not ENCODERS[enc_name].needs_fit:
+        for k, v in fit_options.items():
+            if v is not None:
+                warn(f"{k} does not apply to encoding {enc_name}; ignored")
+    if o.tfidf is not None and enc_name != "bow" and ENCODERS[enc_name].needs_fit:
+        warn("--tfidf/--no-tfidf applies to encoding bow only; ignored")
+    if o.alpha is not None and enc_name not in ("ifv", "vlad"):
+        warn(f"--alpha does not apply to encoding {enc_name}; ignored")
+    if (given is None and base is None and ENCODERS[enc_name].needs_fit) or o.svm:
+        require_sklearn()
+    ort_threads = use_threads(o.threads)
+    front_name = o.features or (cb_meta.get("features") or {}).get("name", DEFAULT_FRONT_END)
+    if o.resize is not None and front_name != "cnn":   # (with --append, --resize was refused above)
+        raise VprError(f"--resize applies to the cnn front end, not {front_name}")
+    front = map_front_end(base, out, o.model, ort_threads) if base else make_front_end(
+        front_name, o.model, ort_threads, spec={"params": {"resize": o.resize}} if o.resize else None)
+    if enc_name == "none" and front.n_local is None:
+        raise VprError(f"encoding none needs a front end with a fixed grid of descriptors; {front.name} detects "
+                       f"keypoints (a varying number per image): choose bow, vlad, fv or ifv")
+    if base is not None:
+        given = base.encoder
+    elif given is not None:
+        recorded = cb_meta.get("features_fingerprint") or cb_meta.get("model_sha256")
+        described = (cb_meta.get("features") or {}).get("name", "cnn")
+        # an int8 model may reuse the codebook of the fp32 model it was quantised from
+        fits = (None, front.fingerprint, front.source_fingerprint)
+        if described != front.name or recorded not in fits:
+            raise VprError(f"{o.codebook}: codebook was fitted on {described} descriptors "
+                           f"({str(recorded)[:12]}), not on this {front.name} front end's "
+                           f"({front.fingerprint[:12]}){'; another model' if front.name == 'cnn' else ''}")
+        if given.input_dim != front.dim:
+            raise VprError(f"{o.codebook}: codebook expects {given.input_dim}-dim descriptors but "
+                           f"the {front.name} front end gives {front.dim}")
+        if o.alpha is not None:
+            given = given.with_alpha(o.alpha)
+    d = FitSettings()
+    settings = FitSettings(o.components or d.n_components, o.pca_dim, d.whiten if o.whiten is None else o.whiten,
+                           d.alpha if o.alpha is None else o.alpha, o.max_descriptors or d.max_descriptors,
+                           o.fit_iterations or d.iterations, o.seed, bool(o.tfidf))
+    storage = o.storage or (base.stored.storage if base else DEFAULT_STORAGE)
+    return MapPlan(refs, out, files, front, enc_name, given, settings, storage, o, base, cb_meta)
+
+
+def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
+    """Build the planned map and write it (and the codebook, if asked) atomically; returns a one-line summary."""
+    o = plan.options
+    place_map = build_map(plan.files, plan.front, plan.encoding, plan.given, plan.settings, o.batch_size, o.svm,
+                          plan.storage, progress=progress)
+    if plan.base is not None:
+        place_map = plan.base.repacked(plan.storage).extended(place_map)
+    save_map(place_map, plan.out, plan.storage)
+    if o.save_codebook:
+        place_map.encoder.save(o.save_codebook, {k: place_map.meta.get(k) for k in
+                                                 ("features", "features_fingerprint", "model_sha256")})
+    how = "fitted on the references" if plan.given is None else "the map's" if plan.base else "given"
+    book = f", {place_map.encoder.n_components}-entry codebook ({how})" if place_map.encoder.needs_fit else ""
+    policy = (place_map.features.get("params") or {}).get("resize")
+    how_resized = f" (frames resized by {policy})" if policy not in (None, "stretch") else ""
+    appended = f" ({len(plan.files)} appended)" if plan.base else ""
+    return (f"wrote {plan.out}: {len(place_map.names)} references{appended}, "
+            f"{place_map.stored.shape[1]}-dim {plan.storage} {place_map.features['name']}{how_resized} + "
+            f"{place_map.encoder.name} encodings{book}{', an SVM per place' if place_map.svm is not None else ''}")
+
+
+def summary(path: Path) -> dict:
+    """``vpr-edge info``: a map's size and settings as JSON-ready data (its metadata, names said once)."""
+    pm = load_map(path, mmap=True)
+    meta = {k: v for k, v in pm.meta.items() if k not in ("names", "n_refs", "dim")}
+    return {"references": len(pm.names), "first": pm.names[0], "last": pm.names[-1],
+            "encoding_dims": int(pm.stored.shape[1]), "size_mb": round(path.stat().st_size / 1e6, 2)} | meta

@@ -1,0 +1,106 @@
+"""The map's data: reference encodings as stored, their names, the encoder that makes query encodings
+comparable, metadata, and for ``--mode svm`` one classifier per place. File I/O is ``map.io``, the front end
+a map's queries go through is ``map.front``, building one from images is ``map.build``."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from vpr_edge.encoders import Encoder
+from vpr_edge.errors import VprError, warn
+from vpr_edge.index.encodings import Encodings
+
+CNN = {"name": "cnn", "params": {}}
+
+
+@dataclass(frozen=True)
+class Svm:
+    """One linear classifier per reference place: decision value of encoding q for place r is
+    ``weights[r] . q + bias[r]``. ``weights`` stored like the encodings (``compact.Encodings``)."""
+
+    weights: Encodings
+    bias: np.ndarray          # (R,) float32
+    meta: dict
+
+    def scores(self, queries: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Encodings (B, D) -> decision values (B, R) float32 (of the places ``rows`` only, if given)."""
+        return self.weights.similarity(queries, rows) + (self.bias if rows is None else self.bias[rows])
+
+
+@dataclass(frozen=True)
+class PlaceMap:
+    """Reference encodings as stored (``compact.Encodings``: unit rows, R x D), their image names, the
+    encoder (``vpr_edge.encoders``), metadata (``features``: the front end's record; ``model_*`` for cnn;
+    how the codebook was made) and, when built with ``--svm``, the per-place classifiers."""
+
+    stored: Encodings
+    names: list[str]
+    encoder: Encoder
+    meta: dict
+    svm: Svm | None = None
+
+    @property
+    def encodings(self) -> np.ndarray:
+        """All reference encodings as float32 (R, D) in RAM (for analysis; matching uses ``similarity``)."""
+        return self.stored.dense()
+
+    @property
+    def features(self) -> dict:
+        """The front end's record ({"name", "params"}); maps older than schema 3 are cnn."""
+        return self.meta.get("features") or CNN
+
+    def similarity(self, queries: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Query encodings (B, D) -> cosine similarities to every reference (B, R) float32, or to the
+        references ``rows`` (int array) only."""
+        if queries.shape[-1] != self.stored.shape[1]:
+            raise VprError(f"query encodings have {queries.shape[-1]} dims but the map's "
+                           f"{self.features['name']} + {self.encoder.name} encodings have {self.stored.shape[1]}")
+        return self.stored.similarity(queries, rows)
+
+    def scores(self, queries: np.ndarray, kind: str = "cosine", rows: np.ndarray | None = None) -> np.ndarray:
+        """(B, R): ``cosine`` similarities, or ``svm`` decision values (VprError if the map has no SVM); of
+        the references ``rows`` only if given."""
+        if kind == "cosine":
+            return self.similarity(queries, rows)
+        if self.svm is None:
+            raise VprError("this map has no SVM (build it with build-map --svm)")
+        self.similarity(queries[:0], rows)  # dimension check
+        return self.svm.scores(queries, rows)
+
+    def repacked(self, storage: str) -> "PlaceMap":
+        """This map with its encodings (and SVM weights) stored as ``storage``."""
+        def packed(e: Encodings) -> Encodings:
+            return e if e.storage == storage else Encodings.pack(e.dense(), storage)
+
+        svm = None if self.svm is None else Svm(packed(self.svm.weights), self.svm.bias, self.svm.meta)
+        return PlaceMap(packed(self.stored), self.names, self.encoder, self.meta, svm)
+
+    def extended(self, more: "PlaceMap") -> "PlaceMap":
+        """This map with ``more``'s references after its own (``more`` encoded with this map's front end,
+        encoder and model; raises VprError otherwise). The result is in this map's storage: its stored rows
+        are copied as they are (into RAM, never expanded to float32). An SVM is not carried over (its
+        classifiers would need retraining on the whole route)."""
+        if more.encoder is not self.encoder or more.meta.get("features_fingerprint") != self.fingerprint:
+            raise VprError("appended references must be described and encoded with the map's own front end, "
+                           "model and codebook")
+        clash = sorted(set(self.names) & set(more.names))
+        if clash:
+            warn(f"{len(clash)} appended reference name(s) already in the map (e.g. {clash[0]}); results name "
+                 f"references by index too")
+        if self.svm is not None:
+            warn("the map's SVM is dropped by --append (rebuild with --svm to train it on the whole route)")
+        appended = self.meta.get("appended", []) + [{"folder": more.meta.get("refs_folder"),
+                                                     "first_index": len(self.names), "count": len(more.names)}]
+        meta = {k: v for k, v in self.meta.items() if k != "svm"}
+        return PlaceMap(self.stored.concat(more.stored), self.names + more.names, self.encoder,
+                        meta | {"appended": appended, "vpr_edge_version": more.meta.get("vpr_edge_version")})
+
+    @property
+    def fingerprint(self) -> str:
+        """What identifies the front end: the model file's SHA-256 for cnn, a hash of the parameters else."""
+        return str(self.meta.get("features_fingerprint") or self.meta.get("model_sha256"))
+
+    def encode(self, local: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Local descriptors (B, N, K) (mask (B, N) or None) -> query encodings (B, D) for this map."""
+        return self.encoder.transform(local, mask)

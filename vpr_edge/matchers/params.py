@@ -1,0 +1,82 @@
+"""Every matcher parameter, defined once: its default and what it means. The registry builds each matcher's
+presets from these tables, ``localize --list-params`` prints them, and ``docs/matchers.md`` is written from
+them (``python -m vpr_edge.matchers.params`` prints that table). Values given on the command line
+(``--param KEY=VALUE``) are read as the default's type and checked by the matcher itself."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Param:
+    """A matcher parameter: its ``default`` (whose type a given value is read as) and its ``meaning``."""
+
+    default: Any
+    meaning: str
+
+
+STREAM: dict[str, Param] = {
+    "vmax": Param(4.0, "fastest speed followed, in references per frame"),
+    "grid": Param(2, "positions per reference (2: half-reference steps)"),
+    "decay": Param(0.9, "each frame discounts a trajectory's past evidence by this factor (about 1/(1-decay) "
+                        "frames remembered)"),
+    "bias": Param(1.0, "what a frame's normalised similarity must exceed to extend a trajectory; higher = "
+                       "more frames reported lost"),
+    "turn": Param(1.0, "cost of a change of speed, per reference per frame"),
+    "memory": Param(50.0, "frames in each reference's running mean (subtracted to remove look-alike hubs)"),
+    "lock": Param(6.0, "trajectory score below which the frame is reported lost"),
+    "rival_window": Param(10, "references either side of the answer that a rival trajectory must lie beyond "
+                              "(the uniqueness part of the score)"),
+    "window": Param(100, "local search: references either side of a firm lock read per frame, on routes of "
+                         "more than 4x this (0 = every reference every frame)"),
+    "probe": Param(512, "local search: fixed random references that estimate a frame's similarity mean and "
+                        "spread"),
+    "check": Param(100, "local search: every this many firmly locked frames, search the whole route ..."),
+    "span": Param(5, "... for this many frames"),
+    "hold": Param(2.0, "a lock is firm (local search allowed) at this many times the lock score"),
+    "stop_gain": Param(0.3, "at speed 0, the share of a frame's positive evidence counted (standing still is "
+                            "not new evidence)"),
+    "stop_decay": Param(0.95, "at speed 0, the decay of the trajectory score (a lock holds through a stop)"),
+}
+STREAM_DTW: dict[str, Param] = {
+    "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),
+}
+DTW: dict[str, Param] = {
+    "variant": Param("distance", "distance: minimise summed 1 - cosine; similarity: maximise summed cosine "
+                                 "(the thesis)"),
+    "open_ends": Param(False, "let the path start and end anywhere, 0..max_step references per frame"),
+    "max_step": Param(4, "with open_ends: most references the path advances per frame"),
+    "rival_window": Param(5, "the score is the margin over the best path avoiding this many references "
+                             "either side of the answer"),
+    "hubs": Param(False, "z-score each frame's similarities and subtract each reference's mean first"),
+}
+SEQSLAM: dict[str, Param] = {
+    "ds": Param(10, "trajectory length in frames (SeqSLAM's ds)"),
+    "vmin": Param(0.5, "slowest trajectory speed, references per frame"),
+    "vmax": Param(3.0, "fastest trajectory speed, references per frame"),
+    "r_window": Param(10, "local contrast enhancement window, references"),
+    "match_window": Param(10, "the ratio test's rival lies more than match_window/2 references away"),
+}
+
+
+def defaults(table: dict[str, Param], **overrides: Any) -> dict[str, Any]:
+    """The default values of ``table``, with some presets changed (an unknown name is a KeyError)."""
+    for k in overrides:
+        table[k]   # noqa: B018 - a preset must name a defined parameter
+    return {k: p.default for k, p in table.items()} | overrides
+
+
+def markdown() -> str:
+    """Every registered matcher's parameters as a Markdown table (docs/matchers.md)."""
+    from vpr_edge.matchers.registry import MATCHERS
+
+    lines = ["| matcher | parameter | default | meaning |", "|---|---|---|---|"]
+    for m in MATCHERS.values():
+        for key, value in m.params.items():
+            lines.append(f"| `{m.name}` | `{key}` | `{value}` | {m.definitions[key].meaning} |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    print(markdown())
