@@ -24,6 +24,7 @@ def api_map(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_push_matches_the_cli(api_map: Path, small_queries: Path) -> None:
     loc = Localizer(api_map, threads=1)
     files = sorted(small_queries.iterdir())
@@ -40,6 +41,7 @@ def test_push_matches_the_cli(api_map: Path, small_queries: Path) -> None:
     assert again == [m.ref_index for m in pushed]
 
 
+@pytest.mark.slow
 def test_run_offline_mode_and_push_refused(api_map: Path, small_queries: Path) -> None:
     loc = Localizer(api_map, mode="dtw")
     frames, _ = open_stream(small_queries)
@@ -93,6 +95,7 @@ def test_threads_limit_blas() -> None:
     assert use_threads(0) >= 1 and threadpool_info is not None
 
 
+@pytest.mark.slow
 def test_local_search_reads_only_the_window(api_map: Path, small_queries: Path) -> None:
     """With a local search (window 3 on the 111-place sample map) push computes only the similarities the
     matcher asks for, and answers as the matcher does on the full similarity matrix (evaluate's path)."""

@@ -202,6 +202,7 @@ def _snapshot(folder: Path) -> dict[str, str]:
             for p in sorted(folder.rglob("*"))}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c.id)
 def test_bad_input(case: Case, ws: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     for key, value in case.env:
@@ -263,6 +264,7 @@ def test_warnings_for_ignored_input(ws: Path, tmp_path: Path) -> None:
     assert len(res.stdout.splitlines()) == 24                  # 23 frames + header
 
 
+@pytest.mark.slow
 def test_small_images_warned_once(tmp_path: Path, ws: Path) -> None:
     frames = tmp_path / "small"
     frames.mkdir()

@@ -38,6 +38,7 @@ def small_map(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Pat
     return out
 
 
+@pytest.mark.slow
 def test_help() -> None:
     for args in ([], ["build-map"], ["localize"], ["info"]):
         proc = run(*args, "--help")
@@ -46,6 +47,7 @@ def test_help() -> None:
     assert "--codebook" in run("build-map", "--help").stdout
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv, needle", [(["localize", "--bogus"], "--bogus"),
                                           (["build-map"], "Missing argument"),
                                           (["localize", "-m", "a", "-s", "b", "--window", "-1"], "--window"),
@@ -59,6 +61,7 @@ def test_usage_errors_are_one_line(argv: list[str], needle: str) -> None:
     assert len(proc.stderr.splitlines()) == 1, proc.stderr
 
 
+@pytest.mark.slow
 def test_map_contents(small_map: Path, model_path: Path) -> None:
     pm = load_map(small_map)
     assert pm.encodings.shape == (24, 2 * 8 * 32)
@@ -70,6 +73,7 @@ def test_map_contents(small_map: Path, model_path: Path) -> None:
     assert pm.encoder.name == "ifv" and pm.svm is None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["stream", "stream --min-confidence 0", "stream --window 3", "dtw", "single",
                                   "dtw --variant distance --open-ends", "stream --param lock=5 --param turn=0.5"])
 def test_localize_matches_real_frames(small_map: Path, small_queries: Path, mode: str) -> None:
@@ -87,6 +91,7 @@ def test_localize_matches_real_frames(small_map: Path, small_queries: Path, mode
     assert all(r["ref"] == "" and r["ref_index"] == "-1" for r in rows if r["lost"] == "1")
 
 
+@pytest.mark.slow
 def test_localize_jsonl_file_and_reused_codebook(tmp_path: Path, small_map: Path, small_refs: Path,
                                                  small_queries: Path) -> None:
     cb = tmp_path / "cb.npz"
@@ -113,6 +118,7 @@ def write_video(path: Path, frames: Path, count: int) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_video_stream(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
     video = write_video(tmp_path / "q.avi", small_queries, 10)
     proc = run("localize", "-m", small_map, "-s", video)
@@ -120,6 +126,7 @@ def test_video_stream(tmp_path: Path, small_map: Path, small_queries: Path) -> N
     assert len(proc.stdout.splitlines()) == 11
 
 
+@pytest.mark.slow
 def test_network_stream_url(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
     """A URL source goes through OpenCV's network path (here file://, as rtsp:// or http:// would)."""
     video = write_video(tmp_path / "q.avi", small_queries, 6)
@@ -129,6 +136,7 @@ def test_network_stream_url(tmp_path: Path, small_map: Path, small_queries: Path
     assert [r["frame"] for r in rows] == [f"q.avi#{i}" for i in range(6)]
 
 
+@pytest.mark.slow
 def test_corrupt_frame_is_reported_and_skipped(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
     frames = tmp_path / "frames"
     shutil.copytree(small_queries, frames)
@@ -140,6 +148,7 @@ def test_corrupt_frame_is_reported_and_skipped(tmp_path: Path, small_map: Path, 
     assert idx == [i for i in range(24) if i != 5]
 
 
+@pytest.mark.slow
 def test_build_map_bad_input(tmp_path: Path, small_refs: Path) -> None:
     empty = tmp_path / "empty"
     empty.mkdir()
@@ -157,6 +166,7 @@ def test_build_map_bad_input(tmp_path: Path, small_refs: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad", "empty", "m.npz"]   # no temp files
 
 
+@pytest.mark.slow
 def test_localize_bad_input(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
     empty = tmp_path / "empty"
     empty.mkdir()
@@ -186,6 +196,7 @@ def other_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return other
 
 
+@pytest.mark.slow
 def test_map_remembers_its_model(tmp_path: Path, other_model: Path, small_refs: Path, small_queries: Path) -> None:
     out = tmp_path / "other.map.npz"
     assert run("build-map", small_refs, "-o", out, "--model", other_model, "--components", "4").returncode == 0
@@ -197,6 +208,7 @@ def test_map_remembers_its_model(tmp_path: Path, other_model: Path, small_refs: 
     assert info["model_path"] == str(other_model.resolve())
 
 
+@pytest.mark.slow
 def test_codebook_from_other_model(tmp_path: Path, other_model: Path, small_refs: Path) -> None:
     cb = tmp_path / "cb.npz"
     assert run("build-map", small_refs, "-o", tmp_path / "a.npz", "--components", "4",
@@ -207,6 +219,7 @@ def test_codebook_from_other_model(tmp_path: Path, other_model: Path, small_refs
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_map_from_other_model(tmp_path: Path, small_map: Path, small_queries: Path, other_model: Path) -> None:
     other = other_model
     proc = run("localize", "-m", small_map, "-s", small_queries, "--model", other)
@@ -216,6 +229,7 @@ def test_map_from_other_model(tmp_path: Path, small_map: Path, small_queries: Pa
     assert_one_line_error(run("localize", "-m", small_map, "-s", small_queries, "--model", not_onnx), "x.onnx")
 
 
+@pytest.mark.slow
 def test_runtime_imports_neither_torch_nor_sklearn(small_map: Path, small_queries: Path) -> None:
     code = ("import sys, runpy; sys.argv = ['vpr-edge', 'localize', '-m', sys.argv[1], '-s', sys.argv[2]];\n"
             "try: runpy.run_module('vpr_edge', run_name='__main__')\nexcept SystemExit: pass\n"
@@ -227,6 +241,7 @@ def test_runtime_imports_neither_torch_nor_sklearn(small_map: Path, small_querie
     assert len(proc.stdout.splitlines()) == 25
 
 
+@pytest.mark.slow
 def test_append_grows_the_map_with_its_codebook(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
     first, second = tmp_path / "a", tmp_path / "b"
     first.mkdir()

@@ -48,6 +48,7 @@ def test_similarity_exact_where_kept_calibrated_elsewhere() -> None:
     assert abs(row.mean() - exact.mean()) < 0.1 * exact.std() and abs(row.std() / exact.std() - 1) < 0.1
 
 
+@pytest.mark.slow
 def test_localizer_whole_route_frames_go_through_it(api_map_small: Path, small_queries: Path) -> None:
     """Forced on the 24-place map (keep >= R: every value exact), the answers are those without it, and
     every frame went through the coarse search (the local search does not engage on 24 places)."""
@@ -91,6 +92,7 @@ def _rss_file_mb() -> float | None:
     return None
 
 
+@pytest.mark.slow
 def test_sign_pass_releases_a_memory_mapped_map(tmp_path: Path) -> None:
     """Packing the signs reads every stored row; on a memory-mapped map those pages are then dropped from
     the process (store.release_pages), the values still read the same, and an in-RAM map is left alone."""

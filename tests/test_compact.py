@@ -73,6 +73,7 @@ def test_similarity_in_blocks_from_a_memory_map(tmp_path: Path, monkeypatch: pyt
     np.testing.assert_allclose(mapped.similarity(q), q @ x.T, atol=6e-3)      # int8 at 64 dims
 
 
+@pytest.mark.slow
 def test_map_storage_and_schema_1(tmp_path: Path, small_refs: Path) -> None:
     from typer.testing import CliRunner
 

@@ -41,6 +41,7 @@ def planted_similarity(tmp_path: Path, q: int = 40, r: int = 60) -> tuple[Path, 
     return tmp_path / "s.npy", tmp_path / "gt.csv"
 
 
+@pytest.mark.slow
 def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_queries: Path,
                                         aligned_gt: Path) -> None:
     js, png, sim = tmp_path / "r.json", tmp_path / "pr.png", tmp_path / "s.npy"
@@ -72,6 +73,7 @@ def test_evaluate_similarity_needs_no_model_nor_torch(tmp_path: Path) -> None:
     assert doc["modes"]["single"]["recall_at_1"] > 0.7 and doc["modes"]["stream"]["recall_at_1"] > 0.8
 
 
+@pytest.mark.slow
 def test_evaluate_gt_matrix_and_positions(tmp_path: Path) -> None:
     s, _ = planted_similarity(tmp_path)
     m = np.zeros((40, 60), bool)
@@ -97,6 +99,7 @@ def test_evaluate_pixels_front_end(tmp_path: Path, small_refs: Path, small_queri
     assert json.loads((tmp_path / "p.json").read_text())["n_refs"] == 24
 
 
+@pytest.mark.slow
 def test_evaluate_bad_input(tmp_path: Path, eval_map: Path, small_queries: Path, aligned_gt: Path) -> None:
     s, gt = planted_similarity(tmp_path)
     short = tmp_path / "short.csv"
@@ -131,6 +134,7 @@ def test_evaluate_bad_input(tmp_path: Path, eval_map: Path, small_queries: Path,
     assert proc.returncode == 2 and existing.read_text() == "{}" and not (tmp_path / "pr.png").exists()
 
 
+@pytest.mark.slow
 def test_evaluate_window_reaches_the_stream_matcher(tmp_path: Path) -> None:
     """--window sets the stream's local search as localize's does: each run equals the matcher called directly
     with that window (1,000 references: above the 400 where the default window engages)."""
@@ -155,6 +159,7 @@ def test_evaluate_window_reaches_the_stream_matcher(tmp_path: Path) -> None:
     assert proc.returncode == 0 and "--window does not apply" in proc.stderr
 
 
+@pytest.mark.slow
 def test_evaluate_param_sets_matcher_parameters(tmp_path: Path) -> None:
     """--param KEY=VALUE reaches every chosen mode that has KEY (here the stream's bias and lock, and dtw-open's
     hub removal), runs as the matcher called directly with it, and is recorded in the settings."""

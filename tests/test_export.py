@@ -18,6 +18,7 @@ from vpr_edge_export.onnx_export import compare_with_torch, default_weights, exp
 SAMPLE_REFS = sample_folder() / "ref"
 
 
+@pytest.mark.slow
 def test_bundled_model_matches_torch_on_real_images(model_path: Path) -> None:
     ex = FeatureExtractor(model_path)
     info = ex.info
@@ -67,6 +68,7 @@ TORCHVISION_KEYS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,tap,channels,stride", [("vgg16", "block3_conv3", 256, 4), ("resnet50", "res3d", 512, 8)])
 def test_torchvision_layout_export(tmp_path: Path, name: str, tap: str, channels: int, stride: int) -> None:
     sd = _random_state_dict(name, tap)
@@ -119,6 +121,7 @@ def test_hybridnet_export_takes_rgb(tmp_path: Path, tap: str, channels: int, gri
     assert np.abs(got - want).max() <= 1e-4 * max(1.0, np.abs(want).max())
 
 
+@pytest.mark.slow
 def test_vgg16_fc_taps_in_torchvision_layout() -> None:
     """fc1/fc2 = pool5, 7x7 average pooling, classifier.0 (and .3) with ReLU, as torchvision computes them."""
     sd = _random_state_dict("vgg16", "fc2")
@@ -145,6 +148,7 @@ def test_deep_taps_build() -> None:
             assert model(torch.zeros(1, 3, 64, 64)).shape[1] == k == BACKBONES[name].taps[tap]
 
 
+@pytest.mark.slow
 def test_quantize_keeps_features_and_marks_the_model(tmp_path: Path, model_path: Path, small_refs: Path,
                                                      small_queries: Path) -> None:
     pytest.importorskip("onnx")
@@ -165,6 +169,7 @@ def test_quantize_keeps_features_and_marks_the_model(tmp_path: Path, model_path:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["int8.onnx"]     # no temporary files left
 
 
+@pytest.mark.slow
 def test_quantize_qoperator_writes_qlinear_operators(tmp_path: Path, model_path: Path, small_refs: Path,
                                                      small_queries: Path) -> None:
     onnx = pytest.importorskip("onnx")

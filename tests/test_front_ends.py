@@ -136,6 +136,7 @@ def gt(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("front", list(FRONT_ENDS))
 def test_every_front_end_encoding_and_matcher_runs(tmp_path: Path, small_refs: Path, small_queries: Path,
                                                      gt: Path, front: str) -> None:
@@ -219,6 +220,7 @@ def test_maps_refuse_queries_described_another_way(tmp_path: Path, small_refs: P
     np.testing.assert_allclose(load_map(again).encodings, load_map(sift).encodings, atol=1e-2)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("recipe", [("ldb", "none", "--svm"), ("sift-kp", "vlad", "--no-tfidf")])
 def test_runtime_imports_no_heavy_module_for_any_map(tmp_path: Path, small_refs: Path, small_queries: Path,
                                                      recipe: tuple[str, str, str]) -> None:
@@ -237,6 +239,7 @@ def test_runtime_imports_no_heavy_module_for_any_map(tmp_path: Path, small_refs:
     assert "HEAVY []" in proc.stderr and len(proc.stdout.splitlines()) == 25, proc.stderr[-500:]
 
 
+@pytest.mark.slow
 def test_bundled_small_model(tmp_path: Path, small_refs: Path) -> None:
     """The bundled tap at 160x120: a quarter of the pixels, a 10x8 grid of the same 112 channels, and a map
     built with it localises with it."""
@@ -308,6 +311,7 @@ def test_pad_masks_the_cells_that_see_only_padding() -> None:
             np.testing.assert_array_equal(got, centres)
 
 
+@pytest.mark.slow
 def test_resize_policy_recorded_in_the_map(tmp_path: Path, small_refs: Path) -> None:
     """build-map --resize pad: the map records it, its queries go through it; old maps (no record) stretch."""
     from vpr_edge.features.cnn import FeatureExtractor

@@ -17,6 +17,7 @@ def tool(name: str, *args: str) -> str:
     return proc.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mapped", [False, True])
 def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> None:
     extra = ["--mmap", str(tmp_path / "refs.npz"), "--coarse"] if mapped else []
@@ -30,6 +31,7 @@ def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> 
     assert ("memory-mapped from" in out) == mapped and (tmp_path / "refs.npz").is_file() == mapped
 
 
+@pytest.mark.slow
 def test_bench_map_reports_each_size(tmp_path: Path, small_refs: Path) -> None:
     m = tmp_path / "m.npz"
     build = subprocess.run([sys.executable, "-m", "vpr_edge", "build-map", str(small_refs), "-o", str(m),
@@ -41,6 +43,7 @@ def test_bench_map_reports_each_size(tmp_path: Path, small_refs: Path) -> None:
     assert all(float(r[3]) >= 0 and float(r[6]) >= 0 and float(r[1]) >= 0 for r in rows)   # columns filled
 
 
+@pytest.mark.slow
 def test_thesis_grid_writes_tables_and_curves(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
     import json
     import shutil
@@ -65,6 +68,7 @@ def test_thesis_grid_writes_tables_and_curves(tmp_path: Path, small_refs: Path, 
                                                    for q in ("aligned", "speed2")}
 
 
+@pytest.mark.slow
 def test_bench_frame_reports_each_stage(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
     m = tmp_path / "m.npz"
     build = subprocess.run([sys.executable, "-m", "vpr_edge", "build-map", str(small_refs), "-o", str(m),
@@ -75,6 +79,7 @@ def test_bench_frame_reports_each_stage(tmp_path: Path, small_refs: Path, small_
     assert row[0] == "1" and len(row) == 7 and all(float(v) > 0 for v in row[1:])
 
 
+@pytest.mark.slow
 def test_size_sweep_reports_each_configuration(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
     streams = tmp_path / "streams"
     streams.mkdir()
@@ -95,6 +100,7 @@ def test_size_sweep_reports_each_configuration(tmp_path: Path, small_refs: Path,
     assert (tmp_path / "out" / "size.json").exists() and (tmp_path / "out" / "local" / "ref" / "local.npy").exists()
 
 
+@pytest.mark.slow
 def test_coarse_check_compares_exact_and_coarse(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
     m = tmp_path / "m.npz"
     build = subprocess.run([sys.executable, "-m", "vpr_edge", "build-map", str(small_refs), "-o", str(m),
@@ -118,6 +124,7 @@ def test_coarse_check_compares_exact_and_coarse(tmp_path: Path, small_refs: Path
     (["--repeat-noise", "-1"], "--repeat-noise must be >= 0"),
     (["--map-places", "999"], "--map-places must be in 1..24"),
 ])
+@pytest.mark.slow
 def test_derive_streams_checks_before_writing(tmp_path: Path, small_refs: Path, small_queries: Path,
                                               args: list[str], needle: str) -> None:
     import shutil

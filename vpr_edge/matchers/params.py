@@ -1,6 +1,6 @@
 """Every matcher parameter, defined once: its default and what it means. The registry builds each matcher's
 presets from these tables, ``localize --list-params`` prints them, and ``docs/matchers.md`` is written from
-them (``python -m vpr_edge.matchers.params`` prints that table). Values given on the command line
+them (``python -m vpr_edge.matchers`` prints that table). Values given on the command line
 (``--param KEY=VALUE``) are read as the default's type and checked by the matcher itself."""
 from __future__ import annotations
 
@@ -65,18 +65,3 @@ def defaults(table: dict[str, Param], **overrides: Any) -> dict[str, Any]:
     for k in overrides:
         table[k]   # noqa: B018 - a preset must name a defined parameter
     return {k: p.default for k, p in table.items()} | overrides
-
-
-def markdown() -> str:
-    """Every registered matcher's parameters as a Markdown table (docs/matchers.md)."""
-    from vpr_edge.matchers.registry import MATCHERS
-
-    lines = ["| matcher | parameter | default | meaning |", "|---|---|---|---|"]
-    for m in MATCHERS.values():
-        for key, value in m.params.items():
-            lines.append(f"| `{m.name}` | `{key}` | `{value}` | {m.definitions[key].meaning} |")
-    return "\n".join(lines)
-
-
-if __name__ == "__main__":
-    print(markdown())

@@ -42,3 +42,12 @@ def get_matcher(name: str) -> Matcher:
         return MATCHERS[name]
     except KeyError:
         raise ValueError(f"unknown matcher {name!r}; choose from {', '.join(MATCHERS)}") from None
+
+
+def params_table() -> str:
+    """Every registered matcher's parameters as a Markdown table (docs/matchers.md)."""
+    lines = ["| matcher | parameter | default | meaning |", "|---|---|---|---|"]
+    for m in MATCHERS.values():
+        for key, value in m.params.items():
+            lines.append(f"| `{m.name}` | `{key}` | `{value}` | {m.definitions[key].meaning} |")
+    return "\n".join(lines)

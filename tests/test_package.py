@@ -1,0 +1,110 @@
+"""The package as installed: bundled files found through importlib.resources, the sample command, python -m,
+--list-params, and a layout without import cycles."""
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from vpr_edge.matchers import MATCHERS
+from vpr_edge.resources import DEFAULT_MODEL_FILE, SMALL_MODEL_FILE, bundled_model, copy_sample, sample_folder
+
+PACKAGE = Path(__file__).resolve().parent.parent / "vpr_edge"
+
+
+def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "vpr_edge", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def test_bundled_files_are_inside_the_package() -> None:
+    import vpr_edge
+
+    root = Path(vpr_edge.__file__).parent
+    for name in (DEFAULT_MODEL_FILE, SMALL_MODEL_FILE):
+        assert bundled_model(name).is_file() and bundled_model(name).parent.parent == root
+    sample = sample_folder()
+    assert sample.parent.parent == root
+    assert len(list((sample / "ref").glob("*.jpg"))) == len(list((sample / "query").glob("*.jpg"))) == 111
+    assert (sample / "ground_truth.csv").read_text().count("\n") == 112
+
+
+def test_copy_sample_never_writes_over(tmp_path: Path) -> None:
+    out = copy_sample(tmp_path / "c")
+    assert sorted(p.name for p in out.iterdir()) == ["ReadMe.txt", "ground_truth.csv", "query", "ref"]
+    before = sorted(p.name for p in out.rglob("*"))
+    for args, problem in ((["c"], "already exists"), (["missing/c"], "does not exist"),
+                          (["d", "--name", "nope"], "unknown sample")):
+        proc = _cli("sample", *args, cwd=tmp_path)
+        assert proc.returncode == 2 and problem in proc.stderr, proc.stderr
+        assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+    assert sorted(p.name for p in out.rglob("*")) == before and not (tmp_path / "d").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]     # no temporary copy left behind
+
+
+def test_python_m_and_list_params(tmp_path: Path) -> None:
+    import vpr_edge
+
+    version = _cli("--version", cwd=tmp_path)
+    assert version.returncode == 0 and version.stdout.strip() == f"vpr-edge {vpr_edge.__version__}"
+    listed = _cli("localize", "--list-params", cwd=tmp_path)
+    assert listed.returncode == 0
+    for m in MATCHERS.values():
+        assert listed.stdout.count(f"\n{m.name} (") + listed.stdout.startswith(f"{m.name} (") == 1
+        for key, value in m.params.items():
+            assert f"  {key} = {value!r}: {m.definitions[key].meaning}" in listed.stdout
+    assert _cli("evaluate", "--list-params").stdout == listed.stdout
+
+
+def test_every_parameter_is_defined_once_and_constructors_take_them() -> None:
+    for m in MATCHERS.values():
+        assert set(m.params) == set(m.definitions)
+        m.run(__import__("numpy").random.default_rng(0).random((6, 5)), 1)   # the presets construct and run
+
+
+def _imports(path: Path) -> list[tuple[str, str | None]]:
+    """(module, name) for each ``from vpr_edge... import name`` and (module, None) for each ``import vpr_edge...``
+    in ``path``, anywhere in it (lazy imports inside functions too)."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 and node.module.startswith("vpr_edge"):
+            found += [(node.module, a.name) for a in node.names]
+        elif isinstance(node, ast.Import):
+            found += [(a.name, None) for a in node.names if a.name.startswith("vpr_edge")]
+    return found
+
+
+def test_no_import_cycles() -> None:
+    """Module A imports B (at the top or inside a function) and B, directly or not, imports A: refused. Names
+    taken from a package (``from vpr_edge.map import load_map``) count as imports of the modules its
+    __init__ takes them from; the package root is left out (it re-exports the API lazily)."""
+    def dotted(path: Path) -> str:
+        parts = path.relative_to(PACKAGE).with_suffix("").parts
+        return ".".join(("vpr_edge",) + (parts[:-1] if parts[-1] == "__init__" else parts))
+
+    files = {dotted(p): p for p in PACKAGE.rglob("*.py") if p.name != "__main__.py" and p != PACKAGE / "__init__.py"}
+    packages = {dotted(p) for p in PACKAGE.rglob("__init__.py")}
+
+    def targets(module: str, name: str | None) -> set[str]:
+        if name is not None and f"{module}.{name}" in files:
+            return {f"{module}.{name}"}
+        return {module} if module in files else set()
+
+    graph = {m: set().union(*[targets(a, b) for a, b in _imports(p)]) - {m} for m, p in files.items()}
+
+    def reaches(start: str, goal: str) -> bool:
+        seen, todo = set(), [start]
+        while todo:
+            node = todo.pop()
+            if node == goal:
+                return True
+            if node not in seen:
+                seen.add(node)
+                todo.extend(graph[node])
+        return False
+
+    assert packages and graph
+    cycles = sorted(f"{a} <-> {b}" for a in graph for b in graph[a] if reaches(b, a))
+    assert not cycles, cycles

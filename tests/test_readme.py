@@ -1,0 +1,100 @@
+"""The README and the docs as a reader meets them: every example runs as written, the commands are the ones CI
+runs, the parameter table is the registry's, and nothing in them points at one machine or one issue."""
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+README = (ROOT / "README.md").read_text()
+
+
+def blocks(text: str, lang: str) -> list[str]:
+    """The fenced code blocks of ``text`` whose info string is ``lang`` ("" for plain fences)."""
+    out, current, kind = [], None, None
+    for line in text.splitlines():
+        if line.startswith("```"):
+            if current is None:
+                current, kind = [], line[3:].strip()
+            else:
+                if kind == lang:
+                    out.append("\n".join(current) + "\n")
+                current = None
+        elif current is not None:
+            current.append(line)
+    return out
+
+
+def section(text: str, title: str) -> str:
+    start = text.index(f"## {title}\n")
+    end = text.find("\n## ", start + 1)
+    return text[start:end if end > 0 else None]
+
+
+def _env() -> dict[str, str]:
+    return os.environ | {"PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
+
+
+@pytest.mark.slow
+def test_quick_start_and_every_python_block_run_as_written(tmp_path: Path) -> None:
+    """The quick start's commands, in a fresh folder, then each Python block of the README in that folder."""
+    (quick,) = blocks(section(README, "Quick start"), "bash")
+    for line in quick.strip().splitlines():
+        command = line.split("  #")[0].strip()
+        proc = subprocess.run(["bash", "-c", command], cwd=tmp_path, capture_output=True, text=True, env=_env(),
+                              timeout=300)
+        assert proc.returncode == 0, (command, proc.stderr)
+    assert (tmp_path / "corridor.matches.csv").read_text().count("\n") == 112
+    python = blocks(README, "python")
+    assert python, "the README has a Python example"
+    for code in python:
+        proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                              env=_env(), timeout=300)
+        assert proc.returncode == 0, proc.stderr
+        assert "last frame:" in proc.stdout
+
+
+def test_output_line_example_has_the_csv_columns() -> None:
+    from vpr_edge.cli.localize import CSV_COLUMNS
+
+    (example,) = [b for b in blocks(section(README, "Quick start"), "") if b.startswith("frame_index")]
+    header, line = example.strip().splitlines()
+    assert header.split(",") == list(CSV_COLUMNS) and len(line.split(",")) == len(CSV_COLUMNS)
+
+
+def test_the_two_commands_are_what_ci_runs() -> None:
+    main, tests = blocks(section(README, "Two commands"), "bash")
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert tests.strip() in ci.splitlines()
+    # the main job's vpr-edge steps run in CI from the installed wheel, outside the checkout
+    steps = main.strip().split(" && ")
+    assert steps[-3:] == ["vpr-edge sample corridor", "vpr-edge build-map corridor/ref -o corridor.map.npz",
+                          "vpr-edge localize -m corridor.map.npz -s corridor/query -o corridor.matches.csv"]
+    assert " && ".join(steps[-3:]) in ci
+
+
+def test_readme_is_a_front_door() -> None:
+    assert README.count("\n") <= 300
+    for link in re.findall(r"\]\((docs/[^)#]+)\)", README):
+        assert (ROOT / link).is_file(), link
+
+
+@pytest.mark.parametrize("doc", [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))],
+                         ids=lambda p: str(p.relative_to(ROOT)))
+def test_docs_name_no_issue_nor_one_machines_path(doc: Path) -> None:
+    text = doc.read_text()
+    assert not re.search(r"\bissue\s*#?\d|#\d{1,3}\b", text, re.I), doc
+    assert "../shared" not in text and "/work/" not in text and "/tmp/" not in text, doc
+
+
+def test_matcher_parameter_table_is_the_registrys() -> None:
+    from vpr_edge.matchers.registry import params_table
+
+    text = (ROOT / "docs" / "matchers.md").read_text()
+    table = text.split("<!-- params table: generated -->\n")[1].split("\n<!-- end of params table -->")[0]
+    assert table == params_table(), "regenerate with: python -m vpr_edge.matchers"
