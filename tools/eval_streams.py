@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The README's results table: `vpr-edge evaluate` on every derived stream of a dataset, CNN map and pixels.
+"""The results tables (docs/results.md, "Evaluating"): `vpr-edge evaluate` on every derived stream of a dataset, CNN map and pixels.
 
     python tools/derive_streams.py --dataset ../shared/datasets/corridor --out out/corridor
     vpr-edge build-map out/corridor/ref --out out/corridor/map.npz

@@ -1,16 +1,14 @@
 """Static int8 quantisation of a vpr-edge ONNX tap, calibrated on reference images.
 
-    python -m vpr_edge_export.quantize --model models/efficientnet_lite0_stage5_320x240.onnx \\
-        --calibration samples/corridor/ref --out models/efficientnet_lite0_stage5_320x240.int8.onnx
+    python -m vpr_edge_export.quantize --model vpr_edge/models/efficientnet_lite0_stage5_320x240.onnx \\
+        --calibration corridor/ref --out lite0_int8.onnx
 
 onnxruntime's static QDQ quantisation: weights and activations uint8 (U8U8), weights per channel,
 activation ranges by MinMax over the calibration images, preprocessed exactly as the runtime does.
-Measured on the bundled tap (cosine of int8 to fp32 feature maps, 8 Corridor query frames, 32 calibration
-references): U8U8 0.987; the usual U8S8 0.860 (x86 kernels without VNNI saturate the u8 x s8 products),
-U8S8 with reduce_range 0.952, S8S8 0.868, U8U8 per tensor 0.839. On this AVX2 machine without VNNI U8U8 runs
-4.5x slower than fp32; U8S8 reduce_range in the QOperator format (``--weights int8 --format qoperator``) is the
-one scheme faster than fp32 (0.86x at 320x240, 0.91x at 160x120), at some accuracy (README "int8 models").
-Dynamic quantisation was measured 9x slower than fp32 here and lost accuracy, so it is not offered. The
+U8U8 keeps the bundled tap's features closest to fp32's (x86 kernels without VNNI saturate the usual U8S8
+products); U8S8 with reduce_range in the QOperator format (``--weights int8 --format qoperator``) is the
+scheme that can run faster than fp32, at some accuracy; dynamic quantisation is not offered (slower and
+less accurate here). The figures: docs/results.md, "int8 models". The
 model's ``vpr_edge`` metadata is copied and marked (``quantization``: scheme, calibration images, source
 SHA-256), so maps record which model they were built with and refuse the other one; a codebook fitted with
 the source model is accepted. Written atomically. Needs the ``export`` extra (onnx).
@@ -101,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
                         "dot-product kernels (ARM dotprod, x86 VNNI)")
     p.add_argument("--format", choices=tuple(FORMATS), default="qdq",
                    help="qdq: Q/DQ pairs fused by onnxruntime (default); qoperator: QLinearConv etc. in the "
-                        "graph (with --weights int8 the fastest here, README 'int8 models')")
+                        "graph (with --weights int8 the fastest here, docs/results.md 'int8 models')")
     p.add_argument("--out", type=Path, required=True)
     a = p.parse_args(argv)
     return one_line_errors("quantize", lambda: _run(a))

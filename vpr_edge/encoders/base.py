@@ -29,7 +29,7 @@ class FitSettings:
     whiten: bool = True
     alpha: float = 0.5            # signed power normalisation exponent (ifv, vlad); 1 = off
     max_descriptors: int = 30_000
-    iterations: int = 20          # EM / k-means iterations at most (README, "Fitting the codebook")
+    iterations: int = 20          # EM / k-means iterations at most (docs/results.md, "Fitting the codebook")
     seed: int = 0
     tfidf: bool = False           # bow: weight words by inverse document frequency over the references
 

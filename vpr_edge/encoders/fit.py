@@ -79,7 +79,7 @@ def fit_gmm(x: np.ndarray, s: FitSettings) -> tuple[np.ndarray, np.ndarray, np.n
     scikit-learn's EM, started as its own ``k-means++`` start does (means at k-means++ seeds, equal weights,
     variances at the regularisation floor, so the first E-step assigns each descriptor to its nearest seed)
     but with the seeds drawn from ``INIT_SAMPLE`` descriptors; EM runs in float32 (every array given to it is
-    float32, or NumPy promotes the whole EM to float64), half the time of float64 here (README, "Fitting the
+    float32, or NumPy promotes the whole EM to float64), faster than float64 (docs/results.md, "Fitting the
     codebook")."""
     from sklearn.cluster import kmeans_plusplus
     from sklearn.exceptions import ConvergenceWarning
@@ -92,7 +92,7 @@ def fit_gmm(x: np.ndarray, s: FitSettings) -> tuple[np.ndarray, np.ndarray, np.n
     rng = np.random.default_rng(s.seed)
     pool = x if len(x) <= INIT_SAMPLE else x[np.sort(rng.choice(len(x), INIT_SAMPLE, replace=False))]
     seeds, _ = kmeans_plusplus(pool, m, random_state=s.seed)
-    with warnings.catch_warnings():  # stopping EM early is the chosen trade (README); not worth a warning
+    with warnings.catch_warnings():  # stopping EM early is the chosen trade (docs/results.md); not worth a warning
         warnings.simplefilter("ignore", ConvergenceWarning)
         gm = GaussianMixture(n_components=m, covariance_type="diag", reg_covar=reg, max_iter=s.iterations,
                              random_state=s.seed, init_params="random_from_data",

@@ -1,7 +1,7 @@
 """Reference encodings as a map stores them: float16, float32, or int8 with one scale per row.
 
-Measured on both shared datasets (README, "Map size"): int8 rows change stream and single-frame R@1 by at
-most 0.005 against float32, at a quarter of the bytes; so it is build-map's default. Similarities are
+int8 rows hold a quarter of float32's bytes at nearly its accuracy (docs/results.md, "Map size"), so they
+are build-map's default. Similarities are
 computed from what is stored, a block of references at a time, so that a memory-mapped map is read as it
 is used and never expanded whole into RAM.
 """
@@ -17,7 +17,7 @@ from vpr_edge.index.rows import RowReader, release_pages
 DTYPES = {"int8": np.int8, "float16": np.float16, "float32": np.float32}  # storage name -> stored dtype
 STORAGES = tuple(DTYPES)
 BLOCK_BYTES = 2 << 20   # float32 scratch per block of references in ``similarity``: cache-sized blocks ran
-                        # 2.4x faster than 16 MB ones (100,000 x 2,048 int8, one query: 63 vs 152 ms)
+                        # faster than large ones (tools/bench_map.py)
 
 
 def quantise_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -41,8 +41,8 @@ class RowReader:
     bounded cache (first in, first out; ``cache_bytes``, at least ``min_rows`` rows).
 
     Scattered reads through a mapping (a local window, a probe sample, a coarse search's candidates) leave
-    the pages they touch mapped, and this kernel maps page-cache pages in large folios: ~1,500 rows read at
-    random mapped 96 MB of a 205 MB map (README, "Matchers at scale"). Read this way, the process holds the
+    the pages they touch mapped, and a kernel may map page-cache pages in large folios, so a few thousand rows read at
+    random can map half a large map (docs/results.md, "Matchers at scale"). Read this way, the process holds the
     cache and nothing else; the file's pages are the OS page cache's. Thread-safe."""
 
     def __init__(self, arr: np.memmap, cache_bytes: int = 16 << 20, min_rows: int = 1024) -> None:

@@ -12,7 +12,7 @@ reference's running mean z over the last ~``memory`` frames is subtracted (frame
 trajectory is stopped are left out of that mean, so a long stop does not wash out its own place). The
 second step removes hubs: references that resemble every query (a plain wall, a tunnel) would otherwise
 collect evidence while the vehicle moves on, and a stopped trajectory parked on one beats the moving true
-one (measured: stream R@1 0.41 -> 0.73 on nordland-dev). ``bias`` is what a frame must beat to extend a
+one (docs/design.md, "Matching"). ``bias`` is what a frame must beat to extend a
 trajectory; ``turn`` charges each change of speed; ``decay`` forgets evidence older than about
 1 / (1 - decay) frames. The max(0, .) lets a trajectory start anywhere (lock-on from anywhere, re-lock after
 a detour) and floors hopeless ones.
@@ -24,9 +24,8 @@ Standing still is not new evidence: a stopped camera sees one place again and ag
 repeat in full let a trajectory parked on a look-alike (a hub, a station outside the map) outgrow the true
 moving one and lock on where nothing is mapped. So at speed 0 a frame's excess z - bias counts only
 ``stop_gain`` of itself when positive (in full when negative), and the state decays by ``stop_decay``
-instead of ``decay``, holding a lock through a stop rather than rebuilding it. (Measured with
-``tools/eval_streams.py``: on nordland-dev stream R@1 rose on all seven derived streams, stop-and-go
-0.615 -> 0.694, and 90% instead of 81% of the detour's unmapped frames came out lost.)
+instead of ``decay``, holding a lock through a stop rather than rebuilding it. (What it
+changed on the derived streams: docs/results.md, "Evaluating".)
 
 The answer is the position of the best state. Its score does two jobs, so it has two parts:
 
@@ -35,9 +34,8 @@ The answer is the position of the best state. Its score does two jobs, so it has
 H_best is about the summed excess of z over ``bias`` along the last ~1/(1 - decay) frames: below ``lock``
 no trajectory fits well enough and the frame is lost (the registry's min_confidence is 1.0: "locked").
 H_rival is the best trajectory ending more than ``rival_window`` references away: like SeqSLAM's
-best/second-best ratio, uniqueness ranks frames by how unambiguous the answer is, which H alone does badly
-(measured on nordland-dev, AUC 0.51 -> 0.73 on the aligned stream; H still decides lost better: at 5%
-of mapped frames lost, 80% of unmapped ones are lost by H, 7% by uniqueness). So locked frames rank above
+best/second-best ratio, uniqueness ranks frames by how unambiguous the answer is, which H alone does badly,
+while H decides lost better than uniqueness (docs/design.md, "Matching"). So locked frames rank above
 lost ones, each by uniqueness, and ``--min-confidence`` between 1 and 2 asks for a locked and unambiguous
 answer.
 

@@ -17,7 +17,7 @@ class StreamingDTW(WholeRoute):
     < 1; memory of about 1 / (1 - decay) frames), so evidence from before the vehicle left the mapped route
     fades and a path re-forms wherever it re-enters. The path may begin at any reference.
 
-    Known limits (measured, see README): skipping a reference costs its full 1 - cos, so it cannot follow a
+    Known limits (docs/results.md, "Evaluating"): skipping a reference costs its full 1 - cos, so it cannot follow a
     vehicle faster than the map's spacing; staying put costs nothing extra. Kept as a baseline.
 
     ``update`` returns the reference at the end of the cheapest path and a score: the decayed mean cosine
