@@ -17,8 +17,6 @@ from vpr_edge.index.encodings import EncodingWriter, Encodings
 from vpr_edge.map.front import front_end_meta
 from vpr_edge.map.model import PlaceMap, Svm
 
-FIT_DESCRIPTORS = FitSettings.max_descriptors  # local descriptors sampled to fit a codebook (docs/design.md,
-FIT_ITERATIONS = FitSettings.iterations        # "Fitting the codebook")
 Progress = Callable[[int], None]
 
 
