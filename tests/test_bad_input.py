@@ -69,6 +69,16 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     for i in range(3):
         (w / "allbad" / f"{i:03d}.jpg").write_bytes(b"x")
     (w / "garbage.mp4").write_bytes(os.urandom(2048))
+    (w / "link_to_map.csv").symlink_to(w / "good.npz")
+    # damaged or hostile maps: metadata of the wrong shape, non-finite values, a compressed member
+    for name, edit in {"meta_names": {"names": 5}, "meta_features": {"features": [1, 2]},
+                       "meta_encoding": {"encoding": {"name": ["ifv"], "params": {}}},
+                       "meta_storage": {"storage": 8}, "meta_alpha": {"schema": 2, "alpha": "high"}}.items():
+        write_npz(w / f"{name}.npz", arrays, meta | edit)
+    write_npz(w / "nan_scale.npz", arrays | {"encodings_scale": np.full_like(arrays["encodings_scale"], np.nan)}, meta)
+    write_npz(w / "nan_codebook.npz", arrays | {"encoder_gmm_means": arrays["encoder_gmm_means"] * np.nan}, meta)
+    np.savez_compressed(w / "compressed.npz", **arrays, __meta__=np.array(__import__("json").dumps(meta)))
+    np.savez(w / "meta_list.npz", **arrays, __meta__=np.array("[1, 2, 3]"))
     return w
 
 
@@ -172,6 +182,29 @@ CASES = [
     Case("loc-param-refused", LOC + " --param decay=1.5", ("--param", "decay must be in (0, 1)")),
     Case("loc-param-twice", LOC + " --decay 0.8 --param decay=0.7", ("--param decay", "--decay")),
     Case("loc-param-other-mode", LOC + " --mode single --param lock=3", ("--param", "single takes")),
+    # outputs never alias inputs (following links), a trailing slash names a folder
+    Case("loc-out-is-the-map", LOC + " -o {w}/good.npz", ("good.npz", "--out", "an input")),
+    Case("loc-out-links-to-the-map", LOC + " -o {w}/link_to_map.csv", ("link_to_map.csv", "an input")),
+    Case("loc-out-inside-the-stream", LOC + " -o {w}/queries/r.csv", ("r.csv", "inside the input folder")),
+    Case("loc-out-trailing-slash", LOC + " -o {w}/results/", ("results/", "is a folder")),
+    Case("bm-out-is-a-reference", "build-map {w}/refs -o {w}/refs/0000005.jpg", ("0000005.jpg", "inside the input")),
+    Case("bm-out-inside-refs", "build-map {w}/refs -o {w}/refs/route.npz", ("route.npz", "inside the input folder")),
+    Case("bm-out-is-the-codebook", "build-map {w}/refs -o {w}/cb.npz --codebook {w}/cb.npz", ("cb.npz", "an input")),
+    Case("bm-codebook-trailing-slash", BM + " --save-codebook {w}/cbs/", ("cbs/", "is a folder")),
+    Case("ev-json-is-the-gt", EV + " --json {w}/gt.csv", ("gt.csv", "--json", "an input")),
+    Case("ev-json-is-the-similarity", EV + " --json {w}/sim.npy", ("sim.npy", "an input")),
+    Case("ev-json-and-similarity-out", EV + " --json {w}/x.out --save-similarity {w}/x.out", ("x.out", "same file")),
+    # damaged or hostile maps
+    Case("loc-map-names-not-a-list", "localize -m {w}/meta_names.npz -s {w}/queries", ("meta_names.npz", "'names'")),
+    Case("loc-map-features-a-list", "localize -m {w}/meta_features.npz -s {w}/queries", ("meta_features.npz", "'features'")),
+    Case("loc-map-encoding-name", "localize -m {w}/meta_encoding.npz -s {w}/queries", ("meta_encoding.npz", "'encoding'")),
+    Case("loc-map-storage-number", "localize -m {w}/meta_storage.npz -s {w}/queries", ("meta_storage.npz", "'storage'")),
+    Case("loc-map-alpha-text", "localize -m {w}/meta_alpha.npz -s {w}/queries", ("meta_alpha.npz", "'alpha'")),
+    Case("loc-map-meta-a-list", "localize -m {w}/meta_list.npz -s {w}/queries", ("meta_list.npz", "metadata")),
+    Case("loc-map-nan-scale", "localize -m {w}/nan_scale.npz -s {w}/queries", ("nan_scale.npz", "NaN")),
+    Case("loc-map-nan-codebook", "localize -m {w}/nan_codebook.npz -s {w}/queries", ("nan_codebook.npz", "NaN")),
+    Case("loc-map-compressed", "localize -m {w}/compressed.npz -s {w}/queries", ("compressed.npz", "compressed")),
+    Case("info-map-names-not-a-list", "info {w}/meta_names.npz", ("meta_names.npz", "'names'")),
     # info
     Case("info-missing", "info {w}/none.npz", ("none.npz", "no such file")),
     Case("info-text", "info {w}/notes.txt", ("notes.txt", "not a vpr-edge map")),

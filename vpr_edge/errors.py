@@ -11,6 +11,24 @@ class VprError(Exception):
     """A user-facing error: bad input file, mismatched map, missing dependency. Message is one line."""
 
 
+class Terminated(BaseException):
+    """SIGTERM (how systemd and container runtimes stop a service), raised where the process is, so that
+    every ``finally`` and ``except BaseException`` runs: temporary files are removed, nothing is half
+    written. Exit code 143 (128 + 15), as the shell reports a process ended by SIGTERM."""
+
+    exit_code = 143
+
+
+def terminate_cleanly() -> None:
+    """From now on, SIGTERM raises ``Terminated`` in the main thread instead of killing the process."""
+    import signal
+
+    def handler(signum, frame) -> None:
+        raise Terminated()
+
+    signal.signal(signal.SIGTERM, handler)
+
+
 def warn(message: str) -> None:
     """Print ``vpr-edge: warning: message`` on stderr, once per distinct message in this process."""
     if message not in _said:
@@ -26,9 +44,16 @@ def os_error_line(e: OSError) -> str:
 def one_line_errors(prog: str, main: Callable[[], int]) -> int:
     """Run a command-line ``main``; a VprError, or a file the system refuses (OSError), becomes
     ``prog: error: message`` on stderr and exit code 2 instead of a traceback (for the tools run by
-    ``python``; the ``vpr-edge`` CLI does the same through typer)."""
+    ``python``; the ``vpr-edge`` CLI does the same through typer). SIGTERM and Ctrl-C end it cleanly (143 / 130)."""
+    terminate_cleanly()
     try:
         return main()
+    except Terminated:
+        print(f"{prog}: terminated", file=sys.stderr)
+        return Terminated.exit_code
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130
     except VprError as e:
         print(f"{prog}: error: {e}", file=sys.stderr)
     except OSError as e:

@@ -7,6 +7,7 @@ import hashlib
 import io
 import json
 import os
+import stat
 import struct
 import tempfile
 import zipfile
@@ -20,10 +21,32 @@ from vpr_edge.errors import VprError
 META_KEY = "__meta__"
 
 
+def is_special(path: str | os.PathLike[str]) -> bool:
+    """True for an existing character device, pipe or socket (``/dev/stdout``, ``/dev/null``, a FIFO): an
+    output written in place, never renamed over."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode)
+
+
+def output_target(path: str | os.PathLike[str]) -> Path:
+    """Where writing ``path`` lands: a symbolic link is followed to its final target, which is replaced while
+    the link stays (the link's own folder need not be writable, the target's must)."""
+    p = Path(path)
+    return Path(os.path.realpath(p)) if p.is_symlink() else p
+
+
 def check_writable(path: str | os.PathLike[str]) -> None:
     """Raise VprError unless ``path`` can be written as a file: its folder exists and is writable, and it
-    is not itself a folder. Called before any work, so that bad output paths fail at once."""
-    path = Path(path)
+    is not itself a folder (a symbolic link: its target's). Special files (``is_special``) are written in
+    place. Called before any work, so that bad output paths fail at once."""
+    if is_special(path):
+        if not os.access(path, os.W_OK):
+            raise VprError(f"{path}: not writable")
+        return
+    path = output_target(path)
     folder = path.parent
     if path.is_dir():
         raise VprError(f"{path}: is a folder, expected a file name to write")
@@ -39,14 +62,81 @@ def check_writable(path: str | os.PathLike[str]) -> None:
         raise VprError(f"{path}: folder {folder} is not writable ({e.strerror or e})") from None
 
 
+def output_path(text: str) -> Path:
+    """A command-line output path: a trailing slash names a folder, which is refused (an output is a file)."""
+    if text.endswith(("/", os.sep)) or Path(text).is_dir():
+        raise VprError(f"{text}: is a folder, expected a file name to write")
+    return Path(text)
+
+
+def check_not_input(outputs: dict[str, str | os.PathLike[str] | None],
+                    inputs: list[str | os.PathLike[str] | None]) -> None:
+    """Refuse (VprError, before any work) an output that is one of the command's inputs or lies inside an
+    input folder, following symbolic links, and two outputs naming one file. ``outputs``: option -> path."""
+    def real(p: str | os.PathLike[str]) -> Path:
+        return Path(os.path.realpath(p))
+
+    given = {opt: p for opt, p in outputs.items() if p is not None and not is_special(p)}
+    sources = [(p, real(p)) for p in inputs if p is not None and "://" not in str(p)]
+    seen: dict[Path, str] = {}
+    for opt, out in given.items():
+        target = real(out)
+        if target in seen:
+            raise VprError(f"{out}: {seen[target]} and {opt} name the same file; give each its own")
+        seen[target] = opt
+        for inp, source in sources:
+            if target == source:
+                raise VprError(f"{out}: {opt} would write over an input of this command ({inp}); "
+                               f"write it elsewhere")
+            if source.is_dir() and source in target.parents:
+                raise VprError(f"{out}: {opt} lies inside the input folder {inp}; write it elsewhere")
+
+
+TEMP_SUFFIX = ".tmp"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:   # another user's process
+        return True
+    return True
+
+
+def remove_stale_temps(target: Path) -> list[Path]:
+    """Remove the temporary files that writers of ``target`` which have died (killed, power lost) left beside
+    it: ``.NAME.PID.*.tmp`` whose PID is no longer running. Returns what was removed."""
+    removed = []
+    for tmp in target.parent.glob(f".{glob_escape(target.name)}.*{TEMP_SUFFIX}"):
+        pid = tmp.name[len(target.name) + 2:].split(".", 1)[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            tmp.unlink(missing_ok=True)
+            removed.append(tmp)
+    return removed
+
+
+def glob_escape(name: str) -> str:
+    """``name`` with glob's special characters escaped."""
+    return "".join(f"[{c}]" if c in "*?[" else c for c in name)
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; when the block ends without error, fsync it, give it the
-    umask's mode and rename it over ``path``. On error the temporary file is removed and ``path`` is left
-    as it was."""
+    """Yield a temporary path beside ``path`` (beside its target, for a symbolic link); when the block ends
+    without error, fsync it, give it the umask's mode and rename it over the target. On error, Ctrl-C or
+    SIGTERM the temporary file is removed and the target is left as it was; the temporary files of writers
+    that died are removed first. A special file (``/dev/stdout``) is yielded as it is, written in place. An
+    OSError without a file name (a full disk mid-write) is given ``path``'s name."""
     path = Path(path)
+    if is_special(path):
+        yield path
+        return
     check_writable(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    target = output_target(path)
+    remove_stale_temps(target)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.{os.getpid()}.", suffix=TEMP_SUFFIX, dir=target.parent)
     os.close(fd)
     try:
         yield Path(tmp)
@@ -55,10 +145,41 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
+        os.replace(tmp, target)
+    except OSError as e:
+        Path(tmp).unlink(missing_ok=True)
+        if e.filename is None or str(e.filename) == tmp:
+            raise OSError(e.errno, e.strerror or str(e), str(path)) from None
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+@contextlib.contextmanager
+def writer_lock(path: str | os.PathLike[str]) -> Iterator[None]:
+    """Hold the one-writer lock of ``path`` (an OS file lock on ``.NAME.lock`` beside its target, released
+    when the block ends or the process dies): a second writer waits, saying so once on stderr. Readers take
+    no lock: they read the previous complete file until the writer's rename."""
+    import fcntl
+
+    from vpr_edge.errors import warn
+
+    target = output_target(path)
+    lock = target.parent / f".{target.name}.lock"
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError as e:
+        raise VprError(f"{path}: cannot create its lock file {lock.name} ({e.strerror or e})") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            warn(f"{path}: another vpr-edge is writing it; waiting for it to finish")
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)   # releases the lock
 
 
 def write_npz(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta: dict) -> None:
@@ -126,6 +247,8 @@ def read_npz(path: str | os.PathLike[str], kind: str, schema: int | tuple[int, .
     if head != b"PK\x03\x04":
         raise VprError(f"{path}: not a vpr-edge {kind} ({_describe(head, path)}; expected an .npz archive)")
     try:
+        with zipfile.ZipFile(path) as z:
+            _check_members(path, z, kind)
         if mmap:
             with zipfile.ZipFile(path) as z:
                 arrays = _mapped_members(path, z)
@@ -146,6 +269,8 @@ def read_npz(path: str | os.PathLike[str], kind: str, schema: int | tuple[int, .
         meta = json.loads(str(arrays.pop(META_KEY)))
     except json.JSONDecodeError as e:
         raise VprError(f"{path}: corrupt metadata ({e})") from None
+    if not isinstance(meta, dict):
+        raise VprError(f"{path}: corrupt metadata (a JSON {type(meta).__name__}, expected an object)")
     if meta.get("kind") != kind:
         raise VprError(f"{path}: not a vpr-edge {kind} (it is a vpr-edge {meta.get('kind')})")
     readable = (schema,) if isinstance(schema, int) else tuple(schema)
@@ -153,6 +278,18 @@ def read_npz(path: str | os.PathLike[str], kind: str, schema: int | tuple[int, .
         raise VprError(f"{path}: {kind} schema version {meta.get('schema')} is not supported "
                        f"(this vpr-edge reads version {', '.join(map(str, readable))}); rebuild it")
     return arrays, meta
+
+
+def _check_members(path: Path, z: zipfile.ZipFile, kind: str) -> None:
+    """VprError for an archive that could make the reader allocate beyond the file's size: a compressed
+    member (vpr-edge never compresses) or members declaring more bytes than the file holds."""
+    size = path.stat().st_size
+    for info in z.infolist():
+        if info.compress_type != zipfile.ZIP_STORED:
+            raise VprError(f"{path}: not a vpr-edge {kind} (member {info.filename} is compressed; vpr-edge "
+                           f"writes stored members only)")
+    if sum(info.file_size for info in z.infolist()) > size:
+        raise VprError(f"{path}: not a vpr-edge {kind} (its members declare more bytes than the file holds)")
 
 
 def _describe(head: bytes, path: Path) -> str:

@@ -8,8 +8,29 @@ import typer
 
 from vpr_edge.cli import build_map, evaluate, info, localize, sample  # noqa: F401 - each registers its command
 from vpr_edge.cli.common import app
+from vpr_edge.errors import Terminated, os_error_line, terminate_cleanly
 
 __all__ = ["app", "main"]
+
+
+class ClosedOutput:
+    """Standard output when the process was started without one: writing to it is an error naming it."""
+
+    def write(self, text: str) -> int:
+        import errno
+
+        raise OSError(errno.EBADF, "standard output is closed", "stdout")
+
+    def flush(self) -> None:
+        pass
+
+    def isatty(self) -> bool:
+        return False
+
+    def fileno(self) -> int:
+        import errno
+
+        raise OSError(errno.EBADF, "standard output is closed", "stdout")
 
 
 # click's UsageError and ClickException, whether typer vendors click or depends on it
@@ -19,6 +40,9 @@ _USAGE_ERROR, _CLICK_ERROR = typer.BadParameter.__mro__[1:3]
 def main() -> None:
     """Console-script entry point: a usage error (unknown option, missing argument) is one line on stderr,
     ``vpr-edge: error: COMMAND: problem (see 'COMMAND -h')``, exit code 2, like every other refusal."""
+    terminate_cleanly()
+    if sys.stdout is None:          # started with standard output closed (`>&-`)
+        sys.stdout = ClosedOutput()
     try:
         rc = app(prog_name="vpr-edge", standalone_mode=False)
     except _USAGE_ERROR as e:
@@ -34,5 +58,11 @@ def main() -> None:
     except typer.Abort:
         print("vpr-edge: aborted", file=sys.stderr)
         sys.exit(1)
+    except OSError as e:            # writing the help or the version to a closed or full output
+        print(f"vpr-edge: error: {os_error_line(e)}", file=sys.stderr)
+        sys.exit(2)
+    except Terminated:              # SIGTERM while parsing options, before any work
+        print("vpr-edge: terminated", file=sys.stderr)
+        sys.exit(Terminated.exit_code)
     sys.exit(rc if isinstance(rc, int) else 0)
 

@@ -12,6 +12,7 @@ from vpr_edge.cli.common import (MODEL_HELP, THREADS_HELP, EncodingOpt, FrontOpt
 from vpr_edge.encoders import ENCODERS, FitSettings
 from vpr_edge.features import FRONT_ENDS
 from vpr_edge.features.resize import RESIZE
+from vpr_edge.files import output_path
 from vpr_edge.map.make import DEFAULT_ENCODING, DEFAULT_FRONT_END, DEFAULT_STORAGE, BuildOptions, plan_map, write_map
 
 _FIT = FitSettings()
@@ -24,7 +25,8 @@ def _value(opt):
 @app.command("build-map")
 def build_map_cmd(
     refs: Path = typer.Argument(..., help="Folder of reference images, taken in file-name order."),
-    out: Path = typer.Option(..., "--out", "-o", help="Map file to write (.npz); written atomically."),
+    out: str = typer.Option(..., "--out", "-o", help="Map file to write (.npz); written atomically, never over "
+                            "an input nor inside the reference folder. A symbolic link is written through."),
     features: Optional[FrontOpt] = typer.Option(None, metavar="FRONT_END", help="Local descriptors: "
                                                 + ", ".join(FRONT_ENDS) + f" (default {DEFAULT_FRONT_END}). "
                                                 "docs/design.md, Front ends."),
@@ -56,7 +58,7 @@ def build_map_cmd(
     svm: bool = typer.Option(False, "--svm", help="Also train one linear SVM per place on the reference "
                              "encodings (for localize/evaluate --mode svm; doubles the map's size)."),
     seed: int = typer.Option(0, help="Random seed for sampling and fitting."),
-    save_codebook: Optional[Path] = typer.Option(None, help="Also write the codebook to this .npz file."),
+    save_codebook: Optional[str] = typer.Option(None, help="Also write the codebook to this .npz file."),
     storage: Optional[StorageOpt] = typer.Option(None, help=f"How the map stores reference encodings: int8 "
                                                  f"with a scale per row (default {DEFAULT_STORAGE}; a quarter of "
                                                  "float32's bytes, docs/results.md), float16 or float32. With "
@@ -71,10 +73,13 @@ def build_map_cmd(
     front end), fit the codebook unless --codebook is given, encode every reference (an Improved Fisher
     Vector by default), optionally train an SVM per place, and write one map file."""
     with user_errors():
-        options = BuildOptions(_value(features), _value(encoding), model, _value(resize), codebook, components,
-                               pca_dim, whiten, alpha, tfidf, max_descriptors, fit_iterations, svm, seed,
-                               save_codebook, _value(storage), append, batch_size, threads)
-        plan = plan_map(refs, out, options)
+        options = BuildOptions(features=_value(features), encoding=_value(encoding), model=model,
+                               resize=_value(resize), codebook=codebook, components=components, pca_dim=pca_dim,
+                               whiten=whiten, alpha=alpha, tfidf=tfidf, max_descriptors=max_descriptors,
+                               fit_iterations=fit_iterations, svm=svm, seed=seed,
+                               save_codebook=output_path(save_codebook) if save_codebook else None,
+                               storage=_value(storage), append=append, batch_size=batch_size, threads=threads)
+        plan = plan_map(refs, output_path(out), options)
         with typer.progressbar(length=len(plan.files), label="extracting", file=sys.stderr,
                                hidden=not sys.stderr.isatty()) as bar:
             line = write_map(plan, progress=bar.update)

@@ -12,7 +12,7 @@ import typer
 
 from vpr_edge import __version__
 from vpr_edge.encoders import ENCODERS
-from vpr_edge.errors import VprError, os_error_line, warn
+from vpr_edge.errors import Terminated, VprError, os_error_line, warn
 from vpr_edge.features import FRONT_ENDS
 from vpr_edge.features.resize import RESIZE
 from vpr_edge.index.encodings import STORAGES
@@ -45,7 +45,8 @@ EncodingOpt = Enum("EncodingOpt", {name: name for name in ENCODERS}, type=str)  
 
 @contextlib.contextmanager
 def user_errors() -> Iterator[None]:
-    """Turn VprError into one line on stderr and exit code 2; Ctrl-C into exit code 130."""
+    """Turn VprError into one line on stderr and exit code 2; Ctrl-C into exit code 130, SIGTERM into 143
+    (temporary outputs removed on the way out)."""
     try:
         yield
     except (VprError, ValueError) as e:
@@ -60,6 +61,9 @@ def user_errors() -> Iterator[None]:
     except KeyboardInterrupt:
         typer.echo("vpr-edge: interrupted", err=True)
         raise typer.Exit(130) from None
+    except Terminated:
+        typer.echo("vpr-edge: terminated", err=True)
+        raise typer.Exit(Terminated.exit_code) from None
 
 
 MODEL_HELP = ("ONNX feature model exported by vpr_edge_export (default: $VPR_EDGE_MODEL if set, else the "

@@ -11,7 +11,7 @@ from vpr_edge.cli.common import LIST_PARAMS, PARAM_HELP, THREADS_HELP, app, para
 from vpr_edge.errors import VprError, warn
 from vpr_edge.evaluation import Source, Truth, evaluate
 from vpr_edge.evaluation.run import default_matchers
-from vpr_edge.files import atomic_output, check_writable
+from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
 from vpr_edge.images import Frame
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.threads import use_threads
@@ -55,10 +55,11 @@ def evaluate_cmd(
     param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE",
                                               help=PARAM_HELP + " Applies to every chosen mode that has KEY."),
     list_params: bool = LIST_PARAMS,
-    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the figures as JSON here."),
-    plot_out: Optional[Path] = typer.Option(None, "--plot", help="Write all modes' PR curves to this PNG "
+    json_text: Optional[str] = typer.Option(None, "--json", help="Write the figures as JSON here."),
+    plot_text: Optional[str] = typer.Option(None, "--plot", help="Write all modes' PR curves to this PNG "
                                             "(needs matplotlib: the plot extra)."),
-    save_similarity: Optional[Path] = typer.Option(None, help="Also save the (Q, R) similarity matrix (.npy)."),
+    similarity_text: Optional[str] = typer.Option(None, "--save-similarity",
+                                                  help="Also save the (Q, R) similarity matrix (.npy)."),
     model: Optional[Path] = typer.Option(None, help="With --map: the map's model, if not where it was."),
     batch_size: int = typer.Option(8, min=1, help="Frames per model run."),
     threads: int = typer.Option(0, min=0, help=THREADS_HELP),
@@ -89,9 +90,14 @@ def evaluate_cmd(
             matchers = {n: m.with_params(window=window) if "window" in m.params else m for n, m in matchers.items()}
         if param:
             matchers = param_options_for_all(matchers, param)
-        for target in (json_out, plot_out, save_similarity):
+        json_out, plot_out, save_similarity = (output_path(t) if t else None
+                                               for t in (json_text, plot_text, similarity_text))
+        outputs = {"--json": json_out, "--plot": plot_out, "--save-similarity": save_similarity}
+        for target in outputs.values():
             if target:
                 check_writable(target)
+        check_not_input(outputs, [map_path, queries, similarity, refs, gt, model,
+                                  *(gt_positions or ())])
         if plot_out:
             report.require_matplotlib()
         use_threads(threads)

@@ -16,7 +16,7 @@ from vpr_edge.api import Localizer, Match
 from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, THREADS_HELP, ModeOpt, app, params_for,
                                  user_errors, with_param_options)
 from vpr_edge.errors import VprError
-from vpr_edge.files import atomic_output, check_writable
+from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
 from vpr_edge.images import Frame, open_stream
 from vpr_edge.matchers import MATCHERS, get_matcher
 
@@ -90,8 +90,9 @@ def localize_cmd(
                    "(stream: %.1f; other modes: never lost)." % MATCHERS["stream"].min_confidence),
     param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE", help=PARAM_HELP),
     list_params: bool = LIST_PARAMS,
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write results here instead of stdout "
-                                       "(written to a temporary file, renamed when the stream is done)."),
+    out_text: Optional[str] = typer.Option(None, "--out", "-o", help="Write results here instead of stdout "
+                                           "(written to a temporary file, renamed when the stream is done; "
+                                           "never over an input; a symbolic link is written through)."),
     fmt: Optional[FormatOpt] = typer.Option(None, "--format", help="csv or jsonl (default: from --out's "
                                             "suffix, csv on stdout)."),
     batch_size: int = typer.Option(1, min=1, help="Frames per model run (1 = lowest latency)."),
@@ -101,8 +102,13 @@ def localize_cmd(
     matched reference index and name (-1 and empty when lost), score (higher = more confident), lost (0/1).
     Undecodable frames are reported on stderr and skipped."""
     with user_errors():
+        out = output_path(out_text) if out_text else None
         if out:
             check_writable(out)
+            check_not_input({"--out": out}, [map_path, stream, model])
+        else:
+            with _writing("stdout"):
+                sys.stdout.write("")      # a closed standard output fails here, before any work
         suffix_fmt = {".csv": "csv", ".jsonl": "jsonl", ".json": "jsonl"}.get(out.suffix.lower()) if out else None
         if fmt and suffix_fmt and fmt.value != suffix_fmt:
             raise VprError(f"{out}: --format {fmt.value} contradicts the file's {out.suffix} suffix")

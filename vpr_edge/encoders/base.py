@@ -114,6 +114,15 @@ class Encoder:
     def to_arrays(self) -> dict[str, np.ndarray]:
         raise NotImplementedError
 
+    def same_as(self, other: "Encoder") -> bool:
+        """True if ``other`` encodes exactly as this one: the same kind, parameters and fitted arrays."""
+        if other is self:
+            return True
+        if type(other) is not type(self) or other.params() != self.params() or other.input_dim != self.input_dim:
+            return False
+        mine, theirs = self.to_arrays(), other.to_arrays()
+        return mine.keys() == theirs.keys() and all(np.array_equal(mine[k], theirs[k]) for k in mine)
+
     def with_alpha(self, alpha: float) -> "Encoder":
         """The same codebook with another power-normalisation exponent (encoders without one: unchanged)."""
         return self

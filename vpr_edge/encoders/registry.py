@@ -42,11 +42,17 @@ def encoder_from_arrays(spec: dict, arrays: dict[str, np.ndarray], input_dim: in
         cls = encoder_class(str(spec.get("name")))
     except ValueError as e:
         raise VprError(f"{source}: {e}") from None
+    for name, a in arrays.items():
+        if not np.issubdtype(np.asarray(a).dtype, np.number) or not np.isfinite(a).all():
+            raise VprError(f"{source}: codebook array {name} holds NaN, infinite or non-numeric values")
+    params = spec.get("params") or {}
+    if not isinstance(params, dict):
+        raise VprError(f"{source}: codebook parameters are not a JSON object")
     try:
-        return cls.from_arrays(arrays, dict(spec.get("params") or {}), input_dim)
+        return cls.from_arrays(arrays, dict(params), input_dim)
     except KeyError as e:
         raise VprError(f"{source}: {cls.name} codebook array {e} missing") from None
-    except (ValueError, TypeError) as e:
+    except (ValueError, TypeError, AttributeError, IndexError) as e:
         raise VprError(f"{source}: codebook arrays are inconsistent ({e})") from None
 
 
@@ -54,4 +60,6 @@ def load_codebook(path: str | os.PathLike[str]) -> tuple[Encoder, dict]:
     """Read a standalone codebook file; returns (encoder, metadata). Schema-1 files are IFV codebooks."""
     arrays, meta = read_npz(path, "codebook", READS_CODEBOOK)
     spec = meta.get("encoding") or {"name": "ifv", "params": {"alpha": 0.5}}
+    if not isinstance(spec, dict) or not isinstance(meta.get("input_dim", 0), int):
+        raise VprError(f"{path}: codebook metadata is malformed (encoding, input_dim)")
     return encoder_from_arrays(spec, arrays, int(meta.get("input_dim", 0)), str(path)), meta

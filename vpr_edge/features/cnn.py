@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -16,6 +17,40 @@ from vpr_edge.resources import SMALL_MODEL_FILE, bundled_model
 MODEL_SCHEMA = 1
 _REQUIRED = ("backbone", "tap", "input_width", "input_height", "mean", "std", "channels", "grid_width",
              "grid_height", "weights_sha256")
+
+
+def _checked_info(path: Path, raw: str) -> dict:
+    """The model's ``vpr_edge`` metadata, every field the runtime uses checked (VprError naming the field)."""
+    try:
+        info = json.loads(raw)
+    except json.JSONDecodeError as e:
+        raise VprError(f"{path}: model metadata is not valid JSON ({e})") from None
+    if not isinstance(info, dict):
+        raise VprError(f"{path}: model metadata is a JSON {type(info).__name__}, expected an object")
+    missing = [k for k in _REQUIRED if k not in info]
+    if info.get("schema") != MODEL_SCHEMA or missing:
+        raise VprError(f"{path}: model metadata schema {info.get('schema')} unsupported "
+                       f"(expected {MODEL_SCHEMA}{', missing ' + ', '.join(missing) if missing else ''})")
+
+    def positive_int(key: str) -> bool:
+        return isinstance(info[key], int) and not isinstance(info[key], bool) and 0 < info[key] <= 1 << 16
+
+    for key in ("input_width", "input_height", "channels", "grid_width", "grid_height"):
+        if not positive_int(key):
+            raise VprError(f"{path}: model metadata field {key!r} must be a positive integer, got {info[key]!r}")
+    for key in ("mean", "std"):
+        v = info[key]
+        if not (isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                            and math.isfinite(x) for x in v)):
+            raise VprError(f"{path}: model metadata field {key!r} must be three finite numbers, got {v!r}")
+    if min(info["std"]) <= 0:
+        raise VprError(f"{path}: model metadata field 'std' must be positive, got {info['std']!r}")
+    for key in ("backbone", "tap", "weights_sha256"):
+        if not isinstance(info[key], str):
+            raise VprError(f"{path}: model metadata field {key!r} must be text, got {info[key]!r}")
+    if "resize" in info and not isinstance(info["resize"], str):
+        raise VprError(f"{path}: model metadata field 'resize' must be text, got {info['resize']!r}")
+    return info
 
 
 def default_model_path() -> Path:
@@ -72,11 +107,7 @@ class FeatureExtractor:
         raw = self.session.get_modelmeta().custom_metadata_map.get("vpr_edge")
         if raw is None:
             raise VprError(f"{self.path}: ONNX model has no vpr_edge metadata (export it with vpr_edge_export)")
-        info = json.loads(raw)
-        missing = [k for k in _REQUIRED if k not in info]
-        if info.get("schema") != MODEL_SCHEMA or missing:
-            raise VprError(f"{self.path}: model metadata schema {info.get('schema')} unsupported "
-                           f"(expected {MODEL_SCHEMA}{', missing ' + ', '.join(missing) if missing else ''})")
+        info = _checked_info(self.path, raw)
         self.info: dict = info
         self.fingerprint = file_sha256(self.path)
         self.size = (int(info["input_width"]), int(info["input_height"]))

@@ -72,7 +72,12 @@ class Encodings:
             raise ValueError(f"encodings are {values.dtype}, storage says {storage!r}")
         if storage == "int8" and (scale is None or scale.shape != (len(values),)):
             raise ValueError("int8 encodings without one scale per row")
-        return cls(values, storage, np.asarray(scale, np.float32) if storage == "int8" else None)
+        if storage == "int8" and not (np.isfinite(scale).all() and (np.asarray(scale) >= 0).all()):
+            raise ValueError("int8 row scales hold NaN, infinite or negative values")
+        made = cls(values, storage, np.asarray(scale, np.float32) if storage == "int8" else None)
+        if storage != "int8" and not all(np.isfinite(block).all() for _, block in made.blocks(8192)):
+            raise ValueError("encodings hold NaN or infinite values")
+        return made
 
     def concat(self, more: "Encodings") -> "Encodings":
         """These rows then ``more``'s, in this storage (``more`` repacked if it is stored otherwise): the

@@ -32,11 +32,47 @@ def save_map(place_map: PlaceMap, path: str | os.PathLike[str], storage: str = "
     write_npz(path, arrays, meta)
 
 
+# metadata fields a map may hold, and the JSON types each must have (None: any); checked on load
+_FIELDS: dict[str, tuple[type, ...]] = {
+    "schema": (int,), "names": (list,), "storage": (str,), "n_refs": (int,), "dim": (int,),
+    "descriptor_dim": (int,), "features": (dict,), "features_fingerprint": (str,), "encoding": (dict,),
+    "model": (dict,), "model_file": (str,), "model_path": (str,), "model_sha256": (str,), "codebook": (dict,),
+    "svm": (dict,), "appended": (list,), "refs_folder": (str,), "alpha": (int, float),
+}
+
+
+def _check_meta(path: str | os.PathLike[str], meta: dict) -> None:
+    """VprError naming the field when a map's metadata has a field of the wrong JSON type or value."""
+    for key, kinds in _FIELDS.items():
+        value = meta.get(key)
+        if value is not None and (not isinstance(value, kinds) or isinstance(value, bool)):
+            raise VprError(f"{path}: map metadata field {key!r} is a {type(value).__name__}, expected "
+                           f"{' or '.join(k.__name__ for k in kinds)}")
+    if not all(isinstance(n, str) for n in meta.get("names") or []):
+        raise VprError(f"{path}: map metadata field 'names' holds something other than image names")
+    for key in ("features", "encoding"):
+        spec = meta.get(key) or {}
+        if not isinstance(spec.get("name", ""), str) or not isinstance(spec.get("params") or {}, dict):
+            raise VprError(f"{path}: map metadata field {key!r} needs a name (text) and params (an object)")
+    alpha = meta.get("alpha", 0.5)
+    if not (isinstance(alpha, (int, float)) and 0.0 <= alpha <= 1.0):
+        raise VprError(f"{path}: map metadata field 'alpha' must be a number in [0, 1]")
+
+
 def load_map(path: str | os.PathLike[str], mmap: bool = False) -> PlaceMap:
-    """Read a map, checking kind, schema version and internal consistency. With ``mmap`` the encodings
-    stay in the file, memory-mapped: opening reads headers and metadata only, and the operating system
-    pages references in as similarities touch them (a 100,000-place map opens in milliseconds)."""
+    """Read a map, checking kind, schema version, every metadata field's type, finite stored values and
+    internal consistency (VprError naming the file and the problem). With ``mmap`` the encodings stay in the
+    file, memory-mapped: opening reads headers and metadata only, and the operating system pages references
+    in as similarities touch them (a 100,000-place map opens in milliseconds)."""
     arrays, meta = read_npz(path, "map", READS_SCHEMAS, mmap=mmap)
+    _check_meta(path, meta)
+    try:
+        return _assemble(path, arrays, meta)
+    except (TypeError, ValueError, KeyError, AttributeError, IndexError) as e:   # a field this code missed
+        raise VprError(f"{path}: map is inconsistent ({str(e).splitlines()[0][:120]})") from None
+
+
+def _assemble(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta: dict) -> PlaceMap:
     storage = meta.get("storage", "float32")
     try:
         stored = Encodings.from_arrays(arrays, storage)

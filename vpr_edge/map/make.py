@@ -9,7 +9,7 @@ from pathlib import Path
 from vpr_edge.encoders import ENCODERS, Encoder, FitSettings, load_codebook
 from vpr_edge.errors import VprError, warn
 from vpr_edge.features import FrontEnd, make_front_end
-from vpr_edge.files import check_writable
+from vpr_edge.files import check_not_input, check_writable, writer_lock
 from vpr_edge.images import list_images
 from vpr_edge.map.build import Progress, build_map
 from vpr_edge.map.front import map_front_end
@@ -93,8 +93,8 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     for target in (out, o.save_codebook):
         if target:
             check_writable(target)
-    if o.save_codebook and o.save_codebook.resolve() == out.resolve():
-        raise VprError(f"{out}: --out and --save-codebook name the same file")
+    # (the map --append reads is also the one it replaces: its own input, by design)
+    check_not_input({"--out": out, "--save-codebook": o.save_codebook}, [refs, o.codebook, o.model])
     files = list_images(refs)
     base = load_map(out, mmap=True) if o.append else None
     given, cb_meta = None, {}
@@ -147,13 +147,21 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
 
 
 def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
-    """Build the planned map and write it (and the codebook, if asked) atomically; returns a one-line summary."""
+    """Build the planned map and write it (and the codebook, if asked) atomically; returns a one-line summary.
+    The references are described and encoded first; then, holding the map's writer lock (``files.writer_lock``:
+    one writer at a time), an appended map is read again, so that a concurrent ``--append`` that finished
+    meanwhile is kept, and the result replaces it."""
     o = plan.options
     place_map = build_map(plan.files, plan.front, plan.encoding, plan.given, plan.settings, o.batch_size, o.svm,
                           plan.storage, progress=progress)
-    if plan.base is not None:
-        place_map = plan.base.repacked(plan.storage).extended(place_map)
-    save_map(place_map, plan.out, plan.storage)
+    with writer_lock(plan.out):
+        if plan.base is not None:
+            base = load_map(plan.out, mmap=True)
+            if not base.encoder.same_as(plan.base.encoder) or base.fingerprint != plan.base.fingerprint:
+                raise VprError(f"{plan.out}: replaced meanwhile by a map with another codebook or front end; "
+                               f"nothing appended (run --append again)")
+            place_map = base.repacked(plan.storage).extended(place_map)
+        save_map(place_map, plan.out, plan.storage)
     if o.save_codebook:
         place_map.encoder.save(o.save_codebook, {k: place_map.meta.get(k) for k in
                                                  ("features", "features_fingerprint", "model_sha256")})

@@ -81,7 +81,7 @@ class PlaceMap:
         encoder and model; raises VprError otherwise). The result is in this map's storage: its stored rows
         are copied as they are (into RAM, never expanded to float32). An SVM is not carried over (its
         classifiers would need retraining on the whole route)."""
-        if more.encoder is not self.encoder or more.meta.get("features_fingerprint") != self.fingerprint:
+        if not self.encoder.same_as(more.encoder) or more.meta.get("features_fingerprint") != self.fingerprint:
             raise VprError("appended references must be described and encoded with the map's own front end, "
                            "model and codebook")
         clash = sorted(set(self.names) & set(more.names))

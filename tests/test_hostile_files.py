@@ -1,0 +1,159 @@
+"""Property-based tests (hypothesis, fixed seed, bounded examples): damaged or hostile maps, model metadata,
+ground-truth and similarity files either load into something valid or are refused with a VprError (one line,
+exit 2 at the CLI) — never another exception, never a hang, never a change to the file."""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from typer.testing import CliRunner
+
+from vpr_edge.cli import app
+from vpr_edge.errors import VprError
+from vpr_edge.evaluation import sources, truth
+from vpr_edge.features.cnn import _checked_info
+from vpr_edge.features.patches import Patches
+from vpr_edge.files import read_npz, write_npz
+from vpr_edge.map import load_map, map_from_local, save_map
+
+FUZZ = settings(max_examples=200, deadline=None, derandomize=True, database=None,
+                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers(-2**40, 2**40) | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=4),
+    max_leaves=8)
+
+
+@pytest.fixture(scope="module")
+def valid_map(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, dict]:
+    """A small valid map (SeqSLAM patches, no encoding: no model, nothing to fit) as (arrays, metadata)."""
+    rng = np.random.default_rng(0)
+    front = Patches()
+    local, _ = front.local([rng.integers(0, 255, (32, 64, 3), dtype=np.uint8) for _ in range(6)])
+    pm = map_from_local(local, None, front, [f"{i}.png" for i in range(6)], "refs", "none")
+    path = tmp_path_factory.mktemp("fuzz") / "valid.npz"
+    save_map(pm, path)
+    arrays, meta = read_npz(path, "map", 3)
+    return {k: np.array(v) for k, v in arrays.items()}, meta
+
+
+def _load_and_use(path: Path) -> None:
+    """What localize does with a map once loaded: a similarity row for a query encoding."""
+    pm = load_map(path, mmap=True)
+    q = np.random.default_rng(1).normal(size=(1, pm.stored.shape[1])).astype(np.float32)
+    sim = pm.similarity(q / np.linalg.norm(q))
+    assert sim.shape == (1, len(pm.names)) and np.isfinite(sim).all()
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@FUZZ
+@given(edits=st.dictionaries(st.sampled_from(["names", "storage", "schema", "features", "encoding",
+                                              "descriptor_dim", "n_refs", "dim", "svm", "alpha", "appended",
+                                              "model", "codebook", "kind", "other"]), json_values, min_size=1,
+                             max_size=3))
+def test_map_metadata_mutations(valid_map: tuple[dict, dict], tmp_path: Path, edits: dict) -> None:
+    arrays, meta = valid_map
+    path = tmp_path / "m.npz"
+    write_npz(path, arrays, meta | edits)
+    before = _digest(path)
+    try:
+        _load_and_use(path)
+    except VprError as e:
+        assert str(path) in str(e) and "\n" not in str(e)
+    res = CliRunner().invoke(app, ["info", str(path)])
+    assert res.exit_code in (0, 2) and not isinstance(res.exception, Exception) or \
+        isinstance(res.exception, SystemExit), (res.exception, res.stderr)
+    if res.exit_code == 2:
+        assert res.stderr.count("\n") == 1 and res.stderr.startswith("vpr-edge: error: ")
+    assert _digest(path) == before
+
+
+@FUZZ
+@given(name=st.sampled_from(["encodings", "encodings_scale", "encoder_x", "svm_bias"]),
+       dtype=st.sampled_from(["int8", "float16", "float32", "float64", "int64", "bool", "uint8"]),
+       shape=st.lists(st.integers(0, 7), min_size=0, max_size=3), fill=st.sampled_from([0.0, 1.0, np.nan, np.inf]))
+def test_map_array_mutations(valid_map: tuple[dict, dict], tmp_path: Path, name: str, dtype: str, shape: list,
+                             fill: float) -> None:
+    arrays, meta = valid_map
+    value = np.full(shape, fill if np.issubdtype(np.dtype(dtype), np.floating) else 1, dtype=dtype)
+    path = tmp_path / "m.npz"
+    write_npz(path, arrays | {name: value}, meta)
+    try:
+        _load_and_use(path)
+    except VprError as e:
+        assert "\n" not in str(e)
+
+
+@FUZZ
+@given(cuts=st.lists(st.tuples(st.floats(0, 1), st.integers(0, 255)), min_size=1, max_size=6))
+def test_map_byte_damage(valid_map: tuple[dict, dict], tmp_path: Path, cuts: list) -> None:
+    arrays, meta = valid_map
+    path = tmp_path / "m.npz"
+    write_npz(path, arrays, meta)
+    data = bytearray(path.read_bytes())
+    for where, byte in cuts:
+        data[min(int(where * len(data)), len(data) - 1)] = byte
+    path.write_bytes(bytes(data))
+    try:
+        _load_and_use(path)
+    except VprError as e:
+        assert "\n" not in str(e)
+
+
+MODEL_INFO = {"schema": 1, "backbone": "efficientnet_lite0", "tap": "stage5", "input_width": 320,
+              "input_height": 240, "mean": [0.5, 0.5, 0.5], "std": [0.5, 0.5, 0.5], "channels": 112,
+              "grid_width": 20, "grid_height": 15, "weights_sha256": "ab"}
+
+
+@FUZZ
+@given(edits=st.dictionaries(st.sampled_from(sorted(MODEL_INFO) + ["resize"]), json_values, min_size=1,
+                             max_size=3), drop=st.booleans())
+def test_model_metadata_mutations(edits: dict, drop: bool) -> None:
+    info = {k: v for k, v in (MODEL_INFO | edits).items() if not (drop and k in edits)}
+    try:
+        checked = _checked_info(Path("model.onnx"), json.dumps(info))
+    except VprError as e:
+        assert str(e).startswith("model.onnx: ") and "\n" not in str(e)
+        return
+    for key in ("input_width", "input_height", "channels", "grid_width", "grid_height"):
+        assert isinstance(checked[key], int) and checked[key] > 0
+    assert all(math.isfinite(v) for v in checked["mean"] + checked["std"]) and min(checked["std"]) > 0
+
+
+@FUZZ
+@given(text=st.text(alphabet="0123456789 ,-\nqueryreferencs.x\"", max_size=80))
+def test_ground_truth_csv(tmp_path: Path, text: str) -> None:
+    path = tmp_path / "gt.csv"
+    path.write_text(text)
+    try:
+        rows = truth.load_csv(path)
+    except VprError as e:
+        assert str(path) in str(e) and "\n" not in str(e)
+        return
+    assert rows.ndim == 2 and rows.dtype == np.int64 and (rows >= -1).all()
+
+
+@FUZZ
+@given(dtype=st.sampled_from(["float32", "float64", "int32", "bool", "complex64", "U3", "uint8"]),
+       shape=st.lists(st.integers(0, 6), max_size=3), fill=st.sampled_from([0.5, np.nan, -np.inf, 3.0]))
+def test_similarity_files(tmp_path: Path, dtype: str, shape: list, fill: float) -> None:
+    path = tmp_path / "s.npy"
+    kind = np.dtype(dtype).kind
+    np.save(path, np.full(shape, fill if kind in "fc" else 1, dtype=dtype), allow_pickle=False)
+    try:
+        sims = sources.from_file(path)
+    except VprError as e:
+        assert str(path) in str(e) and "\n" not in str(e)
+        return
+    assert sims.cosine.ndim == 2 and np.isfinite(sims.cosine).all() and sims.cosine.dtype == np.float64

@@ -1,0 +1,135 @@
+"""What a fleet operator does to the tool, with real processes: links and special files as outputs, SIGTERM and
+SIGKILL in the middle of a write, two writers of one map at once, a closed standard output."""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from vpr_edge.map import load_map
+from vpr_edge.resources import sample_folder
+
+CLI = [sys.executable, "-m", "vpr_edge"]
+
+
+def _run(*args: str, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([*CLI, *map(str, args)], capture_output=True, text=True, timeout=300, **kw)
+
+
+def _temps(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir() if p.name.endswith(".tmp"))
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Path:
+    """A small map of the first 24 references (4-component codebook), kept as the workspace's map."""
+    w = tmp_path_factory.mktemp("rel")
+    proc = _run("build-map", small_refs, "-o", w / "map.npz", "--components", "4", "--save-codebook", w / "cb.npz")
+    assert proc.returncode == 0, proc.stderr
+    return w
+
+
+@pytest.mark.slow
+def test_symbolic_link_output_is_written_through(built: Path, small_queries: Path, tmp_path: Path) -> None:
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "run42.csv").write_text("old\n")
+    (tmp_path / "latest.csv").symlink_to("data/run42.csv")
+    proc = _run("localize", "-m", built / "map.npz", "-s", small_queries, "-o", tmp_path / "latest.csv")
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "latest.csv").is_symlink() and os.readlink(tmp_path / "latest.csv") == "data/run42.csv"
+    assert (tmp_path / "data" / "run42.csv").read_text().count("\n") == 25     # header + 24 frames
+    assert not _temps(tmp_path) and not _temps(tmp_path / "data")
+
+
+@pytest.mark.slow
+def test_special_file_output_is_written_in_place(built: Path, small_queries: Path) -> None:
+    proc = _run("localize", "-m", built / "map.npz", "-s", small_queries, "-o", "/dev/stdout", "--format", "csv")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.count("\n") == 25 and proc.stdout.startswith("frame_index,")
+    assert os.path.islink("/dev/stdout") or not os.path.exists("/dev/stdout") or \
+        not os.path.isfile("/dev/stdout")                                   # never replaced by a file
+    assert _run("evaluate", "--similarity", built / "nope.npy", "--gt", "/dev/null", "--json", "/dev/null"
+                ).returncode == 2                                            # /dev/null is writable, no alias
+
+
+def test_closed_stdout_is_one_line(built: Path, small_queries: Path) -> None:
+    for args in (["info", built / "map.npz"], ["localize", "-m", built / "map.npz", "-s", small_queries],
+                 ["--version"]):
+        proc = subprocess.run([*CLI, *map(str, args)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                              text=True, timeout=300, preexec_fn=lambda: os.close(1))
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert proc.stderr.count("\n") == 1 and "standard output is closed" in proc.stderr, proc.stderr
+
+
+def _start_build(refs: Path, out: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen([*CLI, "build-map", str(refs), "-o", str(out), *extra], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+@pytest.mark.slow
+def test_sigterm_ends_a_build_cleanly(built: Path, tmp_path: Path) -> None:
+    shutil.copy(built / "map.npz", tmp_path / "map.npz")
+    before = (tmp_path / "map.npz").read_bytes()
+    proc = _start_build(sample_folder() / "ref", tmp_path / "map.npz", "--components", "4")
+    time.sleep(2.5)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    if proc.returncode == 0:
+        pytest.skip("the build finished before the signal (a fast machine)")
+    assert proc.returncode == 143 and err.strip().endswith("vpr-edge: terminated"), (proc.returncode, err)
+    assert "Traceback" not in err
+    assert (tmp_path / "map.npz").read_bytes() == before and not _temps(tmp_path)
+
+
+@pytest.mark.slow
+def test_sigkill_at_any_moment_leaves_the_old_or_the_new_map(built: Path, tmp_path: Path) -> None:
+    """Kill a build of the whole sample at several moments: the map is always a complete one (old or new);
+    the next writer removes the dead writers' temporary files."""
+    out = tmp_path / "map.npz"
+    shutil.copy(built / "map.npz", out)
+    old_names = load_map(built / "map.npz").names
+    new_names = sorted(p.name for p in (sample_folder() / "ref").glob("*.jpg"))
+    for delay in (0.5, 2.0, 4.0):                      # while loading the model, extracting, fitting
+        proc = _start_build(sample_folder() / "ref", out, "--components", "4", "--storage", "float32")
+        time.sleep(delay)
+        proc.kill()
+        proc.communicate(timeout=60)
+        assert load_map(out).names in (old_names, new_names)
+    left_behind = 0
+    for _ in range(3):                                 # while writing: killed as soon as its temporary file exists
+        proc = _start_build(sample_folder() / "ref", out, "--components", "4", "--storage", "float32")
+        while proc.poll() is None and not _temps(tmp_path):
+            time.sleep(0.0005)
+        proc.kill()
+        proc.communicate(timeout=60)
+        assert load_map(out).names in (old_names, new_names)
+        left_behind += len(_temps(tmp_path))
+    (tmp_path / ".map.npz.99999999.x.tmp").write_bytes(b"a dead writer's")   # a PID no process has
+    proc = _start_build(sample_folder() / "ref", out, "--components", "4")
+    assert proc.wait(timeout=300) == 0, proc.stderr.read()
+    assert len(load_map(out).names) == 111 and not _temps(tmp_path)
+    assert left_behind > 0, "no kill landed during a write"
+
+
+@pytest.mark.slow
+def test_two_appends_at_once_keep_both(built: Path, tmp_path: Path) -> None:
+    refs = sorted((sample_folder() / "ref").glob("*.jpg"))
+    for name, part in (("a", refs[30:50]), ("b", refs[60:80])):
+        (tmp_path / name).mkdir()
+        for f in part:
+            shutil.copy(f, tmp_path / name / f.name)
+    shutil.copy(built / "map.npz", tmp_path / "map.npz")
+    first = load_map(tmp_path / "map.npz").names
+    procs = [_start_build(tmp_path / name, tmp_path / "map.npz", "--append") for name in ("a", "b")]
+    for p in procs:
+        assert p.wait(timeout=300) == 0, p.stderr.read()
+    names = load_map(tmp_path / "map.npz").names
+    a, b = [f.name for f in refs[30:50]], [f.name for f in refs[60:80]]
+    assert names in (first + a + b, first + b + a)
+    assert not _temps(tmp_path)
