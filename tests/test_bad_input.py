@@ -70,6 +70,8 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
         (w / "allbad" / f"{i:03d}.jpg").write_bytes(b"x")
     (w / "garbage.mp4").write_bytes(os.urandom(2048))
     (w / "link_to_map.csv").symlink_to(w / "good.npz")
+    os.link(w / "gt.csv", w / "gt_hard.csv")
+    (w / "loop").symlink_to(w / "loop")
     # damaged or hostile maps: metadata of the wrong shape, non-finite values, a compressed member
     for name, edit in {"meta_names": {"names": 5}, "meta_features": {"features": [1, 2]},
                        "meta_encoding": {"encoding": {"name": ["ifv"], "params": {}}},
@@ -193,6 +195,11 @@ CASES = [
     Case("bm-codebook-trailing-slash", BM + " --save-codebook {w}/cbs/", ("cbs/", "is a folder")),
     Case("ev-json-is-the-gt", EV + " --json {w}/gt.csv", ("gt.csv", "--json", "an input")),
     Case("ev-json-is-the-similarity", EV + " --json {w}/sim.npy", ("sim.npy", "an input")),
+    Case("ev-json-hard-link-to-gt", EV + " --json {w}/gt_hard.csv", ("gt_hard.csv", "an input")),
+    Case("loc-out-link-loop", LOC + " -o {w}/loop", ("loop", "loop of symbolic links")),
+    Case("loc-min-confidence-nan", LOC + " --min-confidence nan", ("--min-confidence nan", "finite")),
+    Case("ev-min-confidence-inf", EV + " --min-confidence inf", ("--min-confidence inf", "finite")),
+    Case("loc-threads-absurd", LOC + " --threads 100000", ("--threads 100000", "per core")),
     Case("ev-json-and-similarity-out", EV + " --json {w}/x.out --save-similarity {w}/x.out", ("x.out", "same file")),
     # damaged or hostile maps
     Case("loc-map-names-not-a-list", "localize -m {w}/meta_names.npz -s {w}/queries", ("meta_names.npz", "'names'")),

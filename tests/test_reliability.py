@@ -133,3 +133,40 @@ def test_two_appends_at_once_keep_both(built: Path, tmp_path: Path) -> None:
     a, b = [f.name for f in refs[30:50]], [f.name for f in refs[60:80]]
     assert names in (first + a + b, first + b + a)
     assert not _temps(tmp_path)
+
+
+def test_a_full_disk_names_the_file_and_leaves_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import errno
+
+    import numpy as np
+
+    import vpr_edge.files as files
+    from vpr_edge.errors import os_error_line
+
+    (tmp_path / "m.npz").write_bytes(b"the previous map")
+
+    def full(*args, **kw) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(files.np, "savez", full)
+    with pytest.raises(OSError) as e:
+        files.write_npz(tmp_path / "m.npz", {"a": np.zeros(3)}, {"kind": "map"})
+    assert os_error_line(e.value) == f"{tmp_path / 'm.npz'}: No space left on device"
+    assert (tmp_path / "m.npz").read_bytes() == b"the previous map" and not _temps(tmp_path)
+
+
+def test_writer_lock_serialises_two_writers(tmp_path: Path) -> None:
+    """A second process asking for a map's writer lock waits until the first lets go (and says so)."""
+    from vpr_edge.files import writer_lock
+
+    code = ("import sys, time; from vpr_edge.files import writer_lock\n"
+            "with writer_lock(sys.argv[1]):\n    print('got', time.time(), flush=True)\n")
+    with writer_lock(tmp_path / "m.npz"):
+        waiting = subprocess.Popen([sys.executable, "-c", code, str(tmp_path / "m.npz")], stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True)
+        time.sleep(1.5)
+        assert waiting.poll() is None                     # still waiting while this process holds the lock
+        released = time.time()
+    out, err = waiting.communicate(timeout=60)
+    assert waiting.returncode == 0 and float(out.split()[1]) >= released, (out, err)
+    assert "another vpr-edge is writing it; waiting" in err

@@ -12,6 +12,7 @@
 """
 from __future__ import annotations
 
+import math
 import os
 import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -90,6 +91,8 @@ class Localizer:
         self.front = map_front_end(self.map, map_path, Path(model) if model else None, ort_threads)
         if self.matcher.scores == "svm" and self.map.svm is None:
             raise VprError(f"{map_path}: mode svm needs a map built with build-map --svm")
+        if min_confidence is not None and not math.isfinite(min_confidence):
+            raise VprError(f"--min-confidence {min_confidence}: the lost threshold must be a finite number")
         self.threshold = self.matcher.min_confidence if min_confidence is None else min_confidence
         self._online = self.matcher.stream(len(self.map.names)) if self.matcher.online else None
         if coarse is None:

@@ -35,7 +35,12 @@ def output_target(path: str | os.PathLike[str]) -> Path:
     """Where writing ``path`` lands: a symbolic link is followed to its final target, which is replaced while
     the link stays (the link's own folder need not be writable, the target's must)."""
     p = Path(path)
-    return Path(os.path.realpath(p)) if p.is_symlink() else p
+    if not p.is_symlink():
+        return p
+    target = Path(os.path.realpath(p))
+    if target.is_symlink():   # realpath stops inside a loop of links
+        raise VprError(f"{path}: a loop of symbolic links; name a file")
+    return target
 
 
 def check_writable(path: str | os.PathLike[str]) -> None:
@@ -76,6 +81,12 @@ def check_not_input(outputs: dict[str, str | os.PathLike[str] | None],
     def real(p: str | os.PathLike[str]) -> Path:
         return Path(os.path.realpath(p))
 
+    def same(a: Path, b: Path) -> bool:   # one file under two names: a hard link
+        try:
+            return os.path.samefile(a, b)
+        except OSError:
+            return False
+
     given = {opt: p for opt, p in outputs.items() if p is not None and not is_special(p)}
     sources = [(p, real(p)) for p in inputs if p is not None and "://" not in str(p)]
     seen: dict[Path, str] = {}
@@ -85,7 +96,7 @@ def check_not_input(outputs: dict[str, str | os.PathLike[str] | None],
             raise VprError(f"{out}: {seen[target]} and {opt} name the same file; give each its own")
         seen[target] = opt
         for inp, source in sources:
-            if target == source:
+            if target == source or same(target, source):
                 raise VprError(f"{out}: {opt} would write over an input of this command ({inp}); "
                                f"write it elsewhere")
             if source.is_dir() and source in target.parents:

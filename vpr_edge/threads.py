@@ -17,10 +17,18 @@ def cores() -> int:
         return os.cpu_count() or 1
 
 
+MAX_PER_CORE = 4   # threads asked for beyond this many per core are refused (a typo, not a plan)
+
+
 def use_threads(threads: int) -> int:
     """Limit NumPy's BLAS pool, process-wide, to ``threads`` (0 = one per core) and return the count to
     give onnxruntime. Uses threadpoolctl, which finds the BLAS library NumPy actually loaded (OpenBLAS,
     MKL, BLIS) and sets its pool at run time, where environment variables act only before NumPy loads."""
+    from vpr_edge.errors import VprError
+
+    if threads > MAX_PER_CORE * cores():
+        raise VprError(f"--threads {threads}: more than {MAX_PER_CORE} per core of the {cores()} this process may "
+                       f"use only slows both pools down (0 = one per core)")
     n = threads if threads > 0 else cores()
     try:
         from threadpoolctl import threadpool_limits

@@ -2,6 +2,7 @@
 per matcher. ``vpr-edge evaluate`` parses options and prints what this returns; the tools call it too."""
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -113,6 +114,8 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     it against ``truth`` (frames that do not decode go to ``on_skip`` and lose their ground-truth row).
     VprError, before the work where it can be, for a bad source, ground truth or combination."""
     source.check()
+    if min_confidence is not None and not math.isfinite(min_confidence):
+        raise VprError(f"--min-confidence {min_confidence}: the lost threshold must be a finite number")
     chosen = default_matchers(source) if matchers is None else matchers
     if not chosen:
         raise VprError("--modes names no matcher")
