@@ -42,8 +42,9 @@ def from_file(path: str | os.PathLike[str]) -> Similarities:
         sim = np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError) as e:
         raise VprError(f"{path}: not a readable .npy matrix ({str(e).splitlines()[0][:100]})") from None
-    if sim.ndim != 2 or 0 in sim.shape or not np.issubdtype(sim.dtype, np.number):
-        raise VprError(f"{path}: similarity must be a non-empty 2-D numeric (queries x references) matrix, "
+    real = np.issubdtype(sim.dtype, np.floating) or np.issubdtype(sim.dtype, np.integer)
+    if sim.ndim != 2 or 0 in sim.shape or not real:
+        raise VprError(f"{path}: similarity must be a non-empty 2-D real (queries x references) matrix, "
                        f"got shape {sim.shape} {sim.dtype}")
     if not np.isfinite(sim).all():
         raise VprError(f"{path}: similarity matrix holds NaN or infinite values")
