@@ -72,6 +72,10 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     (w / "link_to_map.csv").symlink_to(w / "good.npz")
     os.link(w / "gt.csv", w / "gt_hard.csv")
     (w / "loop").symlink_to(w / "loop")
+    (w / "pos_short.csv").write_text("x,y\n0,0\n1,0\n")
+    (w / "pos_two.csv").write_text("x,y,lat,lon\n" + "0,0,1,1\n" * 24)
+    (w / "pos_bad.csv").write_text("x,y\n" + "0,north\n" * 24)
+    (w / "stamps_short.csv").write_text("frame,stamp\n0000000.jpg,1.0\n")
     # damaged or hostile maps: metadata of the wrong shape, non-finite values, a compressed member
     for name, edit in {"meta_names": {"names": 5}, "meta_features": {"features": [1, 2]},
                        "meta_encoding": {"encoding": {"name": ["ifv"], "params": {}}},
@@ -141,6 +145,15 @@ CASES = [
          ("cb.npz", "encoding ifv", "--encoding vlad")),
     Case("bm-codebook-other-front-end", "build-map {w}/refs -o {w}/out.npz --codebook {w}/cb.npz --features sift",
          ("cb.npz", "fitted on cnn descriptors", "sift")),
+    Case("bm-positions-rows", BM + " --positions {w}/pos_short.csv", ("pos_short.csv", "2 positions but 24")),
+    Case("bm-positions-two-frames", BM + " --positions {w}/pos_two.csv", ("pos_two.csv", "two frames")),
+    Case("bm-positions-unparsable", BM + " --positions {w}/pos_bad.csv", ("pos_bad.csv", "'north' is not a number")),
+    Case("bm-positions-missing", BM + " --positions {w}/nopos.csv", ("nopos.csv", "cannot read positions")),
+    Case("bm-append-positions-to-plain-map", "build-map {w}/refs -o {w}/good.npz --append --positions {w}/pos_two.csv",
+         ("pos_two.csv", "two frames")),
+    Case("loc-timestamps-short", LOC + " --timestamps {w}/stamps_short.csv", ("stamps_short.csv", "no stamp for 23")),
+    Case("loc-timestamps-video", "localize -m {w}/good.npz -s {w}/garbage.mp4 --timestamps {w}/stamps_short.csv",
+         ("--timestamps applies to a folder",)),
     Case("bm-append-svm", "build-map {w}/refs -o {w}/good.npz --append --svm", ("good.npz", "--append", "--svm")),
     Case("bm-append-resize", "build-map {w}/refs -o {w}/good.npz --append --resize pad",
          ("good.npz", "--append", "--resize")),

@@ -88,7 +88,7 @@ def test_localize_matches_real_frames(small_map: Path, small_queries: Path, mode
     err = np.array([abs(int(r["ref_index"]) - int(r["frame_index"])) for r in found])
     assert np.mean(err <= 2) >= 0.75, err          # the Corridor ground truth is +-2 frames
     assert all(r["ref"] == f"{int(r['ref_index']):07d}.jpg" for r in found)
-    assert all(r["ref"] == "" and r["ref_index"] == "-1" for r in rows if r["lost"] == "1")
+    assert all(r["ref"] == "" and r["ref_index"] == "" for r in rows if r["lost"] == "1")   # empty when lost
 
 
 @pytest.mark.slow
@@ -104,7 +104,9 @@ def test_localize_jsonl_file_and_reused_codebook(tmp_path: Path, small_map: Path
     proc = run("localize", "-m", second, "-s", small_queries, "-o", out, "--batch-size", "4")
     assert proc.returncode == 0, proc.stderr
     lines = [json.loads(x) for x in out.read_text().splitlines()]
-    assert len(lines) == 24 and set(lines[0]) == {"frame_index", "frame", "ref_index", "ref", "score", "lost"}
+    assert len(lines) == 24 and list(lines[0]) == ["frame_index", "frame", "stamp", "ref_index", "ref", "x", "y",
+                                                   "lat", "lon", "heading", "along_m", "score", "lost"]
+    assert all(m["ref_index"] is None and m["ref"] is None for m in lines if m["lost"])   # nulls when lost
 
 
 def write_video(path: Path, frames: Path, count: int) -> Path:

@@ -3,6 +3,7 @@ through build-map / localize / evaluate; maps refuse queries described or encode
 from __future__ import annotations
 
 import csv
+import io
 import json
 import subprocess
 import sys
@@ -262,7 +263,7 @@ def test_bundled_small_model(tmp_path: Path, small_refs: Path) -> None:
     proc = subprocess.run(cli + ["localize", "-m", str(out), "-s", str(small_refs), "--mode", "single"],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
-    refs = [int(line.split(",")[2]) for line in proc.stdout.splitlines()[1:]]
+    refs = [int(row["ref_index"]) for row in csv.DictReader(io.StringIO(proc.stdout))]
     assert sum(r == i for i, r in enumerate(refs)) >= 0.9 * len(refs)     # each reference finds itself
 
 

@@ -33,7 +33,8 @@ def test_bundled_files_are_inside_the_package() -> None:
 
 def test_copy_sample_never_writes_over(tmp_path: Path) -> None:
     out = copy_sample(tmp_path / "c")
-    assert sorted(p.name for p in out.iterdir()) == ["ReadMe.txt", "ground_truth.csv", "query", "ref"]
+    assert sorted(p.name for p in out.iterdir()) == ["ReadMe.txt", "ground_truth.csv", "positions.csv", "query",
+                                                     "ref"]
     before = sorted(p.name for p in out.rglob("*"))
     for args, problem in ((["c"], "already exists"), (["missing/c"], "does not exist"),
                           (["d", "--name", "nope"], "unknown sample")):

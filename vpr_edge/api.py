@@ -30,17 +30,39 @@ from vpr_edge.matchers import Matcher, get_matcher, step
 from vpr_edge.threads import use_threads
 
 
+RESULTS_SCHEMA = 2   # the output line (docs/formats.md, docs/results-line.schema.json); 2: stamp, position, nulls
+
+
 @dataclass(frozen=True)
 class Match:
-    """One output line: the query frame, the matched reference (index -1 and name '' when lost) and a
-    score (higher = more confident)."""
+    """One output line (``RESULTS_SCHEMA``): the query frame (its index in the stream, name and time in seconds
+    or None), the matched reference (index and image name; None when lost), its place when the map has
+    positions (``x``/``y`` metres or ``lat``/``lon`` degrees, the other pair None; ``heading`` degrees or None;
+    ``along_m``, metres along the route from its first reference; all None when lost or without positions),
+    interpolated between references where the matcher resolves finer than one reference, a score (higher =
+    more confident; its meaning per mode: docs/matchers.md) and the lost flag."""
 
     frame_index: int
     frame: str
-    ref_index: int
-    ref: str
+    ref_index: int | None
+    ref: str | None
     score: float
     lost: bool
+    stamp: float | None = None
+    x: float | None = None
+    y: float | None = None
+    lat: float | None = None
+    lon: float | None = None
+    heading: float | None = None
+    along_m: float | None = None
+
+    def fields(self) -> dict:
+        """The line as a dict in the schema's order (JSON lines; CSV writes None as an empty cell)."""
+        return {k: getattr(self, k) for k in FIELDS}
+
+
+FIELDS = ("frame_index", "frame", "stamp", "ref_index", "ref", "x", "y", "lat", "lon", "heading", "along_m",
+          "score", "lost")
 
 
 def encode_images(images: Sequence[np.ndarray], place_map: PlaceMap, front: FrontEnd) -> np.ndarray:
@@ -118,7 +140,7 @@ class Localizer:
         given."""
         return self.map.scores(encodings, self.matcher.scores, refs)
 
-    def _step(self, enc: np.ndarray) -> tuple[int, float]:
+    def _step(self, enc: np.ndarray) -> tuple[int, float, float | None]:
         """Match one encoding (D,): only the similarities the matcher asks for are computed (a local search
         around a locked position reads a window of the map, not all of it; with ``coarse``, a whole-route
         frame reads the signs and the best candidates)."""
@@ -127,14 +149,27 @@ class Localizer:
                 return self._coarse.similarity(enc)
             return self.similarity(enc[None], refs)[0]
 
-        return step(self._online, similarity)
+        ref, score = step(self._online, similarity)
+        return ref, score, self._online.position()
 
-    def _line(self, index: int, name: str, ref: int, score: float) -> Match:
+    def _line(self, index: int, name: str, ref: int, score: float, stamp: float | None = None,
+              where: float | None = None) -> Match:
+        """The output line of a frame answered ``ref`` (at fractional reference ``where`` if the matcher
+        resolves finer) with ``score``."""
         lost = self.threshold is not None and score < self.threshold
-        return Match(index, name, -1 if lost else ref, "" if lost else self.map.names[ref], score, lost)
+        if lost:
+            return Match(index, name, None, None, score, True, stamp)
+        place: dict = {}
+        if self.map.positions is not None:
+            coords, heading, along = self.map.positions.at(ref if where is None else where)
+            keys = ("lat", "lon") if self.map.positions.geo else ("x", "y")
+            place = {keys[0]: float(coords[0]), keys[1]: float(coords[1]), "along_m": along,
+                     "heading": None if heading != heading else heading}
+        return Match(index, name, ref, self.map.names[ref], score, False, stamp, **place)
 
-    def push(self, rgb: np.ndarray, name: str = "") -> Match:
-        """Localise the next frame of the stream (RGB uint8 (H, W, 3)); online modes only."""
+    def push(self, rgb: np.ndarray, name: str = "", stamp: float | None = None) -> Match:
+        """Localise the next frame of the stream (RGB uint8 (H, W, 3), taken at ``stamp`` seconds, which the
+        answer carries); online modes only."""
         if self._online is None:
             raise ValueError(f"mode {self.matcher.name} is offline (it needs the whole sequence): use run()")
         image = np.asarray(rgb)
@@ -143,9 +178,9 @@ class Localizer:
                            f"{image.dtype} {image.shape}")
         enc = self.encode([image])[0]
         with self._lock:
-            ref, score = self._step(enc)
+            ref, score, where = self._step(enc)
             self._count += 1
-            return self._line(self._count - 1, name, ref, score)
+            return self._line(self._count - 1, name, ref, score, stamp, where)
 
     def run(self, frames: Iterable[Frame], batch_size: int = 1,
             on_skip: Callable[[Frame], None] = lambda f: None) -> Iterator[Match]:
@@ -156,14 +191,14 @@ class Localizer:
         if self._online is not None:
             for frame, enc in encoded:
                 with self._lock:
-                    ref, score = self._step(enc)
-                yield self._line(frame.index, frame.name, ref, score)
+                    ref, score, where = self._step(enc)
+                yield self._line(frame.index, frame.name, ref, score, frame.stamp, where)
             return
         pairs = list(encoded)
         if pairs:
             result = self.matcher.run(self.similarity(np.stack([e for _, e in pairs])), k=1)
             for (frame, _), ref, score in zip(pairs, result.refs, result.scores):
-                yield self._line(frame.index, frame.name, int(ref), float(score))
+                yield self._line(frame.index, frame.name, int(ref), float(score), frame.stamp)
 
     def reset(self) -> None:
         """Forget the stream (a new drive): the matcher starts again from no hypothesis."""

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,35 +52,74 @@ def load_image(path: str | os.PathLike[str]) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Frame:
-    """One frame of a stream: its position, a name for reports, and the RGB image or the decode error."""
+    """One frame of a stream: its position, a name for reports, the RGB image or the decode error, and its
+    time in seconds (``stamp``: a video's presentation time, a live source's arrival time (Unix), a folder's
+    from a timestamps file; None when unknown)."""
 
     index: int
     name: str
     image: np.ndarray | None
     error: str | None = None
+    stamp: float | None = None
 
 
-def _folder_frames(files: list[Path]) -> Iterator[Frame]:
+def _folder_frames(files: list[Path], stamps: list[float] | None = None) -> Iterator[Frame]:
     for i, f in enumerate(files):
+        stamp = stamps[i] if stamps is not None else None
         try:
-            yield Frame(i, f.name, load_image(f))
+            yield Frame(i, f.name, load_image(f), stamp=stamp)
         except VprError as e:
-            yield Frame(i, f.name, None, str(e))
+            yield Frame(i, f.name, None, str(e), stamp)
 
 
-def _capture_frames(cap: cv2.VideoCapture, where: str, name: str) -> Iterator[Frame]:
-    """Frames from an opened OpenCV capture until it delivers none (end of file, camera stopped)."""
+def read_stamps(path: str | os.PathLike[str], names: list[str]) -> list[float]:
+    """Each frame's time in seconds from a CSV with a header ``frame,stamp`` (``name`` for ``frame`` too),
+    one row per image of the folder; VprError naming the file for a missing frame or a bad number."""
+    import csv
+    import math
+
+    path = Path(path)
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError) as e:
+        raise VprError(f"{path}: cannot read timestamps ({getattr(e, 'strerror', None) or e})") from None
+    head = [c.strip().lower() for c in rows[0]] if rows else []
+    key = next((c for c in ("frame", "name") if c in head), None)
+    if key is None or "stamp" not in head:
+        raise VprError(f"{path}: timestamps need the header frame,stamp (seconds)")
+    k, s = head.index(key), head.index("stamp")
+    found: dict[str, float] = {}
+    for line, row in enumerate(rows[1:], start=2):
+        if not any(cell.strip() for cell in row):
+            continue
+        try:
+            found[row[k].strip()] = value = float(row[s])
+        except (ValueError, IndexError):
+            raise VprError(f"{path}: line {line}: a frame name and a stamp in seconds expected") from None
+        if not math.isfinite(value):
+            raise VprError(f"{path}: line {line}: stamp is not finite")
+    missing = [n for n in names if n not in found]
+    if missing:
+        raise VprError(f"{path}: no stamp for {len(missing)} frame(s) of the folder (e.g. {missing[0]})")
+    return [found[n] for n in names]
+
+
+def _capture_frames(cap: cv2.VideoCapture, where: str, name: str, live: bool = False) -> Iterator[Frame]:
+    """Frames from an opened OpenCV capture until it delivers none (end of file, camera stopped), stamped
+    with the video's presentation time, or for a ``live`` source the time each frame arrived."""
     try:
         i = 0
         while True:
             ok, bgr = cap.read()
             if not ok:
                 break
+            stamp = time.time() if live else cap.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
             if min(bgr.shape[:2]) < MIN_SIDE:
                 yield Frame(i, f"{name}#{i}", None, f"{where}#{i}: frame is {bgr.shape[1]}x{bgr.shape[0]} "
-                                                    f"pixels, too small (at least {MIN_SIDE}x{MIN_SIDE})")
+                                                    f"pixels, too small (at least {MIN_SIDE}x{MIN_SIDE})", stamp)
             else:
-                yield Frame(i, f"{name}#{i}", cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+                yield Frame(i, f"{name}#{i}", cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), stamp=stamp)
             i += 1
     finally:
         cap.release()
@@ -108,10 +148,11 @@ def _live(source: str) -> tuple[Iterator[Frame], None]:
         kind = "camera" if source.isdigit() or source.startswith("/dev/") else "stream"
         raise VprError(f"{source}: cannot open {kind} (OpenCV found no device or could not connect)")
     name = f"camera{source}" if source.isdigit() else Path(source.split("://")[-1]).name or "stream"
-    return _capture_frames(cap, source, name), None
+    return _capture_frames(cap, source, name, live=True), None
 
 
-def open_stream(source: str | os.PathLike[str]) -> tuple[Iterator[Frame], int | None]:
+def open_stream(source: str | os.PathLike[str], stamps: str | os.PathLike[str] | None = None
+                ) -> tuple[Iterator[Frame], int | None]:
     """Frames from a folder of images (name order), a video file, a camera (``0``, ``/dev/video0``) or a
     network stream (``rtsp://``, ``http(s)://``), with the frame count if known (None for live sources).
 
@@ -120,11 +161,15 @@ def open_stream(source: str | os.PathLike[str]) -> tuple[Iterator[Frame], int | 
     """
     text = str(source)
     if text.isdigit() and not Path(text).exists() or text.startswith("/dev/video") or "://" in text:
+        if stamps:
+            raise VprError(f"{stamps}: --timestamps applies to a folder of frames; {text} is stamped as it arrives")
         return _live(text)
     source = Path(source)
     if source.is_dir():
         files = list_images(source)
-        return _folder_frames(files), len(files)
+        return _folder_frames(files, read_stamps(stamps, [f.name for f in files]) if stamps else None), len(files)
+    if stamps:
+        raise VprError(f"{stamps}: --timestamps applies to a folder of frames; {source} stamps its own frames")
     if source.is_file() and source.suffix.lower() in VIDEO_SUFFIXES:
         cap = cv2.VideoCapture(str(source))
         count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0

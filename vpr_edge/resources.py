@@ -28,7 +28,8 @@ def bundled_model(name: str = DEFAULT_MODEL_FILE) -> Path:
 
 
 def sample_folder(name: str = "corridor") -> Path:
-    """The bundled sample ``name``: ``ref/``, ``query/`` and ``ground_truth.csv`` (read it, do not write it)."""
+    """The bundled sample ``name``: ``ref/``, ``query/``, ``ground_truth.csv`` and ``positions.csv`` (synthetic;
+    its ReadMe.txt says how it was drawn). Read it, do not write it."""
     if name not in SAMPLES:
         raise VprError(f"unknown sample {name!r}; choose from {', '.join(SAMPLES)}")
     return _path("samples", name)

@@ -63,6 +63,12 @@ def build_map_cmd(
                                                  f"with a scale per row (default {DEFAULT_STORAGE}; a quarter of "
                                                  "float32's bytes, docs/results.md), float16 or float32. With "
                                                  "--append: the map's own unless given."),
+    positions: Optional[str] = typer.Option(None, metavar="FILE|exif", help="Where each reference is: a CSV "
+                                            "with x,y (metres) or lat,lon (degrees), optional heading and z/alt, "
+                                            "and a name column (or one row per reference, in order); or exif: "
+                                            "the images' GPS tags (the geo extra). References without a fix "
+                                            "are placed between fixes. Stored in the map; localize then answers "
+                                            "with positions."),
     append: bool = typer.Option(False, "--append", help="Add REFS' images after the references of the map "
                                 "at --out, described and encoded as its own (the map is replaced "
                                 "atomically); the route grows without refitting."),
@@ -78,7 +84,7 @@ def build_map_cmd(
                                whiten=whiten, alpha=alpha, tfidf=tfidf, max_descriptors=max_descriptors,
                                fit_iterations=fit_iterations, svm=svm, seed=seed,
                                save_codebook=output_path(save_codebook) if save_codebook else None,
-                               storage=_value(storage), append=append, batch_size=batch_size, threads=threads)
+                               storage=_value(storage), positions=positions, append=append, batch_size=batch_size, threads=threads)
         plan = plan_map(refs, output_path(out), options)
         with typer.progressbar(length=len(plan.files), label="extracting", file=sys.stderr,
                                hidden=not sys.stderr.isatty()) as bar:

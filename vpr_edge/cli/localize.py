@@ -12,7 +12,7 @@ from typing import IO, Optional
 
 import typer
 
-from vpr_edge.api import Localizer, Match
+from vpr_edge.api import FIELDS, Localizer, Match
 from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, THREADS_HELP, ModeOpt, app, params_for,
                                  user_errors, with_param_options)
 from vpr_edge.errors import VprError
@@ -31,7 +31,18 @@ class FormatOpt(str, Enum):
     jsonl = "jsonl"
 
 
-CSV_COLUMNS = ("frame_index", "frame", "ref_index", "ref", "score", "lost")
+CSV_COLUMNS = FIELDS
+
+
+def _cell(value) -> object:
+    """A CSV cell: None empty, floats to 6 decimals (times to the microsecond), bools 0/1."""
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return int(value)
+    if isinstance(value, float):
+        return f"{value:.6f}"
+    return value
 
 
 @contextlib.contextmanager
@@ -54,10 +65,11 @@ def results_writer(fmt: str, stream: IO[str], where: str) -> Callable[[Match], N
             w.writerow(CSV_COLUMNS)
 
         def line(m: Match) -> None:
-            w.writerow([m.frame_index, m.frame, m.ref_index, m.ref, f"{m.score:.6f}", int(m.lost)])
+            w.writerow([_cell(v) for v in m.fields().values()])
     else:
         def line(m: Match) -> None:
-            stream.write(json.dumps(m.__dict__ | {"score": round(m.score, 6)}) + "\n")
+            fields = {k: round(v, 6) if isinstance(v, float) and k != "stamp" else v for k, v in m.fields().items()}
+            stream.write(json.dumps(fields) + "\n")
 
     def write(m: Match) -> None:
         with _writing(where):
@@ -95,17 +107,21 @@ def localize_cmd(
                                            "never over an input; a symbolic link is written through)."),
     fmt: Optional[FormatOpt] = typer.Option(None, "--format", help="csv or jsonl (default: from --out's "
                                             "suffix, csv on stdout)."),
+    timestamps: Optional[Path] = typer.Option(None, help="With a folder of frames: a CSV frame,stamp giving "
+                                              "each frame's time in seconds (videos and live sources are "
+                                              "stamped by themselves)."),
     batch_size: int = typer.Option(1, min=1, help="Frames per model run (1 = lowest latency)."),
     threads: int = typer.Option(0, min=0, help=THREADS_HELP),
 ) -> None:
-    """Localise every frame of a stream against a map. One line per frame: frame index, frame name,
-    matched reference index and name (-1 and empty when lost), score (higher = more confident), lost (0/1).
-    Undecodable frames are reported on stderr and skipped."""
+    """Localise every frame of a stream against a map. One line per frame: frame index, name and time
+    (seconds), the matched reference's index and name, its position (x,y or lat,lon, heading, metres along
+    the route) when the map has positions, score (higher = more confident) and lost (0/1); the reference and
+    position fields are empty when lost. Undecodable frames are reported on stderr and skipped."""
     with user_errors():
         out = output_path(out_text) if out_text else None
         if out:
             check_writable(out)
-            check_not_input({"--out": out}, [map_path, stream, model])
+            check_not_input({"--out": out}, [map_path, stream, model, timestamps])
         else:
             with _writing("stdout"):
                 sys.stdout.write("")      # a closed standard output fails here, before any work
@@ -115,7 +131,7 @@ def localize_cmd(
         params = params_for(mode.value, {"variant": variant.value if variant else None, "open_ends": open_ends,
                                          "decay": decay, "window": window})
         params = with_param_options(get_matcher(mode.value), params, param or [])
-        frames, count = open_stream(stream)
+        frames, count = open_stream(stream, timestamps)
         localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
                               min_confidence=min_confidence, threads=threads)
         chosen = fmt.value if fmt else (suffix_fmt or "csv")

@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError
+from vpr_edge.positions import Positions, distances
+from vpr_edge.positions import read_csv as read_positions
 
-EARTH_RADIUS_M = 6_371_008.8
 
 
 def pad(sets: Sequence[Sequence[int]]) -> np.ndarray:
@@ -67,48 +68,20 @@ def load_matrix(path: str | os.PathLike[str]) -> np.ndarray:
     return pad(np.split(r, np.cumsum(m.sum(axis=1))[:-1]))
 
 
-def _read_positions(path: Path) -> tuple[np.ndarray, bool]:
-    """(N, 2) positions and whether they are (lat, lon) degrees."""
-    try:
-        with open(path, newline="") as f:
-            rows = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError) as e:
-        raise VprError(f"{path}: cannot read positions ({getattr(e, 'strerror', None) or e})") from None
-    head = [c.strip().lower() for c in rows[0]] if rows else []
-    for cols, geo in ((("lat", "lon"), True), (("x", "y"), False)):
-        if all(c in head for c in cols):
-            ix = [head.index(c) for c in cols]
-            break
-    else:
-        raise VprError(f"{path}: positions need columns x,y (metres) or lat,lon (degrees) in the header")
-    try:
-        pos = np.array([[float(row[i]) for i in ix] for row in rows[1:] if row], np.float64)
-    except (ValueError, IndexError):
-        raise VprError(f"{path}: positions must be numbers in every row") from None
-    if len(pos) == 0 or not np.isfinite(pos).all():
-        raise VprError(f"{path}: no positions, or a position that is not finite")
-    return pos, geo
-
-
-def _distances(a: np.ndarray, b: np.ndarray, geo: bool) -> np.ndarray:
-    """(A, 2) x (B, 2) -> (A, B) metres: haversine for lat/lon degrees, Euclidean for x/y."""
-    if not geo:
-        return np.sqrt(((a[:, None, :] - b[None, :, :]) ** 2).sum(-1))
-    la, lb = np.radians(a), np.radians(b)
-    dlat = lb[None, :, 0] - la[:, None, 0]
-    dlon = lb[None, :, 1] - la[:, None, 1]
-    h = np.sin(dlat / 2) ** 2 + np.cos(la[:, None, 0]) * np.cos(lb[None, :, 0]) * np.sin(dlon / 2) ** 2
-    return 2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.clip(h, 0.0, 1.0)))
-
-
 def from_positions(refs_csv: str | os.PathLike[str], queries_csv: str | os.PathLike[str],
                    radius_m: float, chunk: int = 512) -> np.ndarray:
     """References within ``radius_m`` metres of each query -> (Q, T) padded truth."""
-    (rp, rgeo), (qp, qgeo) = _read_positions(Path(refs_csv)), _read_positions(Path(queries_csv))
-    if rgeo != qgeo:
+    refs, queries = read_positions(refs_csv), read_positions(queries_csv)
+    if refs.frame != queries.frame:
         raise VprError(f"{queries_csv}: positions must use the same columns as {refs_csv} (x,y or lat,lon)")
+    return within(queries, refs, radius_m, chunk)
+
+
+def within(queries: Positions, refs: Positions, radius_m: float, chunk: int = 512) -> np.ndarray:
+    """References within ``radius_m`` metres of each query position -> (Q, T) padded truth."""
+    qp, rp = queries.coords, refs.coords
     sets: list[np.ndarray] = []
     for i in range(0, len(qp), chunk):
-        near = _distances(qp[i:i + chunk], rp, rgeo) <= radius_m
+        near = distances(qp[i:i + chunk], rp, refs.geo) <= radius_m
         sets.extend(np.flatnonzero(row) for row in near)
     return pad(sets)

@@ -11,6 +11,7 @@ from vpr_edge.errors import VprError
 from vpr_edge.files import read_npz, write_npz
 from vpr_edge.index.encodings import Encodings
 from vpr_edge.map.model import PlaceMap, Svm
+from vpr_edge.positions import Positions
 
 MAP_SCHEMA = 3          # 3: front end ("features") and encoder ("encoding", arrays encoder_*) recorded; SVM
 READS_SCHEMAS = (1, 2, 3)  # 2: IFV only, int8/float16/float32 encodings; 1: IFV, float32
@@ -25,6 +26,11 @@ def save_map(place_map: PlaceMap, path: str | os.PathLike[str], storage: str = "
                         "n_refs": len(place_map.names), "dim": int(place_map.stored.shape[1]), "features": place_map.features,
                         "descriptor_dim": place_map.encoder.input_dim,
                         "encoding": {"name": place_map.encoder.name, "params": place_map.encoder.params()}}
+    if place_map.positions is not None:
+        arrays |= place_map.positions.to_arrays()
+        meta["positions"] = place_map.positions.meta()
+    else:
+        meta.pop("positions", None)
     if place_map.svm is not None:
         arrays |= {"svm_" + k: v for k, v in m.svm.weights.to_arrays().items()}
         arrays["svm_bias"] = place_map.svm.bias
@@ -37,7 +43,7 @@ _FIELDS: dict[str, tuple[type, ...]] = {
     "schema": (int,), "names": (list,), "storage": (str,), "n_refs": (int,), "dim": (int,),
     "descriptor_dim": (int,), "features": (dict,), "features_fingerprint": (str,), "encoding": (dict,),
     "model": (dict,), "model_file": (str,), "model_path": (str,), "model_sha256": (str,), "codebook": (dict,),
-    "svm": (dict,), "appended": (list,), "refs_folder": (str,), "alpha": (int, float),
+    "svm": (dict,), "appended": (list,), "refs_folder": (str,), "alpha": (int, float), "positions": (dict,),
 }
 
 
@@ -102,4 +108,12 @@ def _assemble(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
         if weights.shape != stored.shape or bias.shape != (stored.shape[0],):
             raise VprError(f"{path}: map's SVM is inconsistent (one classifier per reference expected)")
         svm = Svm(weights, bias, dict(meta.get("svm") or {}))
-    return PlaceMap(stored, names, encoder, meta, svm)
+    positions = None
+    if "positions" in arrays:
+        if not isinstance(meta.get("positions"), dict):
+            raise VprError(f"{path}: map metadata field 'positions' is missing beside its position arrays")
+        try:
+            positions = Positions.from_arrays(arrays, meta["positions"], len(names))
+        except (ValueError, KeyError) as e:
+            raise VprError(f"{path}: map's positions are inconsistent ({e})") from None
+    return PlaceMap(stored, names, encoder, meta, svm, positions)

@@ -3,7 +3,7 @@ against the others, the references and the files before any work; ``write_map`` 
 and the tools call these two, so each default lives here once."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from vpr_edge.encoders import ENCODERS, Encoder, FitSettings, load_codebook
@@ -15,6 +15,8 @@ from vpr_edge.map.build import Progress, build_map
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map, save_map
 from vpr_edge.map.model import PlaceMap
+from vpr_edge.positions import Positions, from_exif
+from vpr_edge.positions import read_csv as read_positions
 from vpr_edge.threads import use_threads
 
 DEFAULT_FRONT_END = "cnn"
@@ -42,6 +44,7 @@ class BuildOptions:
     seed: int = 0
     save_codebook: Path | None = None
     storage: str | None = None
+    positions: str | None = None     # a CSV file, or "exif" for the images' GPS tags
     append: bool = False
     batch_size: int = 8
     threads: int = 0
@@ -64,6 +67,7 @@ class MapPlan:
     options: BuildOptions
     base: PlaceMap | None = None
     codebook_meta: dict = field(default_factory=dict)
+    positions: Positions | None = None
 
 
 def _fit_options(o: BuildOptions) -> dict:
@@ -94,9 +98,22 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
         if target:
             check_writable(target)
     # (the map --append reads is also the one it replaces: its own input, by design)
-    check_not_input({"--out": out, "--save-codebook": o.save_codebook}, [refs, o.codebook, o.model])
+    check_not_input({"--out": out, "--save-codebook": o.save_codebook},
+                    [refs, o.codebook, o.model, None if o.positions in (None, "exif") else o.positions])
     files = list_images(refs)
     base = load_map(out, mmap=True) if o.append else None
+    positions = None
+    if o.positions == "exif":
+        positions = from_exif(files)
+    elif o.positions is not None:
+        positions = read_positions(o.positions, [f.name for f in files])
+    if base is not None and (base.positions is None) != (positions is None):
+        raise VprError(f"{out}: the map has positions: give --positions for the appended references"
+                       if base.positions is not None else
+                       f"{out}: the map has no positions; --positions cannot be given to --append")
+    if base is not None and positions is not None and positions.frame != base.positions.frame:
+        raise VprError(f"{o.positions}: positions in two frames: the map's are {base.positions.frame}, "
+                       f"these {positions.frame}")
     given, cb_meta = None, {}
     if o.codebook:
         given, cb_meta = load_codebook(o.codebook)
@@ -143,7 +160,7 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
                            d.alpha if o.alpha is None else o.alpha, o.max_descriptors or d.max_descriptors,
                            o.fit_iterations or d.iterations, o.seed, bool(o.tfidf))
     storage = o.storage or (base.stored.storage if base else DEFAULT_STORAGE)
-    return MapPlan(refs, out, files, front, enc_name, given, settings, storage, o, base, cb_meta)
+    return MapPlan(refs, out, files, front, enc_name, given, settings, storage, o, base, cb_meta, positions)
 
 
 def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
@@ -152,8 +169,8 @@ def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
     one writer at a time), an appended map is read again, so that a concurrent ``--append`` that finished
     meanwhile is kept, and the result replaces it."""
     o = plan.options
-    place_map = build_map(plan.files, plan.front, plan.encoding, plan.given, plan.settings, o.batch_size, o.svm,
-                          plan.storage, progress=progress)
+    place_map = replace(build_map(plan.files, plan.front, plan.encoding, plan.given, plan.settings, o.batch_size,
+                                  o.svm, plan.storage, progress=progress), positions=plan.positions)
     with writer_lock(plan.out):
         if plan.base is not None:
             base = load_map(plan.out, mmap=True)
@@ -179,5 +196,6 @@ def summary(path: Path) -> dict:
     """``vpr-edge info``: a map's size and settings as JSON-ready data (its metadata, names said once)."""
     pm = load_map(path, mmap=True)
     meta = {k: v for k, v in pm.meta.items() if k not in ("names", "n_refs", "dim")}
+    route = {"route": pm.positions.summary()} if pm.positions is not None else {}
     return {"references": len(pm.names), "first": pm.names[0], "last": pm.names[-1],
-            "encoding_dims": int(pm.stored.shape[1]), "size_mb": round(path.stat().st_size / 1e6, 2)} | meta
+            "encoding_dims": int(pm.stored.shape[1]), "size_mb": round(path.stat().st_size / 1e6, 2)} | meta | route

@@ -10,6 +10,7 @@ import numpy as np
 from vpr_edge.encoders import Encoder
 from vpr_edge.errors import VprError, warn
 from vpr_edge.index.encodings import Encodings
+from vpr_edge.positions import Positions
 
 CNN = {"name": "cnn", "params": {}}
 
@@ -32,13 +33,15 @@ class Svm:
 class PlaceMap:
     """Reference encodings as stored (``compact.Encodings``: unit rows, R x D), their image names, the
     encoder (``vpr_edge.encoders``), metadata (``features``: the front end's record; ``model_*`` for cnn;
-    how the codebook was made) and, when built with ``--svm``, the per-place classifiers."""
+    how the codebook was made), when built with ``--svm`` the per-place classifiers, and when built with
+    ``--positions`` where each reference place is (``positions.Positions``)."""
 
     stored: Encodings
     names: list[str]
     encoder: Encoder
     meta: dict
     svm: Svm | None = None
+    positions: Positions | None = None
 
     @property
     def encodings(self) -> np.ndarray:
@@ -74,7 +77,7 @@ class PlaceMap:
             return e if e.storage == storage else Encodings.pack(e.dense(), storage)
 
         svm = None if self.svm is None else Svm(packed(self.svm.weights), self.svm.bias, self.svm.meta)
-        return PlaceMap(packed(self.stored), self.names, self.encoder, self.meta, svm)
+        return PlaceMap(packed(self.stored), self.names, self.encoder, self.meta, svm, self.positions)
 
     def extended(self, more: "PlaceMap") -> "PlaceMap":
         """This map with ``more``'s references after its own (``more`` encoded with this map's front end,
@@ -88,13 +91,19 @@ class PlaceMap:
         if clash:
             warn(f"{len(clash)} appended reference name(s) already in the map (e.g. {clash[0]}); results name "
                  f"references by index too")
+        if (self.positions is None) != (more.positions is None):
+            raise VprError("the map has positions: give --positions for the appended references too"
+                           if self.positions is not None else
+                           "the map has no positions: appended references cannot bring some")
+        positions = None if self.positions is None else self.positions.concat(more.positions)
         if self.svm is not None:
             warn("the map's SVM is dropped by --append (rebuild with --svm to train it on the whole route)")
         appended = self.meta.get("appended", []) + [{"folder": more.meta.get("refs_folder"),
                                                      "first_index": len(self.names), "count": len(more.names)}]
         meta = {k: v for k, v in self.meta.items() if k != "svm"}
         return PlaceMap(self.stored.concat(more.stored), self.names + more.names, self.encoder,
-                        meta | {"appended": appended, "vpr_edge_version": more.meta.get("vpr_edge_version")})
+                        meta | {"appended": appended, "vpr_edge_version": more.meta.get("vpr_edge_version")},
+                        positions=positions)
 
     @property
     def fingerprint(self) -> str:

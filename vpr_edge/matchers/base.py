@@ -46,6 +46,10 @@ class OnlineMatcher(Protocol):
     def ranking(self) -> np.ndarray:
         """Per-reference preference (R,) after the last update (higher = better); ties broken by index."""
 
+    def position(self) -> float | None:
+        """Where the last answer lies in references, finer than one (the stream's half-reference grid: 41.5
+        is half-way from reference 41 to 42); None: at the answered reference."""
+
     def reset(self) -> None:
         """Forget the stream."""
 
@@ -56,6 +60,9 @@ class WholeRoute:
     searches_locally = False
 
     def wanted(self) -> None:
+        return None
+
+    def position(self) -> None:
         return None
 
 

@@ -102,12 +102,17 @@ class RoadMatcher:
         self._zs = np.empty((2, n_refs * grid), np.float32)   # speed 0's share of z (and scratch)
         self._mean = np.zeros(n_refs)     # running mean z per reference
         self._stopped = False
+        self._position: float | None = None   # the last answer on the reference grid (``position``)
         # per reference, the decayed number of frames in its mean (starts as if `memory` frames of mean 0) and
         # the frame count when it was last seen: a reference outside a local search's window is not updated,
         # and when seen again its old mean weighs as much as its age allows (an EMA over time, not over updates)
         self._weight = np.full(n_refs, memory)
         self._seen = np.zeros(n_refs, np.int64)
         self._t = 0                       # frames counted for the means (not those of a stopped vehicle)
+
+    def position(self) -> float | None:
+        """The best state's position on the 1/``grid`` reference grid, in references (None before a frame)."""
+        return self._position
 
     def wanted(self) -> np.ndarray | None:
         """References (int array) whose similarities the next ``update`` needs, in that order; None:
@@ -186,6 +191,7 @@ class RoadMatcher:
         flat = int(np.argmax(h))
         self._stopped = flat < h.shape[1]          # the best trajectory has speed 0
         ref, best = lo + (flat % h.shape[1]) // g, float(h.flat[flat])
+        self._position = lo + (flat % h.shape[1]) / g
         per_ref = h.max(axis=0).reshape(hi - lo, g).max(axis=1)
         rival = _beyond(per_ref, ref - lo, self.rival_window)
         # firm lock: strong evidence, and no hypothesis beyond the window half as strong (seen in global frames)
@@ -221,6 +227,7 @@ class RoadMatcher:
 
     def reset(self) -> None:
         """Forget the stream."""
+        self._position = None
         self.h[:] = 0.0
         self._mean[:] = 0.0
         self._stopped = False

@@ -1,0 +1,169 @@
+"""Positions in the map and answers as positions and times: cases worked by hand, the CLI end to end, and
+bad positions and timestamps files refused in one line."""
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vpr_edge.errors import VprError
+from vpr_edge.map import load_map
+from vpr_edge.positions import Positions, distances, read_csv
+
+NAMES = ["a.jpg", "b.jpg", "c.jpg", "d.jpg"]
+
+
+def run(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "vpr_edge", *map(str, args)], capture_output=True, text=True,
+                          timeout=600)
+
+
+def _pos(coords, frame="local", heading=None) -> Positions:
+    c = np.asarray(coords, np.float64)
+    h = np.full(len(c), np.nan) if heading is None else np.asarray(heading, np.float64)
+    return Positions(c, frame, h, np.full(len(c), np.nan))
+
+
+def test_interpolation_and_distance_along_worked_by_hand() -> None:
+    p = _pos([[0, 0], [10, 0], [10, 10]], heading=[90, 90, 0])
+    np.testing.assert_allclose(p.along(), [0, 10, 20])
+    coords, heading, along = p.at(1.5)
+    np.testing.assert_allclose(coords, [10, 5])
+    assert along == pytest.approx(15.0) and heading == pytest.approx(45.0)
+    coords, heading, along = p.at(0.25)
+    np.testing.assert_allclose(coords, [2.5, 0]) and along == pytest.approx(2.5)
+    assert p.at(2.0)[2] == pytest.approx(20.0) and p.at(7.0)[2] == pytest.approx(20.0)   # clamped to the route
+    wrap = _pos([[0, 0], [1, 0]], heading=[350, 10])
+    assert wrap.at(0.5)[1] == pytest.approx(0.0)                    # through north, not through south
+    assert np.isnan(_pos([[0, 0], [1, 0]]).at(0.5)[1])
+
+
+def test_haversine_against_a_meridian_degree() -> None:
+    d = distances(np.array([[52.0, 13.0]]), np.array([[53.0, 13.0], [52.0, 13.0]]), geo=True)
+    assert d[0, 0] == pytest.approx(6_371_008.8 * np.pi / 180, rel=1e-9) and d[0, 1] == 0.0
+
+
+def test_read_csv_by_name_in_order_and_with_gaps(tmp_path: Path) -> None:
+    f = tmp_path / "p.csv"
+    f.write_text("name,lat,lon,heading,alt\nd.jpg,52.003,13.0,,\na.jpg,52.0,13.0,370,34\nc.jpg,52.002,13.0,,\n")
+    p = read_csv(f, NAMES)
+    assert p.frame == "wgs84" and p.interpolated == 1                # b.jpg: no row, placed between a and c
+    np.testing.assert_allclose(p.coords[:, 0], [52.0, 52.001, 52.002, 52.003])
+    assert p.heading[0] == pytest.approx(10.0) and p.altitude[0] == 34 and np.isnan(p.heading[1])
+    f.write_text("x,y\n0,0\n,\n4,0\n6,0\n")                          # in order, one row without a fix
+    np.testing.assert_allclose(read_csv(f, NAMES).coords[:, 0], [0, 2, 4, 6])
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("x,y\n0,0\n1,0\n", "2 positions but 4 references"),
+    ("x,y,lat,lon\n0,0,1,1\n", "not both"),
+    ("a,b\n0,0\n", "x,y (metres) or lat,lon"),
+    ("name,x,y\na.jpg,0,zero\n", "line 2: y 'zero' is not a number"),
+    ("name,x,y\na.jpg,0,0\nz.jpg,1,1\n", "'z.jpg' is not one of the references"),
+    ("name,lat,lon\na.jpg,95,0\nd.jpg,0,0\n", "latitude outside"),
+    ("name,x,y\nb.jpg,0,0\nd.jpg,1,1\n", "before the first position"),
+    ("name,x,y\na.jpg,0,\n", "give both x and y"),
+    ("x,y\n", "no positions"),
+])
+def test_read_csv_refuses(tmp_path: Path, text: str, problem: str) -> None:
+    f = tmp_path / "p.csv"
+    f.write_text(text)
+    with pytest.raises(VprError, match=problem.replace("(", r"\(").replace(")", r"\)")) as e:
+        read_csv(f, NAMES)
+    assert str(e.value).startswith(str(f)) and "\n" not in str(e.value)
+
+
+@pytest.fixture(scope="module")
+def positioned(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Path:
+    w = tmp_path_factory.mktemp("pos")
+    names = sorted(p.name for p in small_refs.glob("*.jpg"))
+    with open(w / "pos.csv", "w") as f:                          # a straight route along y, 2 m apart
+        f.write("name,x,y,heading\n" + "".join(f"{n},5.0,{2.0 * i},0\n" for i, n in enumerate(names)))
+    proc = run("build-map", small_refs, "-o", w / "map.npz", "--components", "4", "--positions", w / "pos.csv")
+    assert proc.returncode == 0, proc.stderr
+    return w
+
+
+@pytest.mark.slow
+def test_map_positions_answers_and_stamps(positioned: Path, small_queries: Path, tmp_path: Path) -> None:
+    pm = load_map(positioned / "map.npz")
+    assert pm.positions.frame == "local" and pm.positions.coords[3].tolist() == [5.0, 6.0]
+    info = json.loads(run("info", positioned / "map.npz").stdout)
+    assert info["route"]["length_m"] == 46.0 and info["route"]["extent"]["y"] == [0.0, 46.0]
+    names = sorted(p.name for p in small_queries.glob("*.jpg"))
+    (tmp_path / "t.csv").write_text("frame,stamp\n" + "".join(f"{n},{100 + i / 4}\n" for i, n in enumerate(names)))
+    proc = run("localize", "-m", positioned / "map.npz", "-s", small_queries, "--timestamps", tmp_path / "t.csv",
+               "--format", "jsonl")
+    assert proc.returncode == 0, proc.stderr
+    lines = [json.loads(x) for x in proc.stdout.splitlines()]
+    assert [m["stamp"] for m in lines] == [100 + i / 4 for i in range(24)]
+    for m in lines:
+        if m["lost"]:
+            assert m["ref_index"] is None and m["x"] is None and m["along_m"] is None
+        else:   # on the route, within one reference (2 m) of the answered reference, heading as mapped
+            assert m["x"] == 5.0 and abs(m["y"] - 2.0 * m["ref_index"]) <= 1.0 and m["heading"] == 0.0
+            assert m["along_m"] == m["y"] and m["lat"] is None
+    assert any(m["y"] % 2.0 == 1.0 for m in lines if not m["lost"]), "no answer between references"
+
+
+@pytest.mark.slow
+def test_append_extends_positions(positioned: Path, small_refs: Path, tmp_path: Path) -> None:
+    shutil.copy(positioned / "map.npz", tmp_path / "map.npz")
+    more = tmp_path / "more"
+    more.mkdir()
+    for f in sorted(small_refs.glob("*.jpg"))[:3]:
+        shutil.copy(f, more / f"x{f.name}")
+    (tmp_path / "more.csv").write_text("x,y\n5,50\n5,52\n5,54\n")
+    no = run("build-map", more, "-o", tmp_path / "map.npz", "--append")
+    assert no.returncode == 2 and "give --positions" in no.stderr
+    geo = tmp_path / "geo.csv"
+    geo.write_text("lat,lon\n1,1\n1,2\n1,3\n")
+    mixed = run("build-map", more, "-o", tmp_path / "map.npz", "--append", "--positions", geo)
+    assert mixed.returncode == 2 and "two frames" in mixed.stderr
+    ok = run("build-map", more, "-o", tmp_path / "map.npz", "--append", "--positions", tmp_path / "more.csv")
+    assert ok.returncode == 0, ok.stderr
+    pm = load_map(tmp_path / "map.npz")
+    assert len(pm.positions) == 27 and pm.positions.coords[-1].tolist() == [5.0, 54.0]
+
+
+@pytest.mark.slow
+def test_video_frames_carry_their_time(positioned: Path, small_queries: Path, tmp_path: Path) -> None:
+    from test_cli import write_video
+
+    video = write_video(tmp_path / "q.avi", small_queries, 5)          # 10 frames a second
+    proc = run("localize", "-m", positioned / "map.npz", "-s", video, "--mode", "single")
+    assert proc.returncode == 0, proc.stderr
+    stamps = [float(r["stamp"]) for r in csv.DictReader(proc.stdout.splitlines())]
+    np.testing.assert_allclose(stamps, [0.0, 0.1, 0.2, 0.3, 0.4], atol=1e-6)
+    bad = run("localize", "-m", positioned / "map.npz", "-s", video, "--timestamps", tmp_path / "none.csv")
+    assert bad.returncode == 2 and "applies to a folder" in bad.stderr
+
+
+def test_timestamps_file_refused(tmp_path: Path) -> None:
+    from vpr_edge.images import read_stamps
+
+    f = tmp_path / "t.csv"
+    for text, problem in (("frame,stamp\na.jpg,1\n", "no stamp for 1 frame"), ("a,b\n", "frame,stamp"),
+                          ("frame,stamp\na.jpg,x\nb.jpg,2\n", "line 2"), ("frame,stamp\na.jpg,inf\nb.jpg,1\n", "finite")):
+        f.write_text(text)
+        with pytest.raises(VprError, match=problem):
+            read_stamps(f, ["a.jpg", "b.jpg"])
+
+
+def test_the_json_schema_names_the_fields_in_order() -> None:
+    from vpr_edge.api import FIELDS, Match
+
+    schema = json.loads((Path(__file__).resolve().parent.parent / "docs" / "results-line.schema.json").read_text())
+    assert schema["required"] == list(FIELDS) == list(schema["properties"])
+    line = Match(3, "f.jpg", 4, "r.jpg", 1.5, False, 12.5, lat=52.0, lon=13.0, heading=90.0, along_m=8.0).fields()
+    kinds = {"integer": int, "number": (int, float), "string": str, "boolean": bool, "null": type(None)}
+    for key, value in line.items():
+        allowed = schema["properties"][key]["type"]
+        allowed = [allowed] if isinstance(allowed, str) else allowed
+        assert isinstance(value, tuple(kinds[t] for t in allowed)), (key, value)
