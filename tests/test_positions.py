@@ -167,3 +167,31 @@ def test_the_json_schema_names_the_fields_in_order() -> None:
         allowed = schema["properties"][key]["type"]
         allowed = [allowed] if isinstance(allowed, str) else allowed
         assert isinstance(value, tuple(kinds[t] for t in allowed)), (key, value)
+
+
+def test_metre_errors_worked_by_hand() -> None:
+    from vpr_edge.evaluation.metrics import metre_errors, metre_summary
+
+    coords = np.array([[0.0, 0], [0, 4], [0, 8], [0, 30]])
+    truth = np.array([[0, -1], [1, 2], [-1, -1], [3, -1]])      # query 1 has two correct references
+    refs = np.array([1, 0, 2, 0])
+    err = metre_errors(refs, truth, coords, geo=False)
+    np.testing.assert_allclose(err[[0, 1, 3]], [4.0, 4.0, 30.0]) and np.isnan(err[2])
+    s = metre_summary(err, lost=np.array([False, False, False, True]))
+    assert s["median_m"] == 4.0 and s["within_5m"] == pytest.approx(2 / 3) and s["within_25m"] == pytest.approx(2 / 3)
+    assert metre_summary(err, lost=np.zeros(4, bool))["within_25m"] == pytest.approx(2 / 3)   # 30 m is outside
+
+
+@pytest.mark.slow
+def test_evaluate_reports_metres_with_map_positions(positioned: Path, small_queries: Path, tmp_path: Path) -> None:
+    from vpr_edge.evaluation.streams import write_ground_truth
+
+    write_ground_truth(tmp_path / "gt.csv", [[i] for i in range(24)])
+    proc = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt", tmp_path / "gt.csv",
+               "--modes", "single,dtw", "--tolerance", "0", "--json", tmp_path / "e.json")
+    assert proc.returncode == 0, proc.stderr
+    assert "error in metres" in proc.stdout
+    doc = json.loads((tmp_path / "e.json").read_text())
+    assert doc["schema_version"] == 4
+    m = doc["modes"]["dtw"]["metres"]
+    assert m["median_m"] == 0.0 and m["within_5m"] >= doc["modes"]["dtw"]["recall_at_1"]   # 2 m spacing

@@ -98,6 +98,37 @@ def localisation_error(refs: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return err
 
 
+METRE_RADII: tuple[float, ...] = (5.0, 10.0, 25.0)
+
+
+def metre_errors(refs: np.ndarray, truth: np.ndarray, coords: np.ndarray, geo: bool) -> np.ndarray:
+    """Per query, metres from the answered reference's position to the nearest correct reference's
+    (``coords`` (R, 2), x/y metres or lat/lon degrees) -> (Q,) float, NaN for unmapped queries."""
+    from vpr_edge.positions import paired_distances
+
+    out = np.full(len(refs), np.nan)
+    for col in range(truth.shape[1]):
+        t = truth[:, col]
+        ok = t >= 0
+        d = paired_distances(coords[refs[ok]], coords[t[ok]], geo)
+        out[ok] = np.fmin(out[ok], d)
+    return out
+
+
+def metre_summary(errors: np.ndarray, lost: np.ndarray) -> dict[str, float]:
+    """Over the mapped queries (finite ``errors``): the median and 90th percentile of the error in metres of
+    the answers not reported lost, and the share of mapped queries answered (not lost) within each of
+    ``METRE_RADII`` metres (a lost frame counts as not within)."""
+    mapped = np.isfinite(errors)
+    answered = errors[mapped & ~lost]
+    nan = float("nan")
+    out = {"median_m": float(np.median(answered)) if answered.size else nan,
+           "p90_m": float(np.percentile(answered, 90)) if answered.size else nan}
+    for r in METRE_RADII:
+        out[f"within_{r:g}m"] = float(((errors <= r) & ~lost)[mapped].mean()) if mapped.any() else nan
+    return out
+
+
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """The runs of True in ``mask`` (Q,) bool as [start, stop) frame pairs, in order."""
     edges = np.flatnonzero(np.diff(np.concatenate([[False], np.asarray(mask, bool), [False]]).astype(np.int8)))

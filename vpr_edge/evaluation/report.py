@@ -29,6 +29,13 @@ def table(reports: dict[str, ModeReport]) -> str:
                                            cell(r.lost_mapped), delays_text(r.lock_frames), delays_text(r.exit_frames),
                                            cell(r.match_ms, "{:.2f}")]
         lines.append(f"{name:<{width}} " + " ".join(f"{c:>8s}" for c in cells))
+    metres = {name: r.metres for name, r in reports.items() if r.metres is not None}
+    if metres:
+        keys = list(next(iter(metres.values())))
+        lines += ["", f"{'error in metres (map positions)':<{width}}", f"{'mode':<{width}} "
+                  + " ".join(f"{k:>10s}" for k in keys)]
+        lines += [f"{name:<{width}} " + " ".join(f"{cell(m[k], '{:.2f}'):>10s}" for k in keys)
+                  for name, m in metres.items()]
     return "\n".join(lines)
 
 
@@ -38,7 +45,7 @@ def delays_text(frames: Sequence[float | None]) -> str:
     return "/".join("never" if d is None or d != d else f"{d:.0f}" for d in frames) or "-"
 
 
-JSON_SCHEMA_VERSION = 3   # 2: lost shares, ms_per_frame, each mode's settings, the tolerance; 3: lock/exit frames
+JSON_SCHEMA_VERSION = 4   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres
 
 
 def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, reports: dict[str, ModeReport],

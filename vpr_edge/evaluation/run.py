@@ -137,6 +137,6 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
         rows = rows[sims.kept]
     check_truth_fits(rows, gt_shape, sims.cosine, truth.name)
     by_kind = {"cosine": sims.cosine, "svm": sims.svm}
-    reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence)
+    reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions)
                for name, m in chosen.items()}
     return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms)

@@ -9,6 +9,7 @@ import numpy as np
 
 from vpr_edge.matchers import Matcher, Result
 from vpr_edge.evaluation import metrics
+from vpr_edge.positions import Positions
 
 RECALL_KS: tuple[int, ...] = (1, 5, 10)
 
@@ -35,6 +36,7 @@ class ModeReport:
     settings: dict[str, Any] = field(default_factory=dict)
     lock_frames: tuple[float, ...] = ()
     exit_frames: tuple[float, ...] = ()
+    metres: dict[str, float] | None = None    # with a map's positions: ``metrics.metre_summary``
 
     def as_json(self) -> dict:
         """The keys of ``evaluate --json`` (NaN as null)."""
@@ -47,22 +49,24 @@ class ModeReport:
             "median_error": num(self.median_error), "lost_unmapped": num(self.lost_unmapped),
             "lost_mapped": num(self.lost_mapped), "ms_per_frame": num(self.match_ms),
             "lock_frames": [num(v) for v in self.lock_frames], "exit_frames": [num(v) for v in self.exit_frames],
-            "settings": self.settings}
+            "settings": self.settings} | ({"metres": {k: num(v) for k, v in self.metres.items()}}
+                                          if self.metres is not None else {})
 
 
 def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, tolerance: int = 1,
-                  min_confidence: float | None = None) -> ModeReport:
-    """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics)."""
+                  min_confidence: float | None = None, positions: Positions | None = None) -> ModeReport:
+    """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics); with the
+    references' ``positions``, the error in metres too."""
     t0 = time.perf_counter()
     result = matcher.run(sim, k=max(RECALL_KS))
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)
     threshold = matcher.min_confidence if min_confidence is None else min_confidence
-    return replace(score_result(result, truth, tolerance, threshold, ms),
+    return replace(score_result(result, truth, tolerance, threshold, ms, positions),
                    settings=matcher.params | {"min_confidence": threshold})
 
 
 def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshold: float | None = None,
-                 match_ms: float = float("nan")) -> ModeReport:
+                 match_ms: float = float("nan"), positions: Positions | None = None) -> ModeReport:
     """A matcher's answers (``Result``, Q frames) against ``truth`` (Q, T); frames scoring below
     ``threshold`` count as lost (None: no lost state)."""
     mapped = (truth >= 0).any(axis=1)
@@ -80,4 +84,6 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
                       metrics.precision_at_full_recall(curve), metrics.recall_at_full_precision(curve),
                       float(np.nanmedian(err)) if mapped.any() else float("nan"),
                       share(~mapped), share(mapped), match_ms, curve, lock_frames=tuple(lock.tolist()),
-                      exit_frames=tuple(exits.tolist()) if threshold is not None else ())
+                      exit_frames=tuple(exits.tolist()) if threshold is not None else (),
+                      metres=None if positions is None else metrics.metre_summary(
+                          metrics.metre_errors(result.refs, truth, positions.coords, positions.geo), lost))

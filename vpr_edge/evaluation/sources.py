@@ -12,6 +12,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError
 from vpr_edge.images import Frame, list_images, load_image, open_stream
+from vpr_edge.positions import Positions
 
 OnSkip = Callable[[Frame], None]
 
@@ -26,6 +27,7 @@ class Similarities:
     svm: np.ndarray | None = None
     kept: np.ndarray | None = None
     encode_ms: float = float("nan")
+    positions: Positions | None = None     # the references' (a map built with --positions)
 
 
 def sad_similarity(queries: np.ndarray, refs: np.ndarray, chunk: int = 16) -> np.ndarray:
@@ -59,10 +61,11 @@ def _count_checked(queries: str | os.PathLike[str], n_truth: int, truth_src: str
 
 
 def _finish(queries: str | os.PathLike[str], kept: list[int], t0: float, cosine: np.ndarray,
-            svm: np.ndarray | None = None) -> Similarities:
+            svm: np.ndarray | None = None, positions: Positions | None = None) -> Similarities:
     if not kept:
         raise VprError(f"{queries}: none of its frames could be decoded")
-    return Similarities(cosine, svm, np.asarray(kept, np.int64), 1e3 * (time.perf_counter() - t0) / len(kept))
+    return Similarities(cosine, svm, np.asarray(kept, np.int64), 1e3 * (time.perf_counter() - t0) / len(kept),
+                        positions)
 
 
 def from_pixels(refs: str | os.PathLike[str], queries: str | os.PathLike[str], n_truth: int, truth_src: str,
@@ -106,4 +109,4 @@ def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], 
     stacked = np.stack(enc)
     cosine = loc.similarity(stacked).astype(np.float64)
     scores = loc.map.scores(stacked, "svm").astype(np.float64) if svm else None
-    return _finish(queries, kept, t0, cosine, scores)
+    return _finish(queries, kept, t0, cosine, scores, loc.map.positions)
