@@ -195,3 +195,66 @@ def test_evaluate_reports_metres_with_map_positions(positioned: Path, small_quer
     assert doc["schema_version"] == 4
     m = doc["modes"]["dtw"]["metres"]
     assert m["median_m"] == 0.0 and m["within_5m"] >= doc["modes"]["dtw"]["recall_at_1"]   # 2 m spacing
+
+
+def _jpeg_with_gps(path: Path, lat: float, lon: float, direction: float | None = None) -> None:
+    """A real JPEG whose EXIF holds GPS tags (IFD0 -> GPS IFD; little-endian TIFF), written by hand."""
+    import struct
+
+    import cv2
+
+    def rationals(deg: float) -> bytes:
+        d = abs(deg)
+        dd, mm = int(d), int((d - int(d)) * 60)
+        ss = round(((d - dd) * 60 - mm) * 60 * 1000)
+        return struct.pack("<6I", dd, 1, mm, 1, ss, 1000)
+
+    entries = [(1, 2, 2, b"N\0" if lat >= 0 else b"S\0"), (2, 5, 3, rationals(lat)),
+               (3, 2, 2, b"E\0" if lon >= 0 else b"W\0"), (4, 5, 3, rationals(lon))]
+    if direction is not None:
+        entries.append((17, 5, 1, struct.pack("<2I", round(direction * 100), 100)))
+    gps_at = 8 + 2 + 12 + 4                                    # after the TIFF header and IFD0 (one entry)
+    data_at = gps_at + 2 + 12 * len(entries) + 4
+    ifd, data = b"", b""
+    for tag, kind, count, value in entries:
+        if len(value) <= 4:
+            ifd += struct.pack("<HHI", tag, kind, count) + value.ljust(4, b"\0")
+        else:
+            ifd += struct.pack("<HHII", tag, kind, count, data_at + len(data))
+            data += value
+    tiff = (b"II*\0" + struct.pack("<I", 8) + struct.pack("<H", 1) + struct.pack("<HHII", 0x8825, 4, 1, gps_at)
+            + struct.pack("<I", 0) + struct.pack("<H", len(entries)) + ifd + struct.pack("<I", 0) + data)
+    app1 = b"Exif\0\0" + tiff
+    ok, jpg = cv2.imencode(".jpg", np.full((120, 160, 3), 128, np.uint8))
+    jpg = jpg.tobytes()
+    path.write_bytes(jpg[:2] + b"\xff\xe1" + struct.pack(">H", len(app1) + 2) + app1 + jpg[2:])
+
+
+def test_positions_from_exif_gps(tmp_path: Path) -> None:
+    pytest.importorskip("exifread")
+    from vpr_edge.positions import from_exif
+
+    files = [tmp_path / f"{i}.jpg" for i in range(4)]
+    _jpeg_with_gps(files[0], 52.5, 13.25, direction=90.0)
+    cv2 = pytest.importorskip("cv2")
+    cv2.imwrite(str(files[1]), np.zeros((120, 160, 3), np.uint8))       # no GPS: placed between its neighbours
+    _jpeg_with_gps(files[2], 52.5010, 13.25)
+    _jpeg_with_gps(files[3], -33.5, -70.75)
+    p = from_exif(files)
+    assert p.frame == "wgs84" and p.interpolated == 1
+    np.testing.assert_allclose(p.coords, [[52.5, 13.25], [52.5005, 13.25], [52.501, 13.25], [-33.5, -70.75]],
+                               atol=1e-6)
+    assert p.heading[0] == pytest.approx(90.0) and np.isnan(p.heading[2])
+
+
+@pytest.mark.slow
+def test_build_map_positions_exif(tmp_path: Path) -> None:
+    pytest.importorskip("exifread")
+    refs = tmp_path / "refs"
+    refs.mkdir()
+    for i in range(4):
+        _jpeg_with_gps(refs / f"{i}.jpg", 60.0 + i * 0.001, 10.0)
+    proc = run("build-map", refs, "-o", tmp_path / "m.npz", "--components", "2", "--positions", "exif")
+    assert proc.returncode == 0, proc.stderr
+    info = json.loads(run("info", tmp_path / "m.npz").stdout)["route"]
+    assert info["frame"] == "wgs84" and info["length_m"] == pytest.approx(3 * 111.195, rel=2e-3)   # 0.001 deg of latitude: 111.2 m
