@@ -4,17 +4,16 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from vpr_edge.errors import VprError, warn
+from vpr_edge.frame import MIN_SIDE, Frame
 
 IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm"})
 VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg"})
-MIN_SIDE = 8  # pixels: below this an image cannot describe a place (a 1x1 "image" is a broken file)
 
 
 def list_images(folder: str | os.PathLike[str]) -> list[Path]:
@@ -48,19 +47,6 @@ def load_image(path: str | os.PathLike[str]) -> np.ndarray:
         raise VprError(f"{path}: image is {image.shape[1]}x{image.shape[0]} pixels, too small to describe a "
                        f"place (at least {MIN_SIDE}x{MIN_SIDE})")
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One frame of a stream: its position, a name for reports, the RGB image or the decode error, and its
-    time in seconds (``stamp``: a video's presentation time, a live source's arrival time (Unix), a folder's
-    from a timestamps file; None when unknown)."""
-
-    index: int
-    name: str
-    image: np.ndarray | None
-    error: str | None = None
-    stamp: float | None = None
 
 
 def _folder_frames(files: list[Path], stamps: list[float] | None = None) -> Iterator[Frame]:
@@ -151,15 +137,24 @@ def _live(source: str) -> tuple[Iterator[Frame], None]:
     return _capture_frames(cap, source, name, live=True), None
 
 
-def open_stream(source: str | os.PathLike[str], stamps: str | os.PathLike[str] | None = None
-                ) -> tuple[Iterator[Frame], int | None]:
-    """Frames from a folder of images (name order), a video file, a camera (``0``, ``/dev/video0``) or a
-    network stream (``rtsp://``, ``http(s)://``), with the frame count if known (None for live sources).
+def open_stream(source: str | os.PathLike[str], stamps: str | os.PathLike[str] | None = None,
+                topic: str | None = None) -> tuple[Iterator[Frame], int | None]:
+    """Frames from a folder of images (name order), a video file, a camera (``0``, ``/dev/video0``), a
+    network stream (``rtsp://``, ``http(s)://``) or a ROS bag / MCAP file (the image ``topic``; ``bags``), with
+    the frame count if known (None for live sources).
 
     Undecodable images come through as frames with ``image=None`` and an ``error`` so that the caller can
     report and skip them; a missing or empty source raises VprError at once.
     """
     text = str(source)
+    from vpr_edge.bags import is_bag, open_bag
+
+    if is_bag(text):
+        if stamps:
+            raise VprError(f"{stamps}: --timestamps applies to a folder of frames; {text} stamps its own frames")
+        return open_bag(text, topic)
+    if topic:
+        raise VprError(f"{text}: --topic applies to a ROS bag or MCAP file, not to this source")
     if text.isdigit() and not Path(text).exists() or text.startswith("/dev/video") or "://" in text:
         if stamps:
             raise VprError(f"{stamps}: --timestamps applies to a folder of frames; {text} is stamped as it arrives")

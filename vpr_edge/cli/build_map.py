@@ -24,7 +24,8 @@ def _value(opt):
 
 @app.command("build-map")
 def build_map_cmd(
-    refs: Path = typer.Argument(..., help="Folder of reference images, taken in file-name order."),
+    refs: Path = typer.Argument(..., help="Folder of reference images, taken in file-name order, or a ROS bag "
+                                          "/ MCAP file with --topic."),
     out: str = typer.Option(..., "--out", "-o", help="Map file to write (.npz); written atomically, never over "
                             "an input nor inside the reference folder. A symbolic link is written through."),
     features: Optional[FrontOpt] = typer.Option(None, metavar="FRONT_END", help="Local descriptors: "
@@ -69,6 +70,10 @@ def build_map_cmd(
                                             "the images' GPS tags (the geo extra). References without a fix "
                                             "are placed between fixes. Stored in the map; localize then answers "
                                             "with positions."),
+    topic: Optional[str] = typer.Option(None, help="REFS is a ROS 1/2 bag or MCAP file: its image topic "
+                                        "(sensor_msgs/Image or CompressedImage; the ros extra)."),
+    positions_topic: Optional[str] = typer.Option(None, help="With a bag: the NavSatFix or Odometry topic "
+                                                  "giving each image's position (interpolated in time)."),
     append: bool = typer.Option(False, "--append", help="Add REFS' images after the references of the map "
                                 "at --out, described and encoded as its own (the map is replaced "
                                 "atomically); the route grows without refitting."),
@@ -84,7 +89,8 @@ def build_map_cmd(
                                whiten=whiten, alpha=alpha, tfidf=tfidf, max_descriptors=max_descriptors,
                                fit_iterations=fit_iterations, svm=svm, seed=seed,
                                save_codebook=output_path(save_codebook) if save_codebook else None,
-                               storage=_value(storage), positions=positions, append=append, batch_size=batch_size, threads=threads)
+                               storage=_value(storage), positions=positions, topic=topic,
+                               positions_topic=positions_topic, append=append, batch_size=batch_size, threads=threads)
         plan = plan_map(refs, output_path(out), options)
         with typer.progressbar(length=len(plan.files), label="extracting", file=sys.stderr,
                                hidden=not sys.stderr.isatty()) as bar:

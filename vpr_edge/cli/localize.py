@@ -82,8 +82,8 @@ def results_writer(fmt: str, stream: IO[str], where: str) -> Callable[[Match], N
 def localize_cmd(
     map_path: Path = typer.Option(..., "--map", "-m", help="Map file written by build-map."),
     stream: str = typer.Option(..., "--stream", "-s", metavar="SOURCE",
-                               help="Folder of frames (file-name order), a video file, "
-                                    "a camera (0, 1, ... or /dev/video0) or a network stream (rtsp://...)."),
+                               help="Folder of frames (file-name order), a video file, a camera (0, 1, ... "
+                                    "or /dev/video0), a network stream (rtsp://...) or a ROS bag (--topic)."),
     model: Optional[Path] = typer.Option(None, help="ONNX feature model; must be the map's model (default: "
                                          "$VPR_EDGE_MODEL if set, else the file the map was built with if it "
                                          "still exists, else the bundled one)."),
@@ -107,6 +107,8 @@ def localize_cmd(
                                            "never over an input; a symbolic link is written through)."),
     fmt: Optional[FormatOpt] = typer.Option(None, "--format", help="csv or jsonl (default: from --out's "
                                             "suffix, csv on stdout)."),
+    topic: Optional[str] = typer.Option(None, help="With a ROS 1/2 bag or MCAP file: the image topic "
+                                        "(sensor_msgs/Image or CompressedImage; frames stamped by their headers)."),
     timestamps: Optional[Path] = typer.Option(None, help="With a folder of frames: a CSV frame,stamp giving "
                                               "each frame's time in seconds (videos and live sources are "
                                               "stamped by themselves)."),
@@ -131,7 +133,7 @@ def localize_cmd(
         params = params_for(mode.value, {"variant": variant.value if variant else None, "open_ends": open_ends,
                                          "decay": decay, "window": window})
         params = with_param_options(get_matcher(mode.value), params, param or [])
-        frames, count = open_stream(stream, timestamps)
+        frames, count = open_stream(stream, timestamps, topic)
         localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
                               min_confidence=min_confidence, threads=threads)
         chosen = fmt.value if fmt else (suffix_fmt or "csv")

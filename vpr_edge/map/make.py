@@ -3,9 +3,11 @@ against the others, the references and the files before any work; ``write_map`` 
 and the tools call these two, so each default lives here once."""
 from __future__ import annotations
 
+import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from vpr_edge.bags import bag_positions, extract_images, is_bag
 from vpr_edge.encoders import ENCODERS, Encoder, FitSettings, load_codebook
 from vpr_edge.errors import VprError, warn
 from vpr_edge.features import FrontEnd, make_front_end
@@ -45,6 +47,8 @@ class BuildOptions:
     save_codebook: Path | None = None
     storage: str | None = None
     positions: str | None = None     # a CSV file, or "exif" for the images' GPS tags
+    topic: str | None = None         # refs is a ROS bag: its image topic
+    positions_topic: str | None = None   # ... and its NavSatFix / Odometry topic
     append: bool = False
     batch_size: int = 8
     threads: int = 0
@@ -68,6 +72,8 @@ class MapPlan:
     base: PlaceMap | None = None
     codebook_meta: dict = field(default_factory=dict)
     positions: Positions | None = None
+    names: list[str] | None = None           # the references' names when not their files' (a bag's BAG#N)
+    scratch: tempfile.TemporaryDirectory | None = None   # where a bag's images were extracted
 
 
 def _fit_options(o: BuildOptions) -> dict:
@@ -100,14 +106,22 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     # (the map --append reads is also the one it replaces: its own input, by design)
     check_not_input({"--out": out, "--save-codebook": o.save_codebook},
                     [refs, o.codebook, o.model, None if o.positions in (None, "exif") else o.positions])
-    files = list_images(refs)
+    bag = is_bag(refs)
+    if not bag and (o.topic or o.positions_topic):
+        raise VprError(f"{refs}: --topic and --positions-topic apply to a ROS bag or MCAP file")
+    if o.positions and o.positions_topic:
+        raise VprError(f"--positions {o.positions} and --positions-topic {o.positions_topic}: give one")
+    if bag and o.positions == "exif":
+        raise VprError(f"{refs}: --positions exif reads image files; a bag's positions come from --positions-topic")
+    files = [] if bag else list_images(refs)
     base = load_map(out, mmap=True) if o.append else None
     positions = None
     if o.positions == "exif":
         positions = from_exif(files)
-    elif o.positions is not None:
+    elif o.positions is not None and not bag:
         positions = read_positions(o.positions, [f.name for f in files])
-    if base is not None and (base.positions is None) != (positions is None):
+    has_positions = positions is not None or bool(o.positions or o.positions_topic)
+    if base is not None and (base.positions is None) == has_positions:
         raise VprError(f"{out}: the map has positions: give --positions for the appended references"
                        if base.positions is not None else
                        f"{out}: the map has no positions; --positions cannot be given to --append")
@@ -160,7 +174,19 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
                            d.alpha if o.alpha is None else o.alpha, o.max_descriptors or d.max_descriptors,
                            o.fit_iterations or d.iterations, o.seed, bool(o.tfidf))
     storage = o.storage or (base.stored.storage if base else DEFAULT_STORAGE)
-    return MapPlan(refs, out, files, front, enc_name, given, settings, storage, o, base, cb_meta, positions)
+    names = scratch = None
+    if bag:   # the work starts here: the bag's images are decoded once, into a scratch folder
+        scratch = tempfile.TemporaryDirectory(prefix="vpr-edge-bag-")
+        files, names, stamps = extract_images(refs, o.topic, Path(scratch.name))
+        if o.positions_topic:
+            positions = bag_positions(refs, o.positions_topic, stamps)
+        elif o.positions:
+            positions = read_positions(o.positions, names)
+        if base is not None and positions is not None and positions.frame != base.positions.frame:
+            raise VprError(f"{refs}: positions in two frames: the map's are {base.positions.frame}, these "
+                           f"{positions.frame}")
+    return MapPlan(refs, out, files, front, enc_name, given, settings, storage, o, base, cb_meta, positions,
+                   names, scratch)
 
 
 def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
@@ -169,8 +195,15 @@ def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
     one writer at a time), an appended map is read again, so that a concurrent ``--append`` that finished
     meanwhile is kept, and the result replaces it."""
     o = plan.options
-    place_map = replace(build_map(plan.files, plan.front, plan.encoding, plan.given, plan.settings, o.batch_size,
-                                  o.svm, plan.storage, progress=progress), positions=plan.positions)
+    try:
+        place_map = build_map(plan.files, plan.front, plan.encoding, plan.given, plan.settings, o.batch_size, o.svm,
+                              plan.storage, progress=progress)
+    finally:
+        if plan.scratch is not None:
+            plan.scratch.cleanup()
+    place_map = replace(place_map, positions=plan.positions)
+    if plan.names is not None:
+        place_map = replace(place_map, names=plan.names, meta=place_map.meta | {"refs_folder": str(plan.refs)})
     with writer_lock(plan.out):
         if plan.base is not None:
             base = load_map(plan.out, mmap=True)
