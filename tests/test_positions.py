@@ -258,3 +258,44 @@ def test_build_map_positions_exif(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     info = json.loads(run("info", tmp_path / "m.npz").stdout)["route"]
     assert info["frame"] == "wgs84" and info["length_m"] == pytest.approx(3 * 111.195, rel=2e-3)   # 0.001 deg of latitude: 111.2 m
+
+
+@pytest.mark.slow
+def test_evaluate_draws_the_matrix_and_the_route(positioned: Path, small_queries: Path, tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    import cv2
+
+    from vpr_edge.evaluation.streams import write_ground_truth
+
+    write_ground_truth(tmp_path / "gt.csv", [[i] for i in range(24)])
+    proc = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt", tmp_path / "gt.csv",
+               "--modes", "single,stream", "--plot-matrix", tmp_path / "m.png", "--plot-route", tmp_path / "r.png")
+    assert proc.returncode == 0, proc.stderr
+    for png in ("m.png", "r.png"):
+        image = cv2.imread(str(tmp_path / png))
+        assert image is not None and min(image.shape[:2]) > 300 and image.std() > 10      # a real figure
+    sim = np.random.default_rng(0).random((24, 24))
+    np.save(tmp_path / "s.npy", sim)
+    bad = run("evaluate", "--similarity", tmp_path / "s.npy", "--gt", tmp_path / "gt.csv", "--plot-route",
+              tmp_path / "x.png")
+    assert bad.returncode == 2 and "--plot-route needs a map built with --positions" in bad.stderr
+    assert not (tmp_path / "x.png").exists()
+
+
+@pytest.mark.slow
+def test_gt_positions_from_the_map(positioned: Path, small_queries: Path, tmp_path: Path) -> None:
+    """Query positions against the map's own: within 1 m of a reference 2 m apart is that reference alone."""
+    (tmp_path / "q.csv").write_text("x,y\n" + "".join(f"5.0,{2.0 * i + 0.5}\n" for i in range(24)))
+    a = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt-positions", "map",
+            tmp_path / "q.csv", "--radius", "1", "--modes", "dtw", "--tolerance", "0", "--json", tmp_path / "a.json")
+    assert a.returncode == 0, a.stderr
+    from vpr_edge.evaluation.streams import write_ground_truth
+
+    write_ground_truth(tmp_path / "gt.csv", [[i] for i in range(24)])
+    b = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt", tmp_path / "gt.csv",
+            "--modes", "dtw", "--tolerance", "0", "--json", tmp_path / "b.json")
+    ra, rb = (json.loads((tmp_path / f).read_text())["modes"]["dtw"] for f in ("a.json", "b.json"))
+    assert ra["recall_at_1"] == rb["recall_at_1"] and ra["auc"] == rb["auc"]
+    (tmp_path / "g.csv").write_text("lat,lon\n" + "1,1\n" * 24)
+    bad = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt-positions", "map", tmp_path / "g.csv")
+    assert bad.returncode == 2 and "map's frame" in bad.stderr

@@ -13,6 +13,7 @@ from vpr_edge.evaluation import Source, Truth, evaluate
 from vpr_edge.evaluation.run import default_matchers
 from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
 from vpr_edge.images import Frame
+from vpr_edge.map import load_map
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.threads import use_threads
 
@@ -40,7 +41,8 @@ def evaluate_cmd(
                                       "boolean (Q, R) .npy matrix (VPR_Tutorial's GThard/GTsoft)."),
     gt_positions: Optional[tuple[Path, Path]] = typer.Option(
         None, "--gt-positions", help="Ground truth from positions: REFS.csv QUERIES.csv with columns x,y "
-                                     "(metres) or lat,lon (degrees); see --radius."),
+                                     "(metres) or lat,lon (degrees); see --radius. REFS may be the word map: "
+                                     "the positions of the --map (built with --positions)."),
     radius: float = typer.Option(25.0, min=0.0, help="With --gt-positions: references within this many "
                                                     "metres of a query are correct."),
     modes: Optional[str] = typer.Option(None, help="Comma-separated matchers to run on the same "
@@ -58,6 +60,12 @@ def evaluate_cmd(
     json_text: Optional[str] = typer.Option(None, "--json", help="Write the figures as JSON here."),
     plot_text: Optional[str] = typer.Option(None, "--plot", help="Write all modes' PR curves to this PNG "
                                             "(needs matplotlib: the plot extra)."),
+    matrix_text: Optional[str] = typer.Option(None, "--plot-matrix", help="Write the similarity matrix with the "
+                                              "ground truth and each mode's answers over it to this PNG (plot "
+                                              "extra)."),
+    route_text: Optional[str] = typer.Option(None, "--plot-route", help="Write the route (a map built with "
+                                             "--positions) with each mode's answers, correct / wrong / lost, to "
+                                             "this PNG (plot extra)."),
     similarity_text: Optional[str] = typer.Option(None, "--save-similarity",
                                                   help="Also save the (Q, R) similarity matrix (.npy)."),
     model: Optional[Path] = typer.Option(None, help="With --map: the map's model, if not where it was."),
@@ -90,16 +98,19 @@ def evaluate_cmd(
             matchers = {n: m.with_params(window=window) if "window" in m.params else m for n, m in matchers.items()}
         if param:
             matchers = param_options_for_all(matchers, param)
-        json_out, plot_out, save_similarity = (output_path(t) if t else None
-                                               for t in (json_text, plot_text, similarity_text))
-        outputs = {"--json": json_out, "--plot": plot_out, "--save-similarity": save_similarity}
+        json_out, plot_out, save_similarity, matrix_out, route_out = (
+            output_path(t) if t else None for t in (json_text, plot_text, similarity_text, matrix_text, route_text))
+        outputs = {"--json": json_out, "--plot": plot_out, "--save-similarity": save_similarity,
+                   "--plot-matrix": matrix_out, "--plot-route": route_out}
         for target in outputs.values():
             if target:
                 check_writable(target)
         check_not_input(outputs, [map_path, queries, similarity, refs, gt, model,
                                   *(gt_positions or ())])
-        if plot_out:
+        if plot_out or matrix_out or route_out:
             report.require_matplotlib()
+        if route_out and (map_path is None or load_map(map_path, mmap=True).positions is None):
+            raise VprError(f"{map_path or route_out}: --plot-route needs a map built with --positions")
         use_threads(threads)
 
         def skip(frame: Frame) -> None:
@@ -116,5 +127,10 @@ def evaluate_cmd(
         typer.echo(report.table(result.reports))
         if json_out:
             report.write_json(json_out, sim.shape[0], sim.shape[1], result.reports, tolerance)
+        title = f"{source.name} ({sim.shape[0]} queries, {sim.shape[1]} refs)"
         if plot_out:
-            report.plot(plot_out, result.reports, f"{source.name} ({sim.shape[0]} queries, {sim.shape[1]} refs)")
+            report.plot(plot_out, result.reports, title)
+        if matrix_out:
+            report.plot_matrix(matrix_out, sim, result.truth, result.reports, title)
+        if route_out:
+            report.plot_route(route_out, result.positions, result.truth, result.reports, title)

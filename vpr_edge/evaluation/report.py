@@ -1,13 +1,18 @@
-"""Evaluation reports: the stdout table, the ``--json`` file and the ``--plot`` PR-curve figure."""
+"""Evaluation reports: the stdout table, the ``--json`` file, and figures: the PR curves (``--plot``), the
+similarity matrix with each mode's answers (``--plot-matrix``) and the route with each answer's place
+(``--plot-route``)."""
 from __future__ import annotations
 
 import json
 import os
 from collections.abc import Sequence
 
+import numpy as np
+
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation.scoring import ModeReport
 from vpr_edge.files import atomic_output
+from vpr_edge.positions import Positions
 
 _COLUMNS = ("R@1", "R@5", "R@10", "AUC", "AP", "P@R=1", "R@P=1", "med.err", "lost-off", "lost-on", "lock", "exit",
             "ms/frame")
@@ -87,3 +92,79 @@ def plot(path: str | os.PathLike[str], reports: dict[str, ModeReport], title: st
     with atomic_output(path) as tmp:
         fig.savefig(tmp, format="png")
     plt.close(fig)
+
+
+_STYLE = {"correct": ("tab:green", "o"), "wrong": ("tab:red", "x"), "lost": ("0.6", ".")}
+
+
+def _save(fig, path: str | os.PathLike[str]) -> None:
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+
+
+def plot_matrix(path: str | os.PathLike[str], sim: np.ndarray, truth: np.ndarray,
+                reports: dict[str, ModeReport], title: str) -> None:
+    """The (Q, R) similarity matrix (queries down, references across) with the ground truth's correct
+    references outlined and each mode's answers over it (lost frames left out), as SeqSLAM users look at a
+    run. One PNG, written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    q, r = sim.shape
+    fig, ax = plt.subplots(figsize=(min(12.0, 3.0 + r / 40), min(12.0, 2.5 + q / 40)), dpi=120)
+    ax.imshow(sim, aspect="auto", cmap="viridis", interpolation="nearest")
+    tq, tr = np.nonzero(truth >= 0)
+    ax.scatter(truth[tq, tr], tq, s=6, facecolors="none", edgecolors="white", linewidths=0.5, label="correct")
+    markers = "o^sDv<>p*h"
+    for k, (name, rep) in enumerate(reports.items()):
+        if rep.refs is None:
+            continue
+        keep = ~rep.lost
+        ax.scatter(rep.refs[keep], np.flatnonzero(keep), s=8, marker=markers[k % len(markers)], linewidths=0.4,
+                   label=f"{name} (lost: {int(rep.lost.sum())})")
+    ax.set_xlabel("reference")
+    ax.set_ylabel("query frame")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7, loc="upper left", markerscale=1.5)
+    _save(fig, path)
+
+
+def plot_route(path: str | os.PathLike[str], positions: Positions, truth: np.ndarray,
+               reports: dict[str, ModeReport], title: str) -> None:
+    """The route from the map's positions, and per mode (one panel each) every frame's answer at its place:
+    green correct, red wrong, grey lost (drawn at the frame's true place, where it has one). One PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    shown = {n: r for n, r in reports.items() if r.refs is not None}
+    cols = min(3, len(shown)) or 1
+    rows = -(-len(shown) // cols) or 1
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 4.0 * rows), dpi=120, squeeze=False)
+    xy = positions.coords[:, ::-1] if positions.geo else positions.coords     # lon across, lat up
+    first = truth[:, 0]
+    for ax, (name, rep) in zip(axes.flat, shown.items()):
+        ax.plot(xy[:, 0], xy[:, 1], color="0.8", linewidth=2, zorder=0, label="route")
+        kinds = {"correct": rep.correct & ~rep.lost, "wrong": ~rep.correct & ~rep.lost,
+                 "lost": rep.lost & (first >= 0)}
+        for kind, mask in kinds.items():
+            at = rep.refs[mask] if kind != "lost" else first[mask]
+            color, marker = _STYLE[kind]
+            ax.scatter(xy[at, 0], xy[at, 1], s=10, c=color, marker=marker, label=f"{kind} {int(mask.sum())}",
+                       zorder=2)
+        ax.set_title(name, fontsize=9)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel("lon (deg)" if positions.geo else "x (m)")
+        ax.set_ylabel("lat (deg)" if positions.geo else "y (m)")
+        ax.legend(fontsize=7)
+    for ax in list(axes.flat)[len(shown):]:
+        ax.axis("off")
+    fig.suptitle(title, fontsize=9)
+    _save(fig, path)

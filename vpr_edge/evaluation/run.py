@@ -13,6 +13,7 @@ from vpr_edge.errors import VprError
 from vpr_edge.evaluation import sources
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
 from vpr_edge.matchers import MATCHERS, Matcher, get_matcher
+from vpr_edge.positions import Positions
 
 PathLike = str | os.PathLike[str]
 
@@ -56,12 +57,22 @@ class Truth:
     positions: tuple[PathLike, PathLike] | None = None
     radius: float = 25.0
 
-    def load(self) -> tuple[np.ndarray, tuple[int, ...] | None]:
-        """(Q, T) padded correct references, and the (Q, R) shape of a matrix file (else None)."""
+    def load(self, map_positions: Positions | None = None) -> tuple[np.ndarray, tuple[int, ...] | None]:
+        """(Q, T) padded correct references, and the (Q, R) shape of a matrix file (else None). With
+        ``positions`` ("map", QUERIES.csv) the references' positions are ``map_positions`` (the map's own)."""
         from vpr_edge.evaluation import truth
 
         if (self.gt is None) == (self.positions is None):
             raise VprError("give ground truth: --gt FILE (.csv or .npy) or --gt-positions REFS.csv QUERIES.csv")
+        if self.positions is not None and str(self.positions[0]) == "map":
+            if map_positions is None:
+                raise VprError("--gt-positions map ...: the references' positions come from --map, which must be "
+                               "built with --positions")
+            queries = truth.read_positions(self.positions[1])
+            if queries.frame != map_positions.frame:
+                raise VprError(f"{self.positions[1]}: positions must be in the map's frame ({map_positions.frame}: "
+                               f"{' and '.join(('lat', 'lon') if map_positions.geo else ('x', 'y'))})")
+            return truth.within(queries, map_positions, self.radius), None
         if self.positions is not None:
             return truth.from_positions(self.positions[0], self.positions[1], self.radius), None
         if Path(self.gt).suffix.lower() == ".npy":
@@ -83,6 +94,8 @@ class Evaluation:
     n_mapped: int
     tolerance: int
     encode_ms: float
+    truth: np.ndarray | None = None           # (Q, T) the rows scored (frames that did not decode left out)
+    positions: Positions | None = None        # the references', from a map built with positions
 
 
 def default_matchers(source: Source) -> dict[str, Matcher]:
@@ -122,7 +135,12 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     with_svm = any(m.scores == "svm" for m in chosen.values())
     if with_svm and source.map is None:
         raise VprError("mode svm needs --map (a map built with build-map --svm)")
-    rows, gt_shape = truth.load()
+    map_positions = None
+    if source.map is not None and truth.positions is not None:
+        from vpr_edge.map import load_map
+
+        map_positions = load_map(source.map, mmap=True).positions
+    rows, gt_shape = truth.load(map_positions)
     if source.similarity is not None:
         sims = sources.from_file(source.similarity)
     elif source.pixels:
@@ -139,4 +157,5 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     by_kind = {"cosine": sims.cosine, "svm": sims.svm}
     reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions)
                for name, m in chosen.items()}
-    return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms)
+    return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms, rows,
+                      sims.positions)

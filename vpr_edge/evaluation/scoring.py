@@ -37,6 +37,9 @@ class ModeReport:
     lock_frames: tuple[float, ...] = ()
     exit_frames: tuple[float, ...] = ()
     metres: dict[str, float] | None = None    # with a map's positions: ``metrics.metre_summary``
+    refs: np.ndarray | None = field(default=None, repr=False, compare=False)      # (Q,) each frame's answer
+    lost: np.ndarray | None = field(default=None, repr=False, compare=False)      # (Q,) bool
+    correct: np.ndarray | None = field(default=None, repr=False, compare=False)   # (Q,) bool, within tolerance
 
     def as_json(self) -> dict:
         """The keys of ``evaluate --json`` (NaN as null)."""
@@ -86,4 +89,5 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
                       share(~mapped), share(mapped), match_ms, curve, lock_frames=tuple(lock.tolist()),
                       exit_frames=tuple(exits.tolist()) if threshold is not None else (),
                       metres=None if positions is None else metrics.metre_summary(
-                          metrics.metre_errors(result.refs, truth, positions.coords, positions.geo), lost))
+                          metrics.metre_errors(result.refs, truth, positions.coords, positions.geo), lost),
+                      refs=result.refs, lost=lost, correct=correct[:, 0])
