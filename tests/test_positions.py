@@ -299,3 +299,48 @@ def test_gt_positions_from_the_map(positioned: Path, small_queries: Path, tmp_pa
     (tmp_path / "g.csv").write_text("lat,lon\n" + "1,1\n" * 24)
     bad = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt-positions", "map", tmp_path / "g.csv")
     assert bad.returncode == 2 and "map's frame" in bad.stderr
+
+
+GPX = """<?xml version="1.0" encoding="UTF-8"?>
+<gpx version="1.1" creator="test" xmlns="http://www.topografix.com/GPX/1/1"><trk><trkseg>
+<trkpt lat="60.0" lon="10.0"><ele>100</ele><time>2026-01-01T00:00:00Z</time></trkpt>
+<trkpt lat="60.001" lon="10.0"><ele>110</ele><time>2026-01-01T00:00:10Z</time></trkpt>
+<trkpt lat="60.001" lon="10.002"><time>2026-01-01T00:00:20Z</time></trkpt>
+</trkseg></trk></gpx>
+"""
+T_GPX = 1767225600.0     # 2026-01-01T00:00:00Z
+
+
+def test_gpx_track_matched_by_time_worked_by_hand(tmp_path: Path) -> None:
+    pytest.importorskip("gpxpy")
+    from vpr_edge.positions import from_gpx
+
+    (tmp_path / "t.gpx").write_text(GPX)
+    p = from_gpx(tmp_path / "t.gpx", np.array([0.0, 5.0, 10.0, 15.0]) + T_GPX)
+    np.testing.assert_allclose(p.coords, [[60.0, 10.0], [60.0005, 10.0], [60.001, 10.0], [60.001, 10.001]])
+    np.testing.assert_allclose(p.altitude[:3], [100, 105, 110]) and p.frame == "wgs84"
+    assert p.interpolated == 2
+    with pytest.raises(VprError, match="the track"):
+        from_gpx(tmp_path / "t.gpx", np.array([T_GPX - 1.0]))
+    (tmp_path / "bad.gpx").write_text("<gpx><trk>")
+    with pytest.raises(VprError, match="bad.gpx: not a readable GPX track"):
+        from_gpx(tmp_path / "bad.gpx", np.array([T_GPX]))
+
+
+@pytest.mark.slow
+def test_build_map_positions_from_gpx(tmp_path: Path, small_refs: Path) -> None:
+    pytest.importorskip("gpxpy")
+    (tmp_path / "t.gpx").write_text(GPX)
+    names = sorted(p.name for p in small_refs.glob("*.jpg"))[:5]
+    refs = tmp_path / "refs"
+    refs.mkdir()
+    for n in names:
+        shutil.copy(small_refs / n, refs / n)
+    (tmp_path / "s.csv").write_text("frame,stamp\n" + "".join(f"{n},{T_GPX + 2.5 * i}\n" for i, n in enumerate(names)))
+    no_time = run("build-map", refs, "-o", tmp_path / "m.npz", "--positions", tmp_path / "t.gpx")
+    assert no_time.returncode == 2 and "--timestamps" in no_time.stderr
+    ok = run("build-map", refs, "-o", tmp_path / "m.npz", "--components", "2", "--positions", tmp_path / "t.gpx",
+             "--timestamps", tmp_path / "s.csv")
+    assert ok.returncode == 0, ok.stderr
+    np.testing.assert_allclose(load_map(tmp_path / "m.npz").positions.coords[:, 0],
+                               [60.0, 60.00025, 60.0005, 60.00075, 60.001])

@@ -249,3 +249,37 @@ def from_exif(files: Sequence[Path]) -> Positions:
     where = str(Path(files[0]).parent) if files else "references"
     coords[~np.isfinite(coords).all(axis=1)] = np.nan
     return _filled(coords, "wgs84", heading, altitude, f"{where} (EXIF GPS)")
+
+
+def from_gpx(path: str | os.PathLike[str], stamps: np.ndarray) -> Positions:
+    """Positions at the times ``stamps`` (Unix seconds) from a GPX track (every point of every track and
+    segment with a time; ``gpxpy``, the ``geo`` extra): latitude, longitude and elevation interpolated
+    linearly in time between the points either side (with a warning for those between points). VprError
+    for a file that does not parse, a track without timed points, or a stamp outside the track's time."""
+    path = Path(path)
+    try:
+        import gpxpy
+    except ImportError:
+        raise VprError(f"{path}: reading GPX needs gpxpy: pip install 'vpr-edge[geo]'") from None
+    try:
+        with open(path) as f:
+            gpx = gpxpy.parse(f)
+    except (OSError, UnicodeDecodeError) as e:
+        raise VprError(f"{path}: cannot read the GPX track ({getattr(e, 'strerror', None) or e})") from None
+    except Exception as e:   # gpxpy raises its own GPXException and XML errors
+        raise VprError(f"{path}: not a readable GPX track ({str(e).splitlines()[0][:100]})") from None
+    points = [(p.time.timestamp(), p.latitude, p.longitude, np.nan if p.elevation is None else p.elevation)
+              for track in gpx.tracks for seg in track.segments for p in seg.points if p.time is not None]
+    if not points:
+        raise VprError(f"{path}: no track point with a time (a GPX track is matched to frames by time)")
+    fix = np.array(sorted(points), np.float64)
+    if stamps.min() < fix[0, 0] - 1e-6 or stamps.max() > fix[-1, 0] + 1e-6:
+        raise VprError(f"{path}: the frames span {stamps.min():.3f} to {stamps.max():.3f} s (Unix time) but the "
+                       f"track {fix[0, 0]:.3f} to {fix[-1, 0]:.3f} s")
+    coords = np.stack([np.interp(stamps, fix[:, 0], fix[:, k]) for k in (1, 2)], axis=1)
+    altitude = np.interp(stamps, fix[:, 0], fix[:, 3])
+    between = int((~np.isin(stamps, fix[:, 0])).sum())
+    if between:
+        warn(f"{path}: {between} of {len(stamps)} frames fall between track points; their positions are "
+             f"interpolated in time")
+    return Positions(coords, "wgs84", np.full(len(stamps), np.nan), altitude, between)

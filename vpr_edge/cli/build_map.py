@@ -66,10 +66,14 @@ def build_map_cmd(
                                                  "--append: the map's own unless given."),
     positions: Optional[str] = typer.Option(None, metavar="FILE|exif", help="Where each reference is: a CSV "
                                             "with x,y (metres) or lat,lon (degrees), optional heading and z/alt, "
-                                            "and a name column (or one row per reference, in order); or exif: "
+                                            "and a name column (or one row per reference, in order); a GPX "
+                                            "track (.gpx) matched by time (--timestamps, or a bag's); or exif: "
                                             "the images' GPS tags (the geo extra). References without a fix "
                                             "are placed between fixes. Stored in the map; localize then answers "
                                             "with positions."),
+    timestamps: Optional[Path] = typer.Option(None, help="With --positions TRACK.gpx and a folder: a CSV "
+                                              "frame,stamp giving each reference's time (Unix seconds), to match "
+                                              "the track by time."),
     topic: Optional[str] = typer.Option(None, help="REFS is a ROS 1/2 bag or MCAP file: its image topic "
                                         "(sensor_msgs/Image or CompressedImage; the ros extra)."),
     positions_topic: Optional[str] = typer.Option(None, help="With a bag: the NavSatFix or Odometry topic "
@@ -89,7 +93,7 @@ def build_map_cmd(
                                whiten=whiten, alpha=alpha, tfidf=tfidf, max_descriptors=max_descriptors,
                                fit_iterations=fit_iterations, svm=svm, seed=seed,
                                save_codebook=output_path(save_codebook) if save_codebook else None,
-                               storage=_value(storage), positions=positions, topic=topic,
+                               storage=_value(storage), positions=positions, timestamps=timestamps, topic=topic,
                                positions_topic=positions_topic, append=append, batch_size=batch_size, threads=threads)
         plan = plan_map(refs, output_path(out), options)
         with typer.progressbar(length=len(plan.files), label="extracting", file=sys.stderr,

@@ -7,17 +7,19 @@ import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
+
 from vpr_edge.bags import bag_positions, extract_images, is_bag
 from vpr_edge.encoders import ENCODERS, Encoder, FitSettings, load_codebook
 from vpr_edge.errors import VprError, warn
 from vpr_edge.features import FrontEnd, make_front_end
 from vpr_edge.files import check_not_input, check_writable, writer_lock
-from vpr_edge.images import list_images
+from vpr_edge.images import list_images, read_stamps
 from vpr_edge.map.build import Progress, build_map
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map, save_map
 from vpr_edge.map.model import PlaceMap
-from vpr_edge.positions import Positions, from_exif
+from vpr_edge.positions import Positions, from_exif, from_gpx
 from vpr_edge.positions import read_csv as read_positions
 from vpr_edge.threads import use_threads
 
@@ -47,6 +49,7 @@ class BuildOptions:
     save_codebook: Path | None = None
     storage: str | None = None
     positions: str | None = None     # a CSV file, or "exif" for the images' GPS tags
+    timestamps: Path | None = None   # a folder's frames' times (frame,stamp CSV), for --positions track.gpx
     topic: str | None = None         # refs is a ROS bag: its image topic
     positions_topic: str | None = None   # ... and its NavSatFix / Odometry topic
     append: bool = False
@@ -105,7 +108,8 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
             check_writable(target)
     # (the map --append reads is also the one it replaces: its own input, by design)
     check_not_input({"--out": out, "--save-codebook": o.save_codebook},
-                    [refs, o.codebook, o.model, None if o.positions in (None, "exif") else o.positions])
+                    [refs, o.codebook, o.model, None if o.positions in (None, "exif") else o.positions,
+                     o.timestamps])
     bag = is_bag(refs)
     if not bag and (o.topic or o.positions_topic):
         raise VprError(f"{refs}: --topic and --positions-topic apply to a ROS bag or MCAP file")
@@ -114,10 +118,20 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     if bag and o.positions == "exif":
         raise VprError(f"{refs}: --positions exif reads image files; a bag's positions come from --positions-topic")
     files = [] if bag else list_images(refs)
+    gpx = o.positions is not None and o.positions.lower().endswith(".gpx")
+    if gpx and not bag and o.timestamps is None:
+        raise VprError(f"{o.positions}: a GPX track is matched to the frames by time: give --timestamps "
+                       f"FILE (frame,stamp in Unix seconds) for the folder {refs}")
+    if o.timestamps is not None and bag:
+        raise VprError(f"{o.timestamps}: a bag's images carry their own stamps; drop --timestamps")
+    if o.timestamps is not None and not gpx:
+        raise VprError(f"{o.timestamps}: --timestamps serves --positions TRACK.gpx; nothing else uses it here")
     base = load_map(out, mmap=True) if o.append else None
     positions = None
     if o.positions == "exif":
         positions = from_exif(files)
+    elif gpx and not bag:
+        positions = from_gpx(o.positions, np.asarray(read_stamps(o.timestamps, [f.name for f in files])))
     elif o.positions is not None and not bag:
         positions = read_positions(o.positions, [f.name for f in files])
     has_positions = positions is not None or bool(o.positions or o.positions_topic)
@@ -180,6 +194,8 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
         files, names, stamps = extract_images(refs, o.topic, Path(scratch.name))
         if o.positions_topic:
             positions = bag_positions(refs, o.positions_topic, stamps)
+        elif gpx:
+            positions = from_gpx(o.positions, stamps)
         elif o.positions:
             positions = read_positions(o.positions, names)
         if base is not None and positions is not None and positions.frame != base.positions.frame:
