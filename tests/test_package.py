@@ -7,8 +7,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 from vpr_edge.matchers import MATCHERS
 from vpr_edge.resources import DEFAULT_MODEL_FILE, SMALL_MODEL_FILE, bundled_model, copy_sample, sample_folder
 

@@ -294,6 +294,7 @@ def test_gt_positions_from_the_map(positioned: Path, small_queries: Path, tmp_pa
     write_ground_truth(tmp_path / "gt.csv", [[i] for i in range(24)])
     b = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt", tmp_path / "gt.csv",
             "--modes", "dtw", "--tolerance", "0", "--json", tmp_path / "b.json")
+    assert b.returncode == 0, b.stderr
     ra, rb = (json.loads((tmp_path / f).read_text())["modes"]["dtw"] for f in ("a.json", "b.json"))
     assert ra["recall_at_1"] == rb["recall_at_1"] and ra["auc"] == rb["auc"]
     (tmp_path / "g.csv").write_text("lat,lon\n" + "1,1\n" * 24)

@@ -316,6 +316,18 @@ def _describe(head: bytes, path: Path) -> str:
     return "unknown binary format"
 
 
+def read_csv_rows(path: str | os.PathLike[str], what: str) -> list[list[str]]:
+    """Every row of a CSV file (the header first); VprError ``path: cannot read WHAT (reason)`` for a missing,
+    unreadable or non-text file."""
+    import csv
+
+    try:
+        with open(path, newline="") as f:
+            return list(csv.reader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise VprError(f"{path}: cannot read {what} ({getattr(e, 'strerror', None) or e})") from None
+
+
 def file_sha256(path: str | os.PathLike[str]) -> str:
     """Hex SHA-256 of a file's bytes."""
     h = hashlib.sha256()

@@ -61,15 +61,12 @@ def _folder_frames(files: list[Path], stamps: list[float] | None = None) -> Iter
 def read_stamps(path: str | os.PathLike[str], names: list[str]) -> list[float]:
     """Each frame's time in seconds from a CSV with a header ``frame,stamp`` (``name`` for ``frame`` too),
     one row per image of the folder; VprError naming the file for a missing frame or a bad number."""
-    import csv
     import math
 
+    from vpr_edge.files import read_csv_rows
+
     path = Path(path)
-    try:
-        with open(path, newline="") as f:
-            rows = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError) as e:
-        raise VprError(f"{path}: cannot read timestamps ({getattr(e, 'strerror', None) or e})") from None
+    rows = read_csv_rows(path, "timestamps")
     head = [c.strip().lower() for c in rows[0]] if rows else []
     key = next((c for c in ("frame", "name") if c in head), None)
     if key is None or "stamp" not in head:

@@ -7,7 +7,6 @@ in metres; NaN where unknown. Distances are Euclidean (local) or great-circle (h
 """
 from __future__ import annotations
 
-import csv
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -16,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError, warn
+from vpr_edge.files import read_csv_rows
 
 EARTH_RADIUS_M = 6_371_008.8
 FRAMES = {"local": ("x", "y"), "wgs84": ("lat", "lon")}
@@ -147,11 +147,7 @@ def read_csv(path: str | os.PathLike[str], names: Sequence[str] | None = None) -
     coordinates, or a reference no row names, has no fix: it is interpolated along the route's order between
     the fixes either side (with a warning); one before the first fix or after the last is an error."""
     path = Path(path)
-    try:
-        with open(path, newline="") as f:
-            rows = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError) as e:
-        raise VprError(f"{path}: cannot read positions ({getattr(e, 'strerror', None) or e})") from None
+    rows = read_csv_rows(path, "positions")
     head = [c.strip().lower() for c in rows[0]] if rows else []
     found = [frame for frame, cols in FRAMES.items() if all(c in head for c in cols)]
     if len(found) != 1:

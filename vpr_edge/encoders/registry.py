@@ -1,6 +1,8 @@
 """Every encoder by name: build-map's ``--encoding``, the map file and the tests read this table."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from vpr_edge.encoders.base import Encoder, FitSettings, READS_CODEBOOK

@@ -10,14 +10,13 @@ references, -1 as padding (a row of -1: the query's place is not in the map).
 """
 from __future__ import annotations
 
-import csv
 import os
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 
 from vpr_edge.errors import VprError
+from vpr_edge.files import read_csv_rows
 from vpr_edge.positions import Positions, distances
 from vpr_edge.positions import read_csv as read_positions
 
@@ -34,11 +33,7 @@ def pad(sets: Sequence[Sequence[int]]) -> np.ndarray:
 
 def load_csv(path: str | os.PathLike[str]) -> np.ndarray:
     """The project's ground-truth CSV -> (Q, T) padded truth."""
-    try:
-        with open(path, newline="") as f:
-            rows = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError) as e:
-        raise VprError(f"{path}: cannot read ground truth ({getattr(e, 'strerror', None) or e})") from None
+    rows = read_csv_rows(path, "ground truth")
     if not rows or [c.strip() for c in rows[0][:2]] != ["query", "references"]:
         raise VprError(f"{path}: not a ground-truth CSV (expected the header 'query,references')")
     out: dict[int, list[int]] = {}
