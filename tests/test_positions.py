@@ -345,3 +345,48 @@ def test_build_map_positions_from_gpx(tmp_path: Path, small_refs: Path) -> None:
     assert ok.returncode == 0, ok.stderr
     np.testing.assert_allclose(load_map(tmp_path / "m.npz").positions.coords[:, 0],
                                [60.0, 60.00025, 60.0005, 60.00075, 60.001])
+
+
+def test_isotonic_against_scikit_learn_and_by_hand() -> None:
+    from sklearn.isotonic import IsotonicRegression
+
+    from vpr_edge.calibration import isotonic
+
+    x, y = isotonic(np.array([1.0, 2.0, 3.0, 4.0]), np.array([0, 1, 0, 1]))
+    np.testing.assert_allclose(x, [1.0, 2.5, 4.0]) and np.testing.assert_allclose(y, [0.0, 0.5, 1.0])
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        s = rng.normal(size=60)
+        c = rng.random(60) < 1 / (1 + np.exp(-2 * s))
+        bx, by = isotonic(s, c)
+        want = IsotonicRegression().fit(s, c.astype(float)).predict(np.sort(s))
+        assert (np.diff(by) >= 0).all() and (np.diff(bx) > 0).all()
+        np.testing.assert_allclose(np.unique(by.round(9)), np.unique(want.round(9)))   # the same optimum
+
+
+@pytest.mark.slow
+def test_calibrated_confidence_end_to_end(positioned: Path, small_queries: Path, tmp_path: Path) -> None:
+    from vpr_edge.evaluation.streams import write_ground_truth
+
+    write_ground_truth(tmp_path / "gt.csv", [[i] for i in range(24)])
+    a = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt", tmp_path / "gt.csv",
+            "--modes", "single,stream", "--save-calibration", tmp_path / "cal.json")
+    assert a.returncode == 0, a.stderr
+    out = run("localize", "-m", positioned / "map.npz", "-s", small_queries, "--mode", "single", "--calibration",
+              tmp_path / "cal.json", "--format", "jsonl")
+    assert out.returncode == 0, out.stderr
+    lines = [json.loads(x) for x in out.stdout.splitlines()]
+    conf = [(m["score"], m["confidence"]) for m in lines]
+    assert all(0.0 <= c <= 1.0 for _, c in conf)
+    ordered = sorted(conf)
+    assert all(b[1] >= a[1] - 1e-9 for a, b in zip(ordered, ordered[1:]))   # never less confident at a higher score
+    plain = [json.loads(x) for x in run("localize", "-m", positioned / "map.npz", "-s", small_queries,
+                                        "--format", "jsonl").stdout.splitlines()]
+    assert all(m["confidence"] is None for m in plain)
+    (tmp_path / "bad.json").write_text('{"kind": "calibration", "schema": 1, "modes": {"stream": {"scores": [2, 1], '
+                                       '"confidence": [0.1, 0.2], "n": 2, "tolerance": 1}}}')
+    for f, problem in (("cal.json", "no calibration for mode dtw"), ("bad.json", "non-decreasing"),
+                       ("gt.csv", "not a vpr-edge calibration")):
+        bad = run("localize", "-m", positioned / "map.npz", "-s", small_queries, "--mode",
+                  "dtw" if f == "cal.json" else "stream", "--calibration", tmp_path / f)
+        assert bad.returncode == 2 and problem in bad.stderr and bad.stderr.count("\n") == 1, bad.stderr

@@ -40,7 +40,8 @@ class Match:
     positions (``x``/``y`` metres or ``lat``/``lon`` degrees, the other pair None; ``heading`` degrees or None;
     ``along_m``, metres along the route from its first reference; all None when lost or without positions),
     interpolated between references where the matcher resolves finer than one reference, a score (higher =
-    more confident; its meaning per mode: docs/matchers.md) and the lost flag."""
+    more confident; its meaning per mode: docs/matchers.md), the ``confidence`` (the probability that the
+    answer is right, from a calibration of the mode; None without one) and the lost flag."""
 
     frame_index: int
     frame: str
@@ -49,6 +50,7 @@ class Match:
     score: float
     lost: bool
     stamp: float | None = None
+    confidence: float | None = None
     x: float | None = None
     y: float | None = None
     lat: float | None = None
@@ -62,7 +64,7 @@ class Match:
 
 
 FIELDS = ("frame_index", "frame", "stamp", "ref_index", "ref", "x", "y", "lat", "lon", "heading", "along_m",
-          "score", "lost")
+          "score", "confidence", "lost")
 
 
 def encode_images(images: Sequence[np.ndarray], place_map: PlaceMap, front: FrontEnd) -> np.ndarray:
@@ -106,7 +108,8 @@ class Localizer:
 
     def __init__(self, map_path: str | os.PathLike[str], *, model: str | os.PathLike[str] | None = None,
                  mode: str = "stream", params: dict | None = None, min_confidence: float | None = None,
-                 threads: int | None = None, coarse: bool | None = None) -> None:
+                 threads: int | None = None, coarse: bool | None = None,
+                 calibration: str | os.PathLike[str] | None = None) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
         self.map = load_map(map_path, mmap=True)
         ort_threads = 0 if threads is None else use_threads(threads)
@@ -116,6 +119,11 @@ class Localizer:
         if min_confidence is not None and not math.isfinite(min_confidence):
             raise VprError(f"--min-confidence {min_confidence}: the lost threshold must be a finite number")
         self.threshold = self.matcher.min_confidence if min_confidence is None else min_confidence
+        self._calibration = None
+        if calibration is not None:
+            from vpr_edge.calibration import load
+
+            self._calibration = load(calibration, self.matcher.name)
         self._online = self.matcher.stream(len(self.map.names)) if self.matcher.online else None
         if coarse is None:
             coarse = len(self.map.names) >= COARSE_MIN_REFS
@@ -159,13 +167,14 @@ class Localizer:
         lost = self.threshold is not None and score < self.threshold
         if lost:
             return Match(index, name, None, None, score, True, stamp)
+        confidence = None if self._calibration is None else self._calibration(score)
         place: dict = {}
         if self.map.positions is not None:
             coords, heading, along = self.map.positions.at(ref if where is None else where)
             keys = ("lat", "lon") if self.map.positions.geo else ("x", "y")
             place = {keys[0]: float(coords[0]), keys[1]: float(coords[1]), "along_m": along,
                      "heading": None if heading != heading else heading}
-        return Match(index, name, ref, self.map.names[ref], score, False, stamp, **place)
+        return Match(index, name, ref, self.map.names[ref], score, False, stamp, confidence, **place)
 
     def push(self, rgb: np.ndarray, name: str = "", stamp: float | None = None) -> Match:
         """Localise the next frame of the stream (RGB uint8 (H, W, 3), taken at ``stamp`` seconds, which the

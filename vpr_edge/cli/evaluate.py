@@ -66,6 +66,9 @@ def evaluate_cmd(
     route_text: Optional[str] = typer.Option(None, "--plot-route", help="Write the route (a map built with "
                                              "--positions) with each mode's answers, correct / wrong / lost, to "
                                              "this PNG (plot extra)."),
+    calibration_text: Optional[str] = typer.Option(None, "--save-calibration", help="Write each mode's "
+                                                   "calibration here (score -> probability the answer is right, "
+                                                   "on these frames), for localize --calibration."),
     similarity_text: Optional[str] = typer.Option(None, "--save-similarity",
                                                   help="Also save the (Q, R) similarity matrix (.npy)."),
     model: Optional[Path] = typer.Option(None, help="With --map: the map's model, if not where it was."),
@@ -98,10 +101,11 @@ def evaluate_cmd(
             matchers = {n: m.with_params(window=window) if "window" in m.params else m for n, m in matchers.items()}
         if param:
             matchers = param_options_for_all(matchers, param)
-        json_out, plot_out, save_similarity, matrix_out, route_out = (
-            output_path(t) if t else None for t in (json_text, plot_text, similarity_text, matrix_text, route_text))
+        json_out, plot_out, save_similarity, matrix_out, route_out, calibration_out = (
+            output_path(t) if t else None
+            for t in (json_text, plot_text, similarity_text, matrix_text, route_text, calibration_text))
         outputs = {"--json": json_out, "--plot": plot_out, "--save-similarity": save_similarity,
-                   "--plot-matrix": matrix_out, "--plot-route": route_out}
+                   "--plot-matrix": matrix_out, "--plot-route": route_out, "--save-calibration": calibration_out}
         for target in outputs.values():
             if target:
                 check_writable(target)
@@ -128,6 +132,11 @@ def evaluate_cmd(
         if json_out:
             report.write_json(json_out, sim.shape[0], sim.shape[1], result.reports, tolerance)
         title = f"{source.name} ({sim.shape[0]} queries, {sim.shape[1]} refs)"
+        if calibration_out:
+            from vpr_edge import calibration
+
+            calibration.write(calibration_out, {n: calibration.fit(r.scores, r.correct, tolerance)
+                                                for n, r in result.reports.items()}, source.name)
         if plot_out:
             report.plot(plot_out, result.reports, title)
         if matrix_out:

@@ -101,6 +101,9 @@ def localize_cmd(
         None, help="Frames scoring below this are reported lost (ref_index -1). Default: the mode's own "
                    "(stream: %.1f; other modes: never lost)." % MATCHERS["stream"].min_confidence),
     param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE", help=PARAM_HELP),
+    calibration: Optional[Path] = typer.Option(None, help="A calibration (evaluate --save-calibration on a "
+                                               "labelled drive of this route): each line's confidence is then "
+                                               "the probability that its answer is right."),
     list_params: bool = LIST_PARAMS,
     out_text: Optional[str] = typer.Option(None, "--out", "-o", help="Write results here instead of stdout "
                                            "(written to a temporary file, renamed when the stream is done; "
@@ -123,7 +126,7 @@ def localize_cmd(
         out = output_path(out_text) if out_text else None
         if out:
             check_writable(out)
-            check_not_input({"--out": out}, [map_path, stream, model, timestamps])
+            check_not_input({"--out": out}, [map_path, stream, model, timestamps, calibration])
         else:
             with _writing("stdout"):
                 sys.stdout.write("")      # a closed standard output fails here, before any work
@@ -135,7 +138,7 @@ def localize_cmd(
         params = with_param_options(get_matcher(mode.value), params, param or [])
         frames, count = open_stream(stream, timestamps, topic)
         localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
-                              min_confidence=min_confidence, threads=threads)
+                              min_confidence=min_confidence, threads=threads, calibration=calibration)
         chosen = fmt.value if fmt else (suffix_fmt or "csv")
         skipped = 0
 

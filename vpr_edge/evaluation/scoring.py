@@ -40,6 +40,7 @@ class ModeReport:
     refs: np.ndarray | None = field(default=None, repr=False, compare=False)      # (Q,) each frame's answer
     lost: np.ndarray | None = field(default=None, repr=False, compare=False)      # (Q,) bool
     correct: np.ndarray | None = field(default=None, repr=False, compare=False)   # (Q,) bool, within tolerance
+    scores: np.ndarray | None = field(default=None, repr=False, compare=False)    # (Q,) each answer's score
 
     def as_json(self) -> dict:
         """The keys of ``evaluate --json`` (NaN as null)."""
@@ -90,4 +91,4 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
                       exit_frames=tuple(exits.tolist()) if threshold is not None else (),
                       metres=None if positions is None else metrics.metre_summary(
                           metrics.metre_errors(result.refs, truth, positions.coords, positions.geo), lost),
-                      refs=result.refs, lost=lost, correct=correct[:, 0])
+                      refs=result.refs, lost=lost, correct=correct[:, 0], scores=result.scores)

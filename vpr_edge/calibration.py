@@ -1,0 +1,107 @@
+"""A confidence with one meaning in every mode: the probability that an answer is right, given its score,
+measured on a labelled drive of the route (``evaluate --save-calibration``) and applied on the vehicle
+(``localize --calibration``).
+
+Each mode's score means something of its own (a cosine, a path margin, a trajectory's evidence), so no
+threshold carries from one mode, or one route, to another. Calibration maps a mode's score to the share of
+answers with that score that were right (within the evaluation's tolerance; an answer for a place not in the
+map is wrong), fitted by isotonic regression (pool-adjacent-violators: the best non-decreasing fit in least
+squares), so a higher score never means a lower confidence. Between the fitted scores the confidence is
+interpolated linearly; beyond them it is the end value.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from vpr_edge.errors import VprError
+from vpr_edge.files import atomic_output
+
+CALIBRATION_SCHEMA = 1
+
+
+def isotonic(scores: np.ndarray, correct: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pool-adjacent-violators over the answers sorted by score: -> (block scores (B,), confidence (B,))
+    with confidence non-decreasing; each block's score is the mean of its answers' scores, its confidence
+    their share of right answers."""
+    order = np.argsort(scores, kind="stable")
+    s, y = np.asarray(scores, np.float64)[order], np.asarray(correct, np.float64)[order]
+    means: list[float] = []
+    weights: list[float] = []
+    sums: list[float] = []
+    for value, score in zip(y, s):
+        means.append(value)
+        weights.append(1.0)
+        sums.append(score)
+        while len(means) > 1 and means[-2] > means[-1]:     # a violation: pool the last two blocks
+            w = weights[-2] + weights[-1]
+            means[-2] = (means[-2] * weights[-2] + means[-1] * weights[-1]) / w
+            sums[-2] += sums[-1]
+            weights[-2] = w
+            del means[-1], weights[-1], sums[-1]
+    w = np.asarray(weights)
+    return np.asarray(sums) / w, np.asarray(means)
+
+
+@dataclass(frozen=True)
+class Curve:
+    """One mode's calibration: confidence (B,) at block scores (B,), from ``n`` answers at ``tolerance``."""
+
+    scores: np.ndarray
+    confidence: np.ndarray
+    n: int
+    tolerance: int
+
+    def __call__(self, score: float) -> float:
+        """The probability that an answer with this score is right, in [0, 1]."""
+        return float(np.interp(score, self.scores, self.confidence))
+
+
+def fit(scores: np.ndarray, correct: np.ndarray, tolerance: int) -> Curve:
+    x, y = isotonic(scores, correct)
+    return Curve(x, y, len(scores), tolerance)
+
+
+def write(path: str | os.PathLike[str], curves: dict[str, Curve], source: str) -> None:
+    """The calibration file: JSON with ``kind``, ``schema`` and per mode its curve, written atomically."""
+    doc = {"kind": "calibration", "schema": CALIBRATION_SCHEMA, "source": source,
+           "modes": {name: {"scores": c.scores.round(6).tolist(), "confidence": c.confidence.round(6).tolist(),
+                            "n": c.n, "tolerance": c.tolerance} for name, c in curves.items()}}
+    with atomic_output(path) as tmp:
+        tmp.write_text(json.dumps(doc, indent=1) + "\n")
+
+
+def load(path: str | os.PathLike[str], mode: str) -> Curve:
+    """Mode ``mode``'s curve from a calibration file, every field checked (VprError naming the file)."""
+    try:
+        with open(path) as f:
+            doc = json.load(f)
+    except (OSError, UnicodeDecodeError) as e:
+        raise VprError(f"{path}: cannot read the calibration ({getattr(e, 'strerror', None) or e})") from None
+    except json.JSONDecodeError as e:
+        raise VprError(f"{path}: not a vpr-edge calibration (not JSON: {e})") from None
+    if not isinstance(doc, dict) or doc.get("kind") != "calibration":
+        raise VprError(f"{path}: not a vpr-edge calibration (evaluate --save-calibration writes one)")
+    if doc.get("schema") != CALIBRATION_SCHEMA:
+        raise VprError(f"{path}: calibration schema {doc.get('schema')} is not supported (this vpr-edge reads "
+                       f"{CALIBRATION_SCHEMA})")
+    modes = doc.get("modes")
+    if not isinstance(modes, dict) or mode not in modes:
+        have = ", ".join(modes) if isinstance(modes, dict) else "none"
+        raise VprError(f"{path}: no calibration for mode {mode} (it has {have}); run evaluate --modes {mode} "
+                       f"--save-calibration")
+    m = modes[mode]
+    try:
+        x, y = np.asarray(m["scores"], np.float64), np.asarray(m["confidence"], np.float64)
+        n, tolerance = int(m["n"]), int(m["tolerance"])
+    except (KeyError, TypeError, ValueError):
+        raise VprError(f"{path}: mode {mode}'s calibration is malformed (scores, confidence, n, tolerance)") from None
+    ok = (x.ndim == 1 and x.shape == y.shape and len(x) > 0 and np.isfinite(x).all() and np.isfinite(y).all()
+          and (np.diff(x) >= 0).all() and (np.diff(y) >= 0).all() and (y >= 0).all() and (y <= 1).all())
+    if not ok or not math.isfinite(n):
+        raise VprError(f"{path}: mode {mode}'s calibration is not a non-decreasing curve of confidences in [0, 1]")
+    return Curve(x, y, n, tolerance)
