@@ -76,6 +76,10 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     (w / "pos_two.csv").write_text("x,y,lat,lon\n" + "0,0,1,1\n" * 24)
     (w / "pos_bad.csv").write_text("x,y\n" + "0,north\n" * 24)
     (w / "stamps_short.csv").write_text("frame,stamp\n0000000.jpg,1.0\n")
+    (w / "track.gpx").write_text("<gpx></gpx>")
+    from test_bags import write_bag
+
+    write_bag(w / "d.bag", sorted(small_queries.glob("*.jpg"))[:2], "ros1")
     # damaged or hostile maps: metadata of the wrong shape, non-finite values, a compressed member
     for name, edit in {"meta_names": {"names": 5}, "meta_features": {"features": [1, 2]},
                        "meta_encoding": {"encoding": {"name": ["ifv"], "params": {}}},
@@ -151,6 +155,15 @@ CASES = [
     Case("bm-positions-missing", BM + " --positions {w}/nopos.csv", ("nopos.csv", "cannot read positions")),
     Case("bm-append-positions-to-plain-map", "build-map {w}/refs -o {w}/good.npz --append --positions {w}/pos_two.csv",
          ("pos_two.csv", "two frames")),
+    Case("loc-bag-no-rosbags", "localize -m {w}/good.npz -s {w}/d.bag --topic /camera/image",
+         ("d.bag", "vpr-edge[ros]"), hide=("rosbags",)),
+    Case("loc-bag-wrong-topic", "localize -m {w}/good.npz -s {w}/d.bag --topic /gps/fix", ("d.bag", "NavSatFix")),
+    Case("bm-gpx-no-gpxpy", BM + " --positions {w}/track.gpx --timestamps {w}/stamps_short.csv",
+         ("track.gpx", "vpr-edge[geo]"), hide=("gpxpy",)),
+    Case("bm-exif-no-exifread", BM + " --positions exif", ("exifread", "vpr-edge[geo]"), hide=("exifread",)),
+    Case("bm-timestamps-without-gpx", BM + " --timestamps {w}/stamps_short.csv", ("stamps_short.csv", "TRACK.gpx")),
+    Case("ev-calibration-out-is-gt", EV + " --save-calibration {w}/gt.csv", ("gt.csv", "an input")),
+    Case("loc-calibration-not-json", LOC + " --calibration {w}/gt.csv", ("gt.csv", "not a vpr-edge calibration")),
     Case("loc-timestamps-short", LOC + " --timestamps {w}/stamps_short.csv", ("stamps_short.csv", "no stamp for 23")),
     Case("loc-timestamps-video", "localize -m {w}/good.npz -s {w}/garbage.mp4 --timestamps {w}/stamps_short.csv",
          ("--timestamps applies to a folder",)),

@@ -247,16 +247,22 @@ def from_exif(files: Sequence[Path]) -> Positions:
     return _filled(coords, "wgs84", heading, altitude, f"{where} (EXIF GPS)")
 
 
+def require_gpxpy(path: str | os.PathLike[str]):
+    """The gpxpy module, or VprError naming the extra that brings it (checked before any work)."""
+    try:
+        import gpxpy
+    except ImportError:
+        raise VprError(f"{path}: reading GPX needs gpxpy: pip install 'vpr-edge[geo]'") from None
+    return gpxpy
+
+
 def from_gpx(path: str | os.PathLike[str], stamps: np.ndarray) -> Positions:
     """Positions at the times ``stamps`` (Unix seconds) from a GPX track (every point of every track and
     segment with a time; ``gpxpy``, the ``geo`` extra): latitude, longitude and elevation interpolated
     linearly in time between the points either side (with a warning for those between points). VprError
     for a file that does not parse, a track without timed points, or a stamp outside the track's time."""
     path = Path(path)
-    try:
-        import gpxpy
-    except ImportError:
-        raise VprError(f"{path}: reading GPX needs gpxpy: pip install 'vpr-edge[geo]'") from None
+    gpxpy = require_gpxpy(path)
     try:
         with open(path) as f:
             gpx = gpxpy.parse(f)

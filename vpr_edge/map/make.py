@@ -19,7 +19,7 @@ from vpr_edge.map.build import Progress, build_map
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map, save_map
 from vpr_edge.map.model import PlaceMap
-from vpr_edge.positions import Positions, from_exif, from_gpx
+from vpr_edge.positions import Positions, from_exif, from_gpx, require_gpxpy
 from vpr_edge.positions import read_csv as read_positions
 from vpr_edge.threads import use_threads
 
@@ -119,6 +119,8 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
         raise VprError(f"{refs}: --positions exif reads image files; a bag's positions come from --positions-topic")
     files = [] if bag else list_images(refs)
     gpx = o.positions is not None and o.positions.lower().endswith(".gpx")
+    if gpx:
+        require_gpxpy(o.positions)
     if gpx and not bag and o.timestamps is None:
         raise VprError(f"{o.positions}: a GPX track is matched to the frames by time: give --timestamps "
                        f"FILE (frame,stamp in Unix seconds) for the folder {refs}")
