@@ -28,7 +28,9 @@ def evaluate_cmd(
     map_path: Optional[Path] = typer.Option(None, "--map", "-m", help="Map from build-map: the queries are "
                                             "encoded with its model and codebook."),
     queries: Optional[Path] = typer.Option(None, "--queries", "-q", help="Query frames: a folder (file-name "
-                                           "order) or a video. Row i of the ground truth is frame i."),
+                                           "order), a video, or a ROS bag / MCAP file with --topic. Row i of "
+                                           "the ground truth is frame i."),
+    topic: Optional[str] = typer.Option(None, help="With a bag as --queries: its image topic."),
     similarity: Optional[Path] = typer.Option(None, "--similarity", help="Evaluate a (Q, R) float .npy "
                                               "similarity matrix instead (rows = queries, higher = more "
                                               "alike), e.g. from another tool's descriptors; no model needed."),
@@ -86,7 +88,7 @@ def evaluate_cmd(
     with user_errors():
         # --- everything that can be checked before the work ---
         source = Source(similarity, map_path, queries, refs, features == FeaturesOpt.pixels, model, batch_size,
-                        threads)
+                        threads, topic)
         source.check()
         truth = Truth(gt, gt_positions, radius)
         if modes is None:

@@ -32,6 +32,7 @@ class Source:
     model: Path | None = None
     batch_size: int = 8
     threads: int = 0
+    topic: str | None = None      # queries is a ROS bag / MCAP file: its image topic
 
     def check(self) -> None:
         """VprError unless exactly one source is complete (called before any work)."""
@@ -144,10 +145,10 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     if source.similarity is not None:
         sims = sources.from_file(source.similarity)
     elif source.pixels:
-        sims = sources.from_pixels(source.refs, source.queries, len(rows), truth.name, on_skip)
+        sims = sources.from_pixels(source.refs, source.queries, len(rows), truth.name, on_skip, source.topic)
     else:
         sims = sources.from_map(source.map, source.queries, len(rows), truth.name, on_skip, source.model,
-                                source.batch_size, source.threads, with_svm)
+                                source.batch_size, source.threads, with_svm, source.topic)
     if sims.kept is not None:
         if sims.kept.max() >= len(rows):
             raise VprError(f"{source.queries}: {sims.kept.max() + 1} frames but the ground truth {truth.name} has "

@@ -53,8 +53,8 @@ def from_file(path: str | os.PathLike[str]) -> Similarities:
     return Similarities(sim.astype(np.float64))
 
 
-def _count_checked(queries: str | os.PathLike[str], n_truth: int, truth_src: str):
-    frames, count = open_stream(queries)
+def _count_checked(queries: str | os.PathLike[str], n_truth: int, truth_src: str, topic: str | None = None):
+    frames, count = open_stream(queries, topic=topic)
     if count is not None and count != n_truth:
         raise VprError(f"{queries}: {count} frames but the ground truth {truth_src} has {n_truth} rows")
     return frames
@@ -69,12 +69,12 @@ def _finish(queries: str | os.PathLike[str], kept: list[int], t0: float, cosine:
 
 
 def from_pixels(refs: str | os.PathLike[str], queries: str | os.PathLike[str], n_truth: int, truth_src: str,
-                on_skip: OnSkip) -> Similarities:
+                on_skip: OnSkip, topic: str | None = None) -> Similarities:
     """SeqSLAM's front end (``features.patches.pixel_descriptor``) on the reference folder and the query
     frames, compared by minus the mean absolute difference."""
     from vpr_edge.features.patches import pixel_descriptor
 
-    frames = _count_checked(queries, n_truth, truth_src)
+    frames = _count_checked(queries, n_truth, truth_src, topic)
     ref_desc = np.stack([pixel_descriptor(load_image(f)) for f in list_images(refs)])
     t0 = time.perf_counter()
     kept, qd = [], []
@@ -90,12 +90,12 @@ def from_pixels(refs: str | os.PathLike[str], queries: str | os.PathLike[str], n
 
 def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], n_truth: int, truth_src: str,
              on_skip: OnSkip, model: Path | None = None, batch_size: int = 8, threads: int = 0,
-             svm: bool = False) -> Similarities:
+             svm: bool = False, topic: str | None = None) -> Similarities:
     """The query frames encoded as the map's references were (``api.Localizer``), their cosine similarities
     to the map's references, and with ``svm`` the map's per-place SVM decision values."""
     from vpr_edge.api import Localizer, encode_frames
 
-    frames = _count_checked(queries, n_truth, truth_src)
+    frames = _count_checked(queries, n_truth, truth_src, topic)
     loc = Localizer(map_path, model=model, mode="single", threads=threads)
     if svm and loc.map.svm is None:
         raise VprError(f"{map_path}: mode svm needs a map built with build-map --svm")
