@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +47,11 @@ class Positions:
         return paired_distances(self.coords[:-1], self.coords[1:], self.geo)
 
     def along(self) -> np.ndarray:
-        """(R,) metres along the route from its first reference."""
+        """(R,) metres along the route from its first reference (computed once: ``at`` reads it per frame)."""
+        return self._along
+
+    @cached_property
+    def _along(self) -> np.ndarray:
         return np.concatenate([[0.0], np.cumsum(self.steps())])
 
     def at(self, index: float) -> tuple[np.ndarray, float, float]:
@@ -60,7 +65,7 @@ class Positions:
         a, b = self.heading[i], self.heading[j]
         heading = float(a if t < 0.5 else b) if np.isnan(a) or np.isnan(b) else \
             float((a + t * ((b - a + 180.0) % 360.0 - 180.0)) % 360.0)
-        along = self.along()
+        along = self._along
         return coords, heading, float((1 - t) * along[i] + t * along[j])
 
     def concat(self, more: "Positions") -> "Positions":
