@@ -70,25 +70,19 @@ def write_bag(path: Path, frames: list[Path], kind: str, raw: bool = False, odom
     fix_topic, fix_type = ("/odom", "nav_msgs/msg/Odometry") if odometry else ("/gps/fix", "sensor_msgs/msg/NavSatFix")
     n_fix = math.ceil(len(frames) / 2) + 1
     if kind == "ros1":
-        from rosbags.typesys import Stores as S
-
-        ts1 = get_typestore(S.ROS1_NOETIC)
-        with Writer1(path) as w:
-            cam = w.add_connection("/camera/image", image_type, typestore=ts1)
-            fix = w.add_connection(fix_topic, fix_type, typestore=ts1)
-            for i, f in enumerate(frames):
-                w.write(cam, int((T0 + i * 0.1) * 1e9), ts1.serialize_ros1(_image_msg(ts1, i, f, raw), image_type))
-            for i in range(n_fix):
-                w.write(fix, int((T0 + i * 0.2) * 1e9), ts1.serialize_ros1(_fix_msg(ts1, i, odometry), fix_type))
-        return path
-    plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
-    with Writer2(path, version=9, storage_plugin=plugin) as w:
-        cam = w.add_connection("/camera/image", image_type, typestore=TS)
-        fix = w.add_connection(fix_topic, fix_type, typestore=TS)
+        ts = get_typestore(Stores.ROS1_NOETIC)
+        writer, serialize = Writer1(path), ts.serialize_ros1
+    else:
+        plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
+        ts = TS
+        writer, serialize = Writer2(path, version=9, storage_plugin=plugin), ts.serialize_cdr
+    with writer as w:
+        cam = w.add_connection("/camera/image", image_type, typestore=ts)
+        fix = w.add_connection(fix_topic, fix_type, typestore=ts)
         for i, f in enumerate(frames):
-            w.write(cam, int((T0 + i * 0.1) * 1e9), TS.serialize_cdr(_image_msg(TS, i, f, raw), image_type))
+            w.write(cam, int((T0 + i * 0.1) * 1e9), serialize(_image_msg(ts, i, f, raw), image_type))
         for i in range(n_fix):
-            w.write(fix, int((T0 + i * 0.2) * 1e9), TS.serialize_cdr(_fix_msg(TS, i, odometry), fix_type))
+            w.write(fix, int((T0 + i * 0.2) * 1e9), serialize(_fix_msg(ts, i, odometry), fix_type))
     return path
 
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError, warn
 from vpr_edge.frame import MIN_SIDE, Frame
-from vpr_edge.positions import Positions, check_range
+from vpr_edge.positions import Positions, at_times
 
 IMAGE_TYPES = ("sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/Image")
 POSITION_TYPES = ("sensor_msgs/msg/NavSatFix", "nav_msgs/msg/Odometry")
@@ -164,25 +164,7 @@ def bag_positions(path: str | os.PathLike[str], topic: str, stamps: np.ndarray) 
     fix = fix[np.isfinite(fix[:, :3]).all(axis=1)]
     if len(fix) == 0:
         raise VprError(f"{path}: topic {topic} holds no usable position")
-    if stamps.min() < fix[0, 0] - 1e-6 or stamps.max() > fix[-1, 0] + 1e-6:
-        raise VprError(f"{path}: images from {stamps.min():.3f} to {stamps.max():.3f} s but positions on {topic} "
-                       f"only from {fix[0, 0]:.3f} to {fix[-1, 0]:.3f} s")
-    coords = np.stack([np.interp(stamps, fix[:, 0], fix[:, k]) for k in (1, 2)], axis=1)
-    altitude = np.interp(stamps, fix[:, 0], fix[:, 3])
-    heading = np.full(len(stamps), np.nan)
-    if np.isfinite(fix[:, 4]).all():
-        unwrapped = np.degrees(np.unwrap(np.radians(fix[:, 4])))
-        heading = np.interp(stamps, fix[:, 0], unwrapped) % 360.0
-    frame = "wgs84" if geo else "local"
-    try:
-        check_range(coords, frame, f"{path} {topic}")
-    except ValueError as e:
-        raise VprError(str(e)) from None
-    exact = np.isin(np.round(stamps, 6), np.round(fix[:, 0], 6))
-    if not exact.all():
-        warn(f"{path}: {int((~exact).sum())} of {len(stamps)} images fall between fixes on {topic}; their "
-             f"positions are interpolated in time")
-    return Positions(coords, frame, heading, altitude, int((~exact).sum()))
+    return at_times(fix, stamps, "wgs84" if geo else "local", str(path), f"topic {topic}")
 
 
 def extract_images(path: str | os.PathLike[str], topic: str | None, folder: Path

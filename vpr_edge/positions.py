@@ -279,14 +279,30 @@ def from_gpx(path: str | os.PathLike[str], stamps: np.ndarray) -> Positions:
               for track in gpx.tracks for seg in track.segments for p in seg.points if p.time is not None]
     if not points:
         raise VprError(f"{path}: no track point with a time (a GPX track is matched to frames by time)")
-    fix = np.array(sorted(points), np.float64)
+    fix = np.array([p + (np.nan,) for p in sorted(points)], np.float64)
+    return at_times(fix, stamps, "wgs84", str(path), "the track")
+
+
+def at_times(fix: np.ndarray, stamps: np.ndarray, frame: str, where: str, source: str) -> Positions:
+    """Positions at the times ``stamps`` (N,) seconds from time-ordered fixes ``fix`` (M, 5): time (s), the
+    two coordinates, altitude, heading (degrees; NaN unknown): each linearly interpolated in time between the
+    fixes either side (heading the short way round, only where every fix has one), with a warning for the
+    frames that fall between fixes. VprError naming ``where`` for a frame outside ``source``'s time span or
+    coordinates out of range."""
     if stamps.min() < fix[0, 0] - 1e-6 or stamps.max() > fix[-1, 0] + 1e-6:
-        raise VprError(f"{path}: the frames span {stamps.min():.3f} to {stamps.max():.3f} s (Unix time) but the "
-                       f"track {fix[0, 0]:.3f} to {fix[-1, 0]:.3f} s")
+        raise VprError(f"{where}: the frames span {stamps.min():.3f} to {stamps.max():.3f} s but {source} only "
+                       f"{fix[0, 0]:.3f} to {fix[-1, 0]:.3f} s")
     coords = np.stack([np.interp(stamps, fix[:, 0], fix[:, k]) for k in (1, 2)], axis=1)
     altitude = np.interp(stamps, fix[:, 0], fix[:, 3])
-    between = int((~np.isin(stamps, fix[:, 0])).sum())
+    heading = np.full(len(stamps), np.nan)
+    if np.isfinite(fix[:, 4]).all():
+        heading = np.interp(stamps, fix[:, 0], np.degrees(np.unwrap(np.radians(fix[:, 4])))) % 360.0
+    try:
+        check_range(coords, frame, f"{where} ({source})")
+    except ValueError as e:
+        raise VprError(str(e)) from None
+    between = int((~np.isin(np.round(stamps, 6), np.round(fix[:, 0], 6))).sum())
     if between:
-        warn(f"{path}: {between} of {len(stamps)} frames fall between track points; their positions are "
-             f"interpolated in time")
-    return Positions(coords, "wgs84", np.full(len(stamps), np.nan), altitude, between)
+        warn(f"{where}: {between} of {len(stamps)} frames fall between the fixes of {source}; their positions "
+             f"are interpolated in time")
+    return Positions(coords, frame, heading, altitude, between)

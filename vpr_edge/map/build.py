@@ -95,15 +95,16 @@ def _fit(front: FrontEnd, local: np.ndarray, mask: np.ndarray | None, encoding: 
         local = front.select(local)
     if encoder is None:
         encoder = fit_encoder(encoding, local, mask, settings, front.n_local)
-    _check_fits(encoder, front)
+    check_fits(encoder, front)
     return front, encoder, local
 
 
-def _check_fits(encoder: Encoder, front: FrontEnd) -> None:
-    """VprError unless ``encoder`` takes the descriptors ``front`` gives."""
+def check_fits(encoder: Encoder, front: FrontEnd, source: str = "") -> None:
+    """VprError (naming the codebook file ``source``, if given) unless ``encoder`` takes the descriptors
+    ``front`` gives."""
     if encoder.input_dim != front.dim:
-        raise VprError(f"codebook expects {encoder.input_dim}-dim descriptors but the {front.name} front end "
-                       f"gives {front.dim}")
+        raise VprError(f"{source + ': ' if source else ''}codebook expects {encoder.input_dim}-dim descriptors "
+                       f"but the {front.name} front end gives {front.dim}")
 
 
 def _meta(front: FrontEnd, encoder: Encoder, fitted: bool, settings: FitSettings, n_real: int,
@@ -145,7 +146,7 @@ def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = "ifv", enc
         n_real = int(mask.sum()) if mask is not None else local.size // local.shape[-1]
         front, encoder, local = _fit(front, local, mask, encoding, encoder, settings)
     assert encoder is not None
-    _check_fits(encoder, front)
+    check_fits(encoder, front)
     store = EncodingWriter(len(files), encoder.dim, storage, keep_float=svm)
     if len(pool):
         for i in range(0, len(pool), 32):

@@ -68,8 +68,9 @@ def _check_meta(path: str | os.PathLike[str], meta: dict) -> None:
 def load_map(path: str | os.PathLike[str], mmap: bool = False) -> PlaceMap:
     """Read a map, checking kind, schema version, every metadata field's type, finite stored values and
     internal consistency (VprError naming the file and the problem). With ``mmap`` the encodings stay in the
-    file, memory-mapped: opening reads headers and metadata only, and the operating system pages references
-    in as similarities touch them (a 100,000-place map opens in milliseconds)."""
+    file, memory-mapped, and the operating system pages references in as similarities touch them: an int8
+    map (the default) opens reading its headers, metadata and row scales; a float16 / float32 map is read
+    once through, a block at a time, to refuse non-finite values."""
     arrays, meta = read_npz(path, "map", READS_SCHEMAS, mmap=mmap)
     _check_meta(path, meta)
     try:

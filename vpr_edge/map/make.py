@@ -15,7 +15,7 @@ from vpr_edge.errors import VprError, warn
 from vpr_edge.features import FrontEnd, make_front_end
 from vpr_edge.files import check_not_input, check_writable, writer_lock
 from vpr_edge.images import list_images, read_stamps
-from vpr_edge.map.build import Progress, build_map
+from vpr_edge.map.build import Progress, build_map, check_fits
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map, save_map
 from vpr_edge.map.model import PlaceMap
@@ -180,9 +180,7 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
             raise VprError(f"{o.codebook}: codebook was fitted on {described} descriptors "
                            f"({str(recorded)[:12]}), not on this {front.name} front end's "
                            f"({front.fingerprint[:12]}){'; another model' if front.name == 'cnn' else ''}")
-        if given.input_dim != front.dim:
-            raise VprError(f"{o.codebook}: codebook expects {given.input_dim}-dim descriptors but "
-                           f"the {front.name} front end gives {front.dim}")
+        check_fits(given, front, str(o.codebook))
         if o.alpha is not None:
             given = given.with_alpha(o.alpha)
     d = FitSettings()
