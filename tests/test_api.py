@@ -19,7 +19,7 @@ from vpr_edge.images import load_image, open_stream
 def api_map(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Path:
     out = tmp_path_factory.mktemp("api") / "m.npz"
     proc = subprocess.run([sys.executable, "-m", "vpr_edge", "build-map", str(small_refs), "-o", str(out),
-                           "--components", "4"], capture_output=True, text=True, timeout=600)
+                           "--components", "4", "--pca-dim", "0"], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     return out
 

@@ -340,11 +340,11 @@ def test_small_images_warned_once(tmp_path: Path, ws: Path) -> None:
     frames = tmp_path / "small"
     frames.mkdir()
     for f in sorted((ws / "queries").iterdir())[:5]:
-        cv2.imwrite(str(frames / (f.stem + ".png")), cv2.resize(cv2.imread(str(f)), (40, 30)))
+        cv2.imwrite(str(frames / (f.stem + ".png")), cv2.resize(cv2.imread(str(f)), (36, 28)))
     proc = _run("localize", "-m", str(ws / "good.npz"), "-s", str(frames), "--mode", "single")
     assert proc.returncode == 0, proc.stderr
     warned = [ln for ln in proc.stderr.splitlines() if "upsampled more than 4x" in ln]
-    assert len(warned) == 1 and "40x30" in warned[0], proc.stderr
+    assert len(warned) == 1 and "36x28" in warned[0], proc.stderr
 
 
 def test_option_values_refused_by_the_parser() -> None:

@@ -93,7 +93,7 @@ def test_build_and_localize_from_bags(kind: str, tmp_path: Path, small_refs: Pat
     refs = write_bag(tmp_path / f"drive{suffix}", sorted(small_refs.glob("*.jpg")), kind)
     queries = write_bag(tmp_path / f"drive2{suffix}", sorted(small_queries.glob("*.jpg")), kind, raw=kind == "ros2")
     proc = run("build-map", refs, "-o", tmp_path / "m.npz", "--topic", "/camera/image", "--positions-topic",
-               "/gps/fix", "--components", "4")
+               "/gps/fix", "--components", "4", "--pca-dim", "0")
     assert proc.returncode == 0, proc.stderr
     info = json.loads(run("info", tmp_path / "m.npz").stdout)
     assert info["references"] == 24 and info["first"] == f"{refs.name}#0" and info["route"]["frame"] == "wgs84"
@@ -120,7 +120,7 @@ def test_build_and_localize_from_bags(kind: str, tmp_path: Path, small_refs: Pat
 def test_odometry_positions_and_heading(tmp_path: Path, small_refs: Path) -> None:
     refs = write_bag(tmp_path / "odo.bag", sorted(small_refs.glob("*.jpg"))[:12], "ros1", odometry=True)
     proc = run("build-map", refs, "-o", tmp_path / "m.npz", "--topic", "/camera/image", "--positions-topic",
-               "/odom", "--components", "4")
+               "/odom", "--components", "4", "--pca-dim", "0")
     assert proc.returncode == 0, proc.stderr
     from vpr_edge.map import load_map
 

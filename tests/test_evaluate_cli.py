@@ -49,7 +49,7 @@ def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_qu
                "--plot", png, "--save-similarity", sim, "--modes", "single,stream,dtw,seqslam-online")
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(js.read_text())
-    assert set(doc) == {"schema_version", "n_queries", "n_refs", "tolerance", "modes"}
+    assert set(doc) == {"schema_version", "n_queries", "n_refs", "tolerance", "front_end", "modes"}
     assert doc["n_queries"] == 24 and doc["n_refs"] == 24 and doc["tolerance"] == 1
     assert set(doc["modes"]) == {"single", "stream", "dtw", "seqslam-online"}
     assert all(set(m) == JSON_KEYS for m in doc["modes"].values())

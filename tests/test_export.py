@@ -15,11 +15,14 @@ from vpr_edge.files import file_sha256  # noqa: E402
 from vpr_edge_export.backbones import BACKBONES, build_backbone  # noqa: E402
 from vpr_edge_export.onnx_export import compare_with_torch, default_weights, export_onnx, load_state_dict  # noqa: E402
 
+from vpr_edge.resources import LARGE_MODEL_FILE, bundled_model  # noqa: E402
+
 SAMPLE_REFS = sample_folder() / "ref"
 
 
 @pytest.mark.slow
-def test_bundled_model_matches_torch_on_real_images(model_path: Path) -> None:
+def test_bundled_model_matches_torch_on_real_images() -> None:
+    model_path = bundled_model(LARGE_MODEL_FILE)
     ex = FeatureExtractor(model_path)
     info = ex.info
     weights = default_weights("efficientnet_lite0")

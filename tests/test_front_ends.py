@@ -248,9 +248,9 @@ def test_bundled_small_model(tmp_path: Path, small_refs: Path) -> None:
     import sys
 
     from vpr_edge.features.cnn import FeatureExtractor
-    from vpr_edge.resources import SMALL_MODEL_FILE, bundled_model
+    from vpr_edge.resources import LARGE_MODEL_FILE, SMALL_MODEL_FILE, bundled_model
 
-    SMALL_MODEL, BUNDLED_MODEL = bundled_model(SMALL_MODEL_FILE), bundled_model()
+    SMALL_MODEL, BUNDLED_MODEL = bundled_model(SMALL_MODEL_FILE), bundled_model(LARGE_MODEL_FILE)
 
     small, big = FeatureExtractor(SMALL_MODEL, threads=1), FeatureExtractor(BUNDLED_MODEL, threads=1)
     assert small.size == (160, 120) and big.size == (320, 240)
@@ -316,13 +316,13 @@ def test_pad_masks_the_cells_that_see_only_padding() -> None:
 def test_resize_policy_recorded_in_the_map(tmp_path: Path, small_refs: Path) -> None:
     """build-map --resize pad: the map records it, its queries go through it; old maps (no record) stretch."""
     from vpr_edge.features.cnn import FeatureExtractor
-    from vpr_edge.resources import bundled_model
+    from vpr_edge.resources import LARGE_MODEL_FILE, bundled_model
 
-    BUNDLED_MODEL = bundled_model()
+    BUNDLED_MODEL = bundled_model(LARGE_MODEL_FILE)
 
     out = tmp_path / "pad.npz"
     res = CliRunner().invoke(app, ["build-map", str(small_refs), "-o", str(out), "--resize", "pad",
-                                   "--components", "4"])
+                                   "--components", "4", "--model", str(BUNDLED_MODEL)])
     assert res.exit_code == 0, res.output
     pm = load_map(out)
     assert pm.features == {"name": "cnn", "params": {"resize": "pad"}}

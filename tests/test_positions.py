@@ -85,7 +85,8 @@ def positioned(tmp_path_factory: pytest.TempPathFactory, small_refs: Path) -> Pa
     names = sorted(p.name for p in small_refs.glob("*.jpg"))
     with open(w / "pos.csv", "w") as f:                          # a straight route along y, 2 m apart
         f.write("name,x,y,heading\n" + "".join(f"{n},5.0,{2.0 * i},0\n" for i, n in enumerate(names)))
-    proc = run("build-map", small_refs, "-o", w / "map.npz", "--components", "4", "--positions", w / "pos.csv")
+    proc = run("build-map", small_refs, "-o", w / "map.npz", "--components", "4", "--pca-dim", "0", "--positions",
+               w / "pos.csv")
     assert proc.returncode == 0, proc.stderr
     return w
 
@@ -192,7 +193,7 @@ def test_evaluate_reports_metres_with_map_positions(positioned: Path, small_quer
     assert proc.returncode == 0, proc.stderr
     assert "error in metres" in proc.stdout
     doc = json.loads((tmp_path / "e.json").read_text())
-    assert doc["schema_version"] == 4
+    assert doc["schema_version"] == 5
     m = doc["modes"]["dtw"]["metres"]
     assert m["median_m"] == 0.0 and m["within_5m"] >= doc["modes"]["dtw"]["recall_at_1"]   # 2 m spacing
 

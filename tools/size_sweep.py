@@ -40,6 +40,8 @@ from vpr_edge.map import map_from_local  # noqa: E402
 from vpr_edge.matchers import get_matcher  # noqa: E402
 from vpr_edge.threads import use_threads  # noqa: E402
 
+KINDS = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
+
 
 def cached_local(files: list[Path], front, folder: Path) -> np.ndarray:
     """Local descriptors (N, L, K) of ``files``, extracted once into ``folder``/local.npy (memory-mapped; used
@@ -69,7 +71,9 @@ def bytes_per_place(dim: int, storage: str) -> int:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--streams", type=Path, required=True, help="derive_streams output: ref/ and KIND/ + KIND.csv")
-    p.add_argument("--kinds", default="aligned,speed2")
+    p.add_argument("--kinds", default="aligned,speed2", help="streams, comma-separated, or all")
+    p.add_argument("--encoding", default="ifv", help="ifv, fv or vlad (PCAxCOMPONENTS as for ifv)")
+    p.add_argument("--tolerance", type=int, default=1, help="frames either side counted right (evaluate's)")
     p.add_argument("--configs", default="0x128,64x128,32x128,64x64,32x64,32x32,16x64,24x32")
     p.add_argument("--fits", default=f"{FitSettings.max_descriptors}x{FitSettings.iterations}",
                    help="codebook fits DESCRIPTORSxITERATIONS, comma-separated (default build-map's)")
@@ -78,17 +82,23 @@ def main() -> int:
     p.add_argument("--modes", default="single,stream")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--model", type=Path, default=BUNDLED_MODEL, help="ONNX tap (default: the bundled one)")
+    p.add_argument("--query-model", type=Path, default=None,
+                   help="describe the streams with this model instead (an int8 form of --model: a map built "
+                        "with --model, queried with it)")
     p.add_argument("--threads", type=int, default=0)
     a = p.parse_args()
     use_threads(a.threads)
     a.out.mkdir(parents=True, exist_ok=True)
     front = make_front_end("cnn", a.model, a.threads)
-    kinds = a.kinds.split(",")
+    kinds = list(KINDS) if a.kinds == "all" else a.kinds.split(",")
     modes = a.modes.split(",")
     t0 = time.perf_counter()
     refs = list_images(a.streams / "ref")
     ref_local = cached_local(refs, front, a.out / "local" / "ref")
-    queries = {k: (cached_local(list_images(a.streams / k), front, a.out / "local" / k),
+    q_front, q_dir = front, "local"
+    if a.query_model is not None:
+        q_front, q_dir = make_front_end("cnn", a.query_model, a.threads), f"local-{a.query_model.stem}"
+    queries = {k: (cached_local(list_images(a.streams / k), q_front, a.out / q_dir / k),
                    groundtruth.load_csv(a.streams / f"{k}.csv")) for k in kinds}
     print(f"local descriptors: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     rows = []
@@ -99,23 +109,24 @@ def main() -> int:
             t1 = time.perf_counter()
             settings = FitSettings(n_components=comps, pca_dim=pca or None, seed=seed, max_descriptors=n_desc,
                                    iterations=iters)
-            pm = map_from_local(ref_local, None, front, [f.name for f in refs], "ref", "ifv", settings=settings)
+            pm = map_from_local(ref_local, None, front, [f.name for f in refs], "ref", a.encoding,
+                                settings=settings)
             fit_s = time.perf_counter() - t1
             ref_enc = pm.stored.dense()
             q_enc = {k: pm.encoder.transform_chunked(v[0]) for k, v in queries.items()}
             for storage in a.storages.split(","):
-                row = {"pca": pca, "components": comps, "fit": fit, "seed": seed, "storage": storage,
+                row = {"encoding": a.encoding, "pca": pca, "components": comps, "fit": fit, "seed": seed, "storage": storage,
                        "dim": pm.encoder.dim,
                        "bytes": bytes_per_place(pm.encoder.dim, storage), "fit_s": round(fit_s, 1)}
                 for k, (_, truth) in queries.items():
                     sim = stored_similarity(ref_enc, q_enc[k], storage)
                     for mode in modes:
-                        r = evaluate_mode(get_matcher(mode), sim, truth)
+                        r = evaluate_mode(get_matcher(mode), sim, truth, a.tolerance)
                         row[f"{k} {mode}"] = (round(r.recall[1], 3), round(r.auc, 3))
                 rows.append(row)
                 print(json.dumps(row), file=sys.stderr, flush=True)
     cols = [f"{k} {m}" for k in kinds for m in modes]
-    lines = [f"R@1 / AUC on {a.streams} ({len(refs)} references), tolerance 1; "
+    lines = [f"R@1 / AUC on {a.streams} ({len(refs)} references), {a.encoding}, tolerance {a.tolerance}; "
              f"{(time.perf_counter() - t0) / 60:.1f} min", "",
              "| PCA | components | fit | seed | storage | dims | bytes/place | 100,000 places | fit s | "
              + " | ".join(cols) + " |",

@@ -23,6 +23,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError
 from vpr_edge.features import FrontEnd
+from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.images import MIN_SIDE, Frame
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.map import PlaceMap, load_map, map_front_end
@@ -97,7 +98,8 @@ class Localizer:
     """A map, its model and a matcher, ready for frames.
 
     ``mode`` names a registered matcher (``vpr_edge.matchers.MATCHERS``), ``params`` overrides its
-    parameters, ``min_confidence`` its lost threshold (default: the matcher's own). ``threads`` > 0 sets
+    parameters, ``min_confidence`` its lost threshold (default: the matcher's own). ``precision``: the model's form (``features.choice``: auto runs its int8 form where the CPU has int8
+    dot products; fp32; int8). ``threads`` > 0 sets
     onnxruntime's threads and, process-wide, NumPy's BLAS pool to that count (0: one per core for both;
     None: onnxruntime's default, BLAS untouched). ``coarse``: a local-search matcher's whole-route frames use
     ``coarse.CoarseSearch`` (signs, exact values for the best candidates); None = on maps of at least
@@ -109,11 +111,11 @@ class Localizer:
     def __init__(self, map_path: str | os.PathLike[str], *, model: str | os.PathLike[str] | None = None,
                  mode: str = "stream", params: dict | None = None, min_confidence: float | None = None,
                  threads: int | None = None, coarse: bool | None = None,
-                 calibration: str | os.PathLike[str] | None = None) -> None:
+                 calibration: str | os.PathLike[str] | None = None, precision: str = DEFAULT_PRECISION) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
         self.map = load_map(map_path, mmap=True)
         ort_threads = 0 if threads is None else use_threads(threads)
-        self.front = map_front_end(self.map, map_path, Path(model) if model else None, ort_threads)
+        self.front = map_front_end(self.map, map_path, Path(model) if model else None, ort_threads, precision)
         if self.matcher.scores == "svm" and self.map.svm is None:
             raise VprError(f"{map_path}: mode svm needs a map built with build-map --svm")
         if min_confidence is not None and not math.isfinite(min_confidence):
@@ -132,6 +134,15 @@ class Localizer:
                                                          self._online.searches_locally) else None
         self._lock = threading.Lock()
         self._count = 0
+
+    @property
+    def front_description(self) -> dict:
+        """The front end run: its name, and for cnn the model file and its form with the reason
+        (``features.choice``), e.g. {"name": "cnn", "model": "X.int8.onnx", "form": "int8: AVX512-VNNI"}."""
+        described = {"name": self.front.name}
+        if self.front.name == "cnn":
+            described |= {"model": self.front.path.name, "form": self.front.form}
+        return described
 
     @property
     def names(self) -> list[str]:

@@ -10,9 +10,13 @@ from pathlib import Path
 
 from vpr_edge.errors import VprError
 
-DEFAULT_MODEL_FILE = "efficientnet_lite0_stage5_320x240.onnx"
+LARGE_MODEL_FILE = "efficientnet_lite0_stage5_320x240.onnx"
 # the same tap exported at a quarter of the pixels, for small cameras (docs/results.md, "Input size")
 SMALL_MODEL_FILE = "efficientnet_lite0_stage5_160x120.onnx"
+# the bundled fp32 models by input (width, height); each has an int8 form beside it (int8_form)
+MODEL_FILES = {(160, 120): SMALL_MODEL_FILE, (320, 240): LARGE_MODEL_FILE}
+# without a camera frame to go by (build-map chooses by the references' size: features.choice)
+DEFAULT_MODEL_FILE = SMALL_MODEL_FILE
 SAMPLES = ("corridor",)
 
 
@@ -23,8 +27,14 @@ def _path(*parts: str) -> Path:
 
 
 def bundled_model(name: str = DEFAULT_MODEL_FILE) -> Path:
-    """Path of a bundled ONNX model (``DEFAULT_MODEL_FILE`` or ``SMALL_MODEL_FILE``)."""
+    """Path of a bundled ONNX model (a ``MODEL_FILES`` value or its ``int8_form``)."""
     return _path("models", name)
+
+
+def int8_form(name: str) -> str:
+    """File name of the int8 form of the fp32 model file ``name`` (``vpr_edge_export.quantize``'s output,
+    kept beside it): ``X.onnx`` -> ``X.int8.onnx``."""
+    return name[:-len(".onnx")] + ".int8.onnx" if name.endswith(".onnx") else name + ".int8.onnx"
 
 
 def sample_folder(name: str = "corridor") -> Path:

@@ -12,6 +12,7 @@ from vpr_edge.cli.common import (MODEL_HELP, THREADS_HELP, EncodingOpt, FrontOpt
 from vpr_edge.encoders import ENCODERS, FitSettings
 from vpr_edge.features import FRONT_ENDS
 from vpr_edge.features.resize import RESIZE
+from vpr_edge.encoders.base import DEFAULT_PCA_DIM
 from vpr_edge.files import output_path
 from vpr_edge.map.make import DEFAULT_ENCODING, DEFAULT_FRONT_END, DEFAULT_STORAGE, BuildOptions, plan_map, write_map
 
@@ -43,11 +44,12 @@ def build_map_cmd(
         None, help="Reuse this codebook (.npz from --save-codebook) instead of fitting one on the references."),
     components: Optional[int] = typer.Option(None, min=1, help="Codebook size when fitting: GMM components "
                                              "(fv, ifv) or k-means centres (bow, vlad); default "
-                                             f"{_FIT.n_components}, as the thesis."),
-    pca_dim: Optional[int] = typer.Option(None, min=1, help="Reduce descriptors to this many dims by PCA "
-                                                            "before the codebook (default: no PCA)."),
+                                             f"{_FIT.n_components} (the thesis used 128: --components 128 --pca-dim 0)."),
+    pca_dim: Optional[int] = typer.Option(None, min=0, help="Reduce descriptors to this many dims by PCA "
+                                          f"before the codebook (default {DEFAULT_PCA_DIM} for descriptors "
+                                          "of more dims, none for binary ones; 0 = no PCA)."),
     whiten: Optional[bool] = typer.Option(None, "--whiten/--no-whiten", help="Whiten the PCA output "
-                                          "(default: whiten; with --pca-dim only)."),
+                                          "(default: whiten)."),
     alpha: Optional[float] = typer.Option(None, min=0.0, max=1.0, help="Signed power normalisation exponent "
                                           f"of ifv and vlad (default {_FIT.alpha}; 1 = off)."),
     tfidf: Optional[bool] = typer.Option(None, "--tfidf/--no-tfidf", help="bow: weight words by their inverse "

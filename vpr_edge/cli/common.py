@@ -14,6 +14,7 @@ from vpr_edge import __version__
 from vpr_edge.encoders import ENCODERS
 from vpr_edge.errors import Terminated, VprError, os_error_line, warn
 from vpr_edge.features import FRONT_ENDS
+from vpr_edge.features.choice import PRECISIONS
 from vpr_edge.features.resize import RESIZE
 from vpr_edge.index.encodings import STORAGES
 from vpr_edge.matchers import MATCHERS, Matcher, get_matcher, param_key
@@ -40,6 +41,7 @@ ModeOpt = Enum("ModeOpt", {name: name for name in MATCHERS}, type=str)  # type: 
 StorageOpt = Enum("StorageOpt", {name: name for name in STORAGES}, type=str)  # type: ignore[misc]
 FrontOpt = Enum("FrontOpt", {name: name for name in FRONT_ENDS}, type=str)  # type: ignore[misc]
 ResizeOpt = Enum("ResizeOpt", {name: name for name in RESIZE}, type=str)  # type: ignore[misc]
+PrecisionOpt = Enum("PrecisionOpt", {name: name for name in PRECISIONS}, type=str)  # type: ignore[misc]
 EncodingOpt = Enum("EncodingOpt", {name: name for name in ENCODERS}, type=str)  # type: ignore[misc]
 
 
@@ -67,7 +69,11 @@ def user_errors() -> Iterator[None]:
 
 
 MODEL_HELP = ("ONNX feature model exported by vpr_edge_export (default: $VPR_EDGE_MODEL if set, else the "
-              "bundled EfficientNet-Lite0 tap).")
+              "bundled EfficientNet-Lite0 tap whose input suits the references' frame size: 160x120 up to "
+              "320x240 frames, 320x240 above).")
+PRECISION_HELP = ("The model's numeric form: fp32 (default); int8: its int8 form, kept beside it (faster, less "
+                  "accurate: docs/results.md); auto: int8 where this CPU has int8 dot-product instructions (x86 "
+                  "VNNI, ARM dotprod), else fp32. `vpr-edge info MAP` says what auto runs here.")
 THREADS_HELP = ("Threads for onnxruntime and NumPy's BLAS together, so the two pools never oversubscribe "
                 "the cores (0 = one per core).")
 PARAM_HELP = ("Set one of the matcher's parameters (repeatable), e.g. --param bias=1.6 --param lock=6: "

@@ -7,7 +7,9 @@ from typing import Optional
 
 import typer
 
-from vpr_edge.cli.common import LIST_PARAMS, PARAM_HELP, THREADS_HELP, app, param_options_for_all, user_errors
+from vpr_edge.cli.common import (LIST_PARAMS, PARAM_HELP, PRECISION_HELP, THREADS_HELP, PrecisionOpt, app,
+                                 param_options_for_all, user_errors)
+from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.errors import VprError, warn
 from vpr_edge.evaluation import Source, Truth, evaluate
 from vpr_edge.evaluation.run import default_matchers
@@ -76,6 +78,7 @@ def evaluate_cmd(
     model: Optional[Path] = typer.Option(None, help="With --map: the map's model, if not where it was."),
     batch_size: int = typer.Option(8, min=1, help="Frames per model run."),
     threads: int = typer.Option(0, min=0, help=THREADS_HELP),
+    precision: PrecisionOpt = typer.Option(DEFAULT_PRECISION, help=PRECISION_HELP),
 ) -> None:
     """Measure matchers against ground truth: recall@1/5/10, the precision-recall curve with AUC (thesis
     eq. 5.1) and AP (eq. 5.2), precision at 100% recall, recall at 100% precision, median error in frames,
@@ -88,7 +91,7 @@ def evaluate_cmd(
     with user_errors():
         # --- everything that can be checked before the work ---
         source = Source(similarity, map_path, queries, refs, features == FeaturesOpt.pixels, model, batch_size,
-                        threads, topic)
+                        threads, topic, precision.value)
         source.check()
         truth = Truth(gt, gt_positions, radius)
         if modes is None:
@@ -129,10 +132,12 @@ def evaluate_cmd(
                 np.save(f, sim.astype(np.float32), allow_pickle=False)
         ms = result.encode_ms
         typer.echo(f"{sim.shape[0]} queries ({result.n_mapped} of mapped places), {sim.shape[1]} references; "
-                   f"correct within {tolerance} frame(s); encoding {'-' if ms != ms else f'{ms:.1f}'} ms/frame")
+                   f"correct within {tolerance} frame(s); encoding {'-' if ms != ms else f'{ms:.1f}'} ms/frame"
+                   + (f"; model {result.front['model']} ({result.front['form']})" if result.front and
+                      "model" in result.front else ""))
         typer.echo(report.table(result.reports))
         if json_out:
-            report.write_json(json_out, sim.shape[0], sim.shape[1], result.reports, tolerance)
+            report.write_json(json_out, sim.shape[0], sim.shape[1], result.reports, tolerance, result.front)
         title = f"{source.name} ({sim.shape[0]} queries, {sim.shape[1]} refs)"
         if calibration_out:
             from vpr_edge import calibration

@@ -13,8 +13,9 @@ from typing import IO, Optional
 import typer
 
 from vpr_edge.api import FIELDS, Localizer, Match
-from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, THREADS_HELP, ModeOpt, app, params_for,
-                                 user_errors, with_param_options)
+from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, PRECISION_HELP, THREADS_HELP, ModeOpt,
+                                 PrecisionOpt, app, params_for, user_errors, with_param_options)
+from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.errors import VprError
 from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
 from vpr_edge.images import Frame, open_stream
@@ -117,6 +118,7 @@ def localize_cmd(
                                               "stamped by themselves)."),
     batch_size: int = typer.Option(1, min=1, help="Frames per model run (1 = lowest latency)."),
     threads: int = typer.Option(0, min=0, help=THREADS_HELP),
+    precision: PrecisionOpt = typer.Option(DEFAULT_PRECISION, help=PRECISION_HELP),
 ) -> None:
     """Localise every frame of a stream against a map. One line per frame: frame index, name and time
     (seconds), the matched reference's index and name, its position (x,y or lat,lon, heading, metres along
@@ -138,7 +140,8 @@ def localize_cmd(
         params = with_param_options(get_matcher(mode.value), params, param or [])
         frames, count = open_stream(stream, timestamps, topic)
         localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
-                              min_confidence=min_confidence, threads=threads, calibration=calibration)
+                              min_confidence=min_confidence, threads=threads, calibration=calibration,
+                              precision=precision.value)
         chosen = fmt.value if fmt else (suffix_fmt or "csv")
         skipped = 0
 

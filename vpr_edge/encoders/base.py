@@ -20,11 +20,19 @@ CODEBOOK_SCHEMA = 2        # 2: any encoder (meta "encoding"); 1: the IFV's PCA 
 READS_CODEBOOK = (1, 2)
 
 
+# The default codebook: 41 GMM components over local descriptors reduced to 24 whitened PCA dims, a
+# 2 x 41 x 24 = 1,968-dim IFV (1,972 bytes a place as int8). Chosen on nordland-dev's derived streams among
+# maps of at most 2,000 bytes a place, reported on Corridor too (docs/results.md, "One default").
+DEFAULT_COMPONENTS = 41
+DEFAULT_PCA_DIM = 24
+
+
 @dataclass(frozen=True)
 class FitSettings:
-    """How to fit an encoder on reference descriptors (build-map's options)."""
+    """How to fit an encoder on reference descriptors (build-map's options; ``map.make.plan_map`` applies
+    ``DEFAULT_PCA_DIM`` where it fits the front end)."""
 
-    n_components: int = 128       # GMM components (fv, ifv) or visual words / centres (bow, vlad)
+    n_components: int = DEFAULT_COMPONENTS   # GMM components (fv, ifv) or visual words / centres (bow, vlad)
     pca_dim: int | None = None    # PCA before the codebook (None: descriptors as they are)
     whiten: bool = True
     alpha: float = 0.5            # signed power normalisation exponent (ifv, vlad); 1 = off

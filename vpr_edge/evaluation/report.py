@@ -50,15 +50,16 @@ def delays_text(frames: Sequence[float | None]) -> str:
     return "/".join("never" if d is None or d != d else f"{d:.0f}" for d in frames) or "-"
 
 
-JSON_SCHEMA_VERSION = 4   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres
+JSON_SCHEMA_VERSION = 5   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres;
+#                          5: front_end (the model file run and its form)
 
 
 def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, reports: dict[str, ModeReport],
-               tolerance: int) -> None:
-    """``{"schema_version", "n_queries", "n_refs", "tolerance", "modes": {MODE: {recall_at_1, ..., settings}}}``,
-    written atomically."""
+               tolerance: int, front: dict | None = None) -> None:
+    """``{"schema_version", "n_queries", "n_refs", "tolerance", "front_end", "modes": {MODE: {recall_at_1, ...,
+    settings}}}``, written atomically; ``front_end`` (null without a map): the model file run and its form."""
     doc = {"schema_version": JSON_SCHEMA_VERSION, "n_queries": n_queries, "n_refs": n_refs,
-           "tolerance": tolerance, "modes": {m: r.as_json() for m, r in reports.items()}}
+           "tolerance": tolerance, "front_end": front, "modes": {m: r.as_json() for m, r in reports.items()}}
     with atomic_output(path) as tmp:
         tmp.write_text(json.dumps(doc, indent=1) + "\n")
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation import sources
+from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
 from vpr_edge.matchers import MATCHERS, Matcher, get_matcher
 from vpr_edge.positions import Positions
@@ -33,6 +34,7 @@ class Source:
     batch_size: int = 8
     threads: int = 0
     topic: str | None = None      # queries is a ROS bag / MCAP file: its image topic
+    precision: str = DEFAULT_PRECISION   # the model's form (features.choice), with map
 
     def check(self) -> None:
         """VprError unless exactly one source is complete (called before any work)."""
@@ -97,6 +99,7 @@ class Evaluation:
     encode_ms: float
     truth: np.ndarray | None = None           # (Q, T) the rows scored (frames that did not decode left out)
     positions: Positions | None = None        # the references', from a map built with positions
+    front: dict | None = None                 # the model file run and its form, with a map
 
 
 def default_matchers(source: Source) -> dict[str, Matcher]:
@@ -148,7 +151,7 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
         sims = sources.from_pixels(source.refs, source.queries, len(rows), truth.name, on_skip, source.topic)
     else:
         sims = sources.from_map(source.map, source.queries, len(rows), truth.name, on_skip, source.model,
-                                source.batch_size, source.threads, with_svm, source.topic)
+                                source.batch_size, source.threads, with_svm, source.topic, source.precision)
     if sims.kept is not None:
         if sims.kept.max() >= len(rows):
             raise VprError(f"{source.queries}: {sims.kept.max() + 1} frames but the ground truth {truth.name} has "
@@ -159,4 +162,4 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions)
                for name, m in chosen.items()}
     return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms, rows,
-                      sims.positions)
+                      sims.positions, sims.front)

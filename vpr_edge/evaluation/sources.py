@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +28,7 @@ class Similarities:
     kept: np.ndarray | None = None
     encode_ms: float = float("nan")
     positions: Positions | None = None     # the references' (a map built with --positions)
+    front: dict | None = None              # with a map: {"model": file run, "form": "int8: AVX512-VNNI", ...}
 
 
 def sad_similarity(queries: np.ndarray, refs: np.ndarray, chunk: int = 16) -> np.ndarray:
@@ -90,13 +91,13 @@ def from_pixels(refs: str | os.PathLike[str], queries: str | os.PathLike[str], n
 
 def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], n_truth: int, truth_src: str,
              on_skip: OnSkip, model: Path | None = None, batch_size: int = 8, threads: int = 0,
-             svm: bool = False, topic: str | None = None) -> Similarities:
+             svm: bool = False, topic: str | None = None, precision: str = "auto") -> Similarities:
     """The query frames encoded as the map's references were (``api.Localizer``), their cosine similarities
     to the map's references, and with ``svm`` the map's per-place SVM decision values."""
     from vpr_edge.api import Localizer, encode_frames
 
     frames = _count_checked(queries, n_truth, truth_src, topic)
-    loc = Localizer(map_path, model=model, mode="single", threads=threads)
+    loc = Localizer(map_path, model=model, mode="single", threads=threads, precision=precision)
     if svm and loc.map.svm is None:
         raise VprError(f"{map_path}: mode svm needs a map built with build-map --svm")
     t0 = time.perf_counter()
@@ -109,4 +110,4 @@ def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], 
     stacked = np.stack(enc)
     cosine = loc.similarity(stacked).astype(np.float64)
     scores = loc.map.scores(stacked, "svm").astype(np.float64) if svm else None
-    return _finish(queries, kept, t0, cosine, scores, loc.map.positions)
+    return replace(_finish(queries, kept, t0, cosine, scores, loc.map.positions), front=loc.front_description)

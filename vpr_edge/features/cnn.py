@@ -115,6 +115,8 @@ class FeatureExtractor:
         self._std = np.asarray(info["std"], np.float32)
         self._input = self.session.get_inputs()[0].name
         self.resize = str(resize or info.get("resize") or "stretch")
+        # the numeric form run and why (map.front.map_front_end says why it chose it)
+        self.form = "int8" if info.get("quantization") else "fp32"
         if self.resize not in RESIZE:
             raise VprError(f"{self.path}: unknown resize policy {self.resize!r}; choose from {', '.join(RESIZE)}")
         self._scale = (1.0 / (255.0 * self._std)).astype(np.float32)   # (x / 255 - mean) / std, per channel

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from vpr_edge.errors import VprError
 from vpr_edge.features import FrontEnd, make_front_end
+from vpr_edge.features.choice import DEFAULT_PRECISION, bundled_for_sha256, choose_form
 from vpr_edge.features.cnn import resolve_model
 from vpr_edge.map.model import PlaceMap
 
@@ -17,14 +18,20 @@ def front_end_meta(front: FrontEnd) -> dict:
 
 def map_model_path(place_map: PlaceMap, given: Path | None) -> Path:
     """The model to localise with: ``given``, else ``$VPR_EDGE_MODEL``, else the file the map was built
-    with if it is still there, else the bundled default (``features.cnn.resolve_model``)."""
-    return resolve_model(given, Path(place_map.meta.get("model_path") or ""))
+    with if it is still there, else the bundled model with that file's SHA-256 (a map made on another
+    install), else the bundled default (``features.cnn.resolve_model``)."""
+    recorded = Path(place_map.meta.get("model_path") or "")
+    if given is None and not (recorded.name and recorded.is_file()):
+        recorded = bundled_for_sha256(place_map.meta.get("model_sha256")) or recorded
+    return resolve_model(given, recorded)
 
 
 def map_front_end(place_map: PlaceMap, map_path: str | os.PathLike[str], model: Path | None = None,
-                  threads: int = 0) -> FrontEnd:
+                  threads: int = 0, precision: str = DEFAULT_PRECISION) -> FrontEnd:
     """The front end this map's queries must go through (its model for cnn, checked: VprError naming
-    ``map_path`` if it is another model; ``model`` given to a handcrafted map is an error too)."""
+    ``map_path`` if it is another model; ``model`` given to a handcrafted map is an error too). For cnn,
+    ``precision`` picks the model's form (``features.choice.choose_form``: auto runs the int8 form kept
+    beside the model where the CPU has int8 dot products); the front end's ``form`` says which and why."""
     name = place_map.features["name"]
     if name != "cnn":
         if model is not None:
@@ -32,6 +39,22 @@ def map_front_end(place_map: PlaceMap, map_path: str | os.PathLike[str], model: 
                            f"drop --model")
         return make_front_end(name, spec=place_map.features)
     front = make_front_end("cnn", map_model_path(place_map, model), threads, spec=place_map.features)
+    if front.fingerprint == place_map.meta.get("model_sha256") and front.source_fingerprint is None:
+        path, why = choose_form(front.path, precision)
+        if path != front.path:
+            fast = make_front_end("cnn", path, threads, spec=place_map.features)
+            if fast.source_fingerprint == front.fingerprint:
+                fast.form = why
+                return fast
+            if precision == "int8":
+                raise VprError(f"{path}: not quantised from {front.path.name} (its metadata names another "
+                               f"source); --precision int8 cannot be met")
+            why = f"fp32: {path.name} was quantised from another model"
+        front.form = why
+        return front
+    if front.source_fingerprint is not None and front.source_fingerprint == place_map.meta.get("model_sha256"):
+        front.form = "int8: given"      # an int8 form of the map's model, named by --model
+        return front
     if front.fingerprint != place_map.meta.get("model_sha256"):
         m, given = place_map.meta.get("model", {}), front.identity()
         info = given.get("model", {})

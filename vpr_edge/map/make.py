@@ -3,6 +3,7 @@ against the others, the references and the files before any work; ``write_map`` 
 and the tools call these two, so each default lives here once."""
 from __future__ import annotations
 
+import os
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -11,10 +12,12 @@ import numpy as np
 
 from vpr_edge.bags import bag_positions, extract_images, is_bag
 from vpr_edge.encoders import ENCODERS, Encoder, FitSettings, load_codebook
+from vpr_edge.encoders.base import DEFAULT_PCA_DIM
 from vpr_edge.errors import VprError, warn
 from vpr_edge.features import FrontEnd, make_front_end
 from vpr_edge.files import check_not_input, check_writable, writer_lock
-from vpr_edge.images import list_images, read_stamps
+from vpr_edge.features.choice import bundled_for_sha256, model_for_frame
+from vpr_edge.images import list_images, load_image, read_stamps
 from vpr_edge.map.build import Progress, build_map, check_fits
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map, save_map
@@ -77,6 +80,7 @@ class MapPlan:
     positions: Positions | None = None
     names: list[str] | None = None           # the references' names when not their files' (a bag's BAG#N)
     scratch: tempfile.TemporaryDirectory | None = None   # where a bag's images were extracted
+    model_choice: str | None = None          # why this bundled model (the camera's frame size), when chosen
 
 
 def _fit_options(o: BuildOptions) -> dict:
@@ -101,8 +105,6 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     if fixed and any(v is not None for v in fit_options.values()):
         given_opts = ", ".join(k for k, v in fit_options.items() if v is not None)
         raise VprError(f"{given_opts}: options for fitting a codebook, but {fixed} is given")
-    if o.whiten is not None and o.pca_dim is None:
-        warn("--whiten/--no-whiten applies only with --pca-dim; ignored")
     for target in (out, o.save_codebook):
         if target:
             check_writable(target)
@@ -164,8 +166,17 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     front_name = o.features or (cb_meta.get("features") or {}).get("name", DEFAULT_FRONT_END)
     if o.resize is not None and front_name != "cnn":   # (with --append, --resize was refused above)
         raise VprError(f"--resize applies to the cnn front end, not {front_name}")
-    front = map_front_end(base, out, o.model, ort_threads) if base else make_front_end(
-        front_name, o.model, ort_threads, spec={"params": {"resize": o.resize}} if o.resize else None)
+    model, choice = o.model, None
+    by_camera = front_name == "cnn" and base is None and model is None and not os.environ.get("VPR_EDGE_MODEL")
+    if by_camera and given is not None:   # the bundled model the codebook was fitted with, if it is one
+        model = bundled_for_sha256(cb_meta.get("features_fingerprint") or cb_meta.get("model_sha256"))
+    elif by_camera and not bag:
+        model, choice = _camera_model(files[0])
+    spec = {"params": {"resize": o.resize}} if o.resize else None
+    if base is not None:
+        front = map_front_end(base, out, o.model, ort_threads)
+    else:   # a bag's frames are seen only once extracted: its model is chosen then (the same front end)
+        front = make_front_end(front_name, model, ort_threads, spec=spec)
     if enc_name == "none" and front.n_local is None:
         raise VprError(f"encoding none needs a front end with a fixed grid of descriptors; {front.name} detects "
                        f"keypoints (a varying number per image): choose bow, vlad, fv or ifv")
@@ -184,7 +195,10 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
         if o.alpha is not None:
             given = given.with_alpha(o.alpha)
     d = FitSettings()
-    settings = FitSettings(o.components or d.n_components, o.pca_dim, d.whiten if o.whiten is None else o.whiten,
+    pca_dim = None if o.pca_dim == 0 else o.pca_dim
+    if o.pca_dim is None and not front.binary and front.dim > DEFAULT_PCA_DIM:
+        pca_dim = DEFAULT_PCA_DIM
+    settings = FitSettings(o.components or d.n_components, pca_dim, d.whiten if o.whiten is None else o.whiten,
                            d.alpha if o.alpha is None else o.alpha, o.max_descriptors or d.max_descriptors,
                            o.fit_iterations or d.iterations, o.seed, bool(o.tfidf))
     storage = o.storage or (base.stored.storage if base else DEFAULT_STORAGE)
@@ -192,6 +206,9 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     if bag:   # the work starts here: the bag's images are decoded once, into a scratch folder
         scratch = tempfile.TemporaryDirectory(prefix="vpr-edge-bag-")
         files, names, stamps = extract_images(refs, o.topic, Path(scratch.name))
+        if by_camera and given is None:
+            model, choice = _camera_model(files[0])
+            front = make_front_end(front_name, model, ort_threads, spec=spec)
         if o.positions_topic:
             positions = bag_positions(refs, o.positions_topic, stamps)
         elif gpx:
@@ -202,7 +219,15 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
             raise VprError(f"{refs}: positions in two frames: the map's are {base.positions.frame}, these "
                            f"{positions.frame}")
     return MapPlan(refs, out, files, front, enc_name, given, settings, storage, o, base, cb_meta, positions,
-                   names, scratch)
+                   names, scratch, choice)
+
+
+def _camera_model(first: Path) -> tuple[Path, str]:
+    """The bundled model for the references' camera, judged by the first reference (``features.choice``),
+    and the line a map records of the choice."""
+    height, width = load_image(first).shape[:2]
+    model = model_for_frame(width, height)
+    return model, f"camera {width}x{height}: {model.name}"
 
 
 def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
@@ -218,6 +243,8 @@ def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
         if plan.scratch is not None:
             plan.scratch.cleanup()
     place_map = replace(place_map, positions=plan.positions)
+    if plan.model_choice is not None:
+        place_map = replace(place_map, meta=place_map.meta | {"model_choice": plan.model_choice})
     if plan.names is not None:
         place_map = replace(place_map, names=plan.names, meta=place_map.meta | {"refs_folder": str(plan.refs)})
     with writer_lock(plan.out):
@@ -246,5 +273,14 @@ def summary(path: Path) -> dict:
     pm = load_map(path, mmap=True)
     meta = {k: v for k, v in pm.meta.items() if k not in ("names", "n_refs", "dim")}
     route = {"route": pm.positions.summary()} if pm.positions is not None else {}
+    here = {}
+    if pm.features.get("name") == "cnn":
+        try:
+            front = map_front_end(pm, path, precision="auto")
+            here = {"precision_auto_here": {"model": front.path.name, "form": front.form}}
+        except VprError as e:
+            here = {"precision_auto_here": {"error": str(e)}}
     return {"references": len(pm.names), "first": pm.names[0], "last": pm.names[-1],
-            "encoding_dims": int(pm.stored.shape[1]), "size_mb": round(path.stat().st_size / 1e6, 2)} | meta | route
+            "encoding_dims": int(pm.stored.shape[1]), "bytes_per_place": int(pm.stored.values.itemsize * pm.stored.shape[1]
+                                                          + (4 if pm.stored.scale is not None else 0)),
+            "size_mb": round(path.stat().st_size / 1e6, 2)} | meta | route | here

@@ -1,0 +1,151 @@
+#!/usr/bin/env python3
+"""End to end, per configuration: build-map time and bytes a place, then on every derived stream the
+`localize --threads 1` wall time per frame and the `evaluate --tolerance T` accuracy, beside the yardstick
+(one fp32 inference of the bundled 320x240 model on one thread, measured in the same run).
+
+    python tools/derive_streams.py --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
+    python tools/bench_e2e.py --streams out/nordland-dev --config default= \\
+        --config "thesis=--model vpr_edge/models/efficientnet_lite0_stage5_320x240.onnx --components 128 --pca-dim 0"
+
+A configuration is NAME=BUILD-MAP OPTIONS (empty: the defaults); ``NAME=...|LOCALIZE OPTIONS`` adds options
+to localize and evaluate (e.g. ``|--precision fp32``). Each map is built from STREAMS/ref into OUT (default
+STREAMS/bench) with ``--threads`` (default 2) and timed as a whole command. Localize is timed as a whole
+command over each stream (start-up included: ``startup`` is the same command over a one-frame stream) and
+per frame once started ((wall - startup) / (frames - 1)). Prints a Markdown table; OUT/bench.json keeps it.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from vpr_edge.resources import LARGE_MODEL_FILE, bundled_model  # noqa: E402
+
+KINDS = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
+
+
+def yardstick_ms(runs: int = 40) -> float:
+    """Median ms of one fp32 inference of the bundled 320x240 model, batch 1, one onnxruntime thread (after
+    a warm-up), with NumPy's BLAS held to one thread as localize --threads 1 does."""
+    import onnxruntime as ort
+
+    from vpr_edge.threads import use_threads
+
+    use_threads(1)
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    opts.log_severity_level = 3
+    opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    sess = ort.InferenceSession(str(bundled_model(LARGE_MODEL_FILE)), opts, providers=["CPUExecutionProvider"])
+    inp = sess.get_inputs()[0]
+    x = np.random.default_rng(0).standard_normal([1, *inp.shape[1:]]).astype(np.float32)
+    for _ in range(3):
+        sess.run(None, {inp.name: x})
+    times = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        sess.run(None, {inp.name: x})
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times))
+
+
+def timed(cmd: list[str], env: dict) -> float:
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t0
+    if proc.returncode:
+        sys.exit(f"bench_e2e: {' '.join(cmd)} failed:\n{proc.stderr}")
+    return wall
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--streams", type=Path, required=True, help="derive_streams output: ref/, KIND/, KIND.csv")
+    p.add_argument("--config", action="append", required=True, help="NAME=BUILD-MAP OPTIONS[|RUN OPTIONS]")
+    p.add_argument("--kinds", default=",".join(KINDS))
+    p.add_argument("--tolerance", default="2")
+    p.add_argument("--threads", default="2", help="build-map's threads")
+    p.add_argument("--out", type=Path, default=None)
+    a = p.parse_args()
+    out = a.out or a.streams / "bench"
+    out.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    exe = [sys.executable, "-m", "vpr_edge"]
+    kinds = a.kinds.split(",")
+    yard = [yardstick_ms()]
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        one = Path(tmp) / "one"
+        one.mkdir()
+        first = sorted((a.streams / kinds[0]).iterdir())[0]
+        (one / first.name).write_bytes(first.read_bytes())
+        for config in a.config:
+            name, _, rest = config.partition("=")
+            build_opts, _, run_opts = rest.partition("|")
+            map_path = out / f"{name}.npz"
+            map_path.unlink(missing_ok=True)
+            build_s = timed([*exe, "build-map", str(a.streams / "ref"), "-o", str(map_path), "--threads", a.threads,
+                             *shlex.split(build_opts)], env)
+            info = json.loads(subprocess.run([*exe, "info", str(map_path)], capture_output=True, text=True,
+                                             env=env).stdout)
+            run = shlex.split(run_opts)
+            loc = [*exe, "localize", "--map", str(map_path), "--threads", "1", *run, "--out"]
+            startup = min(timed([*loc, str(Path(tmp) / "o.csv"), "--stream", str(one)], env) for _ in range(2))
+            row = {"config": name, "build_options": build_opts, "run_options": run_opts, "build_s": build_s,
+                   "bytes_per_place": info["bytes_per_place"], "startup_s": startup, "streams": {}}
+            for kind in kinds:
+                frames = len(list((a.streams / kind).iterdir()))
+                wall = timed([*loc, str(Path(tmp) / "o.csv"), "--stream", str(a.streams / kind)], env)
+                js = Path(tmp) / "e.json"
+                timed([*exe, "evaluate", "--map", str(map_path), "--queries", str(a.streams / kind), "--gt",
+                       str(a.streams / f"{kind}.csv"), "--modes", "stream", "--tolerance", a.tolerance,
+                       "--threads", "1", *run, "--json", str(js)], env)
+                doc = json.loads(js.read_text())
+                r = doc["modes"]["stream"]
+                row["model"], row["form"] = doc["front_end"]["model"], doc["front_end"]["form"]
+                row["streams"][kind] = {"frames": frames, "wall_ms": 1e3 * wall / frames,
+                                        "frame_ms": 1e3 * (wall - startup) / max(frames - 1, 1),
+                                        "r1": r["recall_at_1"], "auc": r["auc"],
+                                        "lost_unmapped": r["lost_unmapped"], "lost_mapped": r["lost_mapped"]}
+            rows.append(row)
+            print(json.dumps(row), file=sys.stderr, flush=True)
+    yard.append(yardstick_ms())
+    y = float(np.mean(yard))
+    lines = [f"{a.streams}: stream mode, tolerance {a.tolerance}; yardstick (one fp32 inference of the 320x240 "
+             f"model, one thread) {yard[0]:.1f} ms before, {yard[1]:.1f} ms after", "",
+             "| configuration | model run | " + " | ".join(kinds) + " | ms/frame (whole command) | ms/frame once "
+             "started | × yardstick | start-up s | bytes/place | build-map s |",
+             "|---|---|" + "---|" * len(kinds) + "---|---|---|---|---|---|"]
+    for r in rows:
+        s = r["streams"]
+        wall = np.mean([s[k]["wall_ms"] for k in kinds])
+        frame = np.mean([s[k]["frame_ms"] for k in kinds])
+        lines.append(f"| {r['config']} | {r['model']} ({r['form'].split(':')[0]}) | "
+                     + " | ".join(f"{s[k]['r1']:.3f} / {s[k]['auc']:.3f}" for k in kinds)
+                     + f" | {wall:.1f} | {frame:.1f} | {frame / y:.2f} | {r['startup_s']:.2f} | "
+                       f"{r['bytes_per_place']:,} | {r['build_s']:.1f} |")
+    lines += ["", "Cells: R@1 / AUC. ms/frame: mean over the streams; × yardstick: once started."]
+    if "detour" in kinds:
+        lines += ["", "detour, share of frames reported lost (unmapped / mapped): " + "; ".join(
+            f"{r['config']} {r['streams']['detour']['lost_unmapped']:.3f} / {r['streams']['detour']['lost_mapped']:.3f}"
+            for r in rows)]
+    text = "\n".join(lines)
+    (out / "bench.md").write_text(text + "\n")
+    (out / "bench.json").write_text(json.dumps({"yardstick_ms": yard, "rows": rows}, indent=1) + "\n")
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
