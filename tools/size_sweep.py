@@ -5,7 +5,7 @@
     python tools/size_sweep.py --streams out/nordland-dev --kinds aligned,speed2 --out out/size/nordland-dev
 
 Local descriptors of the references (STREAMS/ref) and of each stream STREAMS/KIND are extracted once with the
-bundled model (cached in OUT/local/) and shared by every configuration. A configuration is an IFV codebook
+default bundled model, 160x120 (or --model; cached in OUT/local/, re-extracted when the shape differs) and shared by every configuration. A configuration is an IFV codebook
 (``--configs`` entries ``PCA_DIMxCOMPONENTS``, PCA 0 = none) fitted on the references by
 ``map_from_local`` (the function behind ``build-map``) and a storage (how the map keeps the references:
 float32, int8 with a row scale, or sign bits). Each stream is scored by ``evaluate_mode`` (the function

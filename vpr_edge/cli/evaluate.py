@@ -9,10 +9,10 @@ import typer
 
 from vpr_edge.cli.common import (LIST_PARAMS, PARAM_HELP, PRECISION_HELP, THREADS_HELP, PrecisionOpt, app,
                                  param_options_for_all, user_errors)
-from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.errors import VprError, warn
 from vpr_edge.evaluation import Source, Truth, evaluate
 from vpr_edge.evaluation.run import default_matchers
+from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
 from vpr_edge.images import Frame
 from vpr_edge.map import load_map
