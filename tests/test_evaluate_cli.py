@@ -14,7 +14,7 @@ from vpr_edge.evaluation.streams import write_ground_truth
 
 JSON_KEYS = {"recall_at_1", "recall_at_5", "recall_at_10", "auc", "ap", "precision_at_full_recall",
              "recall_at_full_precision", "median_error", "lost_unmapped", "lost_mapped", "ms_per_frame", "lock_frames",
-             "exit_frames", "settings"}
+             "exit_frames", "answered_right", "mapped_right", "ece", "reliability", "settings"}
 
 
 @pytest.fixture(scope="module")
@@ -182,3 +182,26 @@ def test_evaluate_param_sets_matcher_parameters(tmp_path: Path) -> None:
     for args, needle in ((["--param", "nope=1"], "nope"), (["--param", "lock=x"], "not a number"),
                          (["--param", "decay=3"], "decay"), (["--modes", "single", "--param", "lock=3"], "lock")):
         assert_one_line_error(run("evaluate", "--similarity", s, "--gt", gt, *args), needle)
+
+
+def test_evaluate_scores_a_calibration_from_other_frames(tmp_path: Path) -> None:
+    """--save-calibration on one stream, --calibration on another: the ECE and reliability table of that
+    confidence, per mode it holds; the answered / mapped shares always; a file without the modes refused."""
+    s, gt = planted_similarity(tmp_path)
+    cal, js = tmp_path / "cal.json", tmp_path / "r.json"
+    assert run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single,stream", "--save-calibration",
+               cal).returncode == 0
+    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single,stream,dtw", "--calibration", cal,
+               "--json", js)
+    assert proc.returncode == 0, proc.stderr
+    modes = json.loads(js.read_text())["modes"]
+    for name in ("single", "stream"):
+        r = modes[name]
+        assert 0.0 <= r["ece"] <= 0.1 and sum(b["n"] for b in r["reliability"]) == 40   # its own frames
+        assert 0.0 <= r["answered_right"] <= 1.0 and 0.0 <= r["mapped_right"] <= r["recall_at_1"] + 1e-9
+    assert modes["dtw"]["ece"] is None and modes["dtw"]["reliability"] == []
+    assert "ECE" in proc.stdout.splitlines()[1]
+    bad = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "dtw", "--calibration", cal)
+    assert_one_line_error(bad, "cal.json", "no calibration for modes dtw")
+    bad = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single", "--calibration", gt)
+    assert_one_line_error(bad, "gt.csv", "not a vpr-edge calibration")

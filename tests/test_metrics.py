@@ -107,3 +107,39 @@ def test_transition_delays_by_hand() -> None:
     np.testing.assert_array_equal(lock, [2.0, np.nan])
     np.testing.assert_array_equal(exits, [1.0, 0.0])
     assert metrics.runs(np.array([], bool)) == [] and metrics.runs(np.ones(3, bool)) == [(0, 3)]
+
+
+def test_reliability_known_answers() -> None:
+    """Equal-width bins; ECE = sum of bin weight x |share right - mean confidence|, against a loop."""
+    from vpr_edge.evaluation.metrics import reliability
+
+    conf = np.array([0.8] * 10)
+    ok = np.array([True] * 8 + [False] * 2)
+    ece, table = reliability(conf, ok)
+    assert ece == pytest.approx(0.0) and table == [{"from": 0.8, "to": 0.9, "n": 10, "confidence": 0.8,
+                                                     "right": 0.8}]
+    ece, _ = reliability(np.full(4, 0.9), np.array([True, False, True, False]))
+    assert ece == pytest.approx(0.4)
+    rng = np.random.default_rng(3)
+    conf, ok = rng.random(500), rng.random(500) < 0.6
+    conf[:3] = [0.0, 1.0, 0.1]                         # the edges: 1.0 falls in the last bin
+    ece, table = reliability(conf, ok, bins=5)
+    naive = 0.0
+    for b in range(5):
+        sel = [i for i in range(500) if min(int(conf[i] * 5), 4) == b]
+        if sel:
+            naive += len(sel) / 500 * abs(ok[sel].mean() - conf[sel].mean())
+    assert ece == pytest.approx(naive) and sum(r["n"] for r in table) == 500
+    assert np.isnan(reliability(np.zeros(0), np.zeros(0, bool))[0])
+
+
+def test_answered_shares_against_counts() -> None:
+    from vpr_edge.evaluation.metrics import answered_shares
+
+    correct = np.array([True, True, False, False, True, False])
+    lost = np.array([False, True, False, True, False, False])
+    mapped = np.array([True, True, True, True, True, False])
+    right, found = answered_shares(correct, lost, mapped)
+    assert right == pytest.approx(2 / 4)               # answered: 0, 2, 4, 5; right: 0, 4
+    assert found == pytest.approx(2 / 5)
+    assert np.isnan(answered_shares(correct, np.ones(6, bool), mapped)[0])

@@ -73,6 +73,10 @@ def evaluate_cmd(
     calibration_text: Optional[str] = typer.Option(None, "--save-calibration", help="Write each mode's "
                                                    "calibration here (score -> probability the answer is right, "
                                                    "on these frames), for localize --calibration."),
+    calibration_in: Optional[Path] = typer.Option(None, "--calibration", help="A calibration from another drive "
+                                                  "or route (evaluate --save-calibration): score each mode's "
+                                                  "confidence against these frames (ECE and the reliability "
+                                                  "table in --json) for the modes it holds."),
     similarity_text: Optional[str] = typer.Option(None, "--save-similarity",
                                                   help="Also save the (Q, R) similarity matrix (.npy)."),
     model: Optional[Path] = typer.Option(None, help="With --map: the map's model, if not where it was."),
@@ -114,7 +118,16 @@ def evaluate_cmd(
         for target in outputs.values():
             if target:
                 check_writable(target)
-        check_not_input(outputs, [map_path, queries, similarity, refs, gt, model,
+        curves = {}
+        if calibration_in is not None:
+            from vpr_edge import calibration as calibration_io
+
+            held = _calibrated_modes(calibration_in)
+            curves = {name: calibration_io.load(calibration_in, name) for name in matchers if name in held}
+            if not curves:
+                raise VprError(f"{calibration_in}: no calibration for modes {','.join(matchers)} (it has "
+                               f"{', '.join(held) or 'none'})")
+        check_not_input(outputs, [map_path, queries, similarity, refs, gt, model, calibration_in,
                                   *(gt_positions or ())])
         if plot_out or matrix_out or route_out:
             report.require_matplotlib()
@@ -125,7 +138,7 @@ def evaluate_cmd(
         def skip(frame: Frame) -> None:
             typer.echo(f"vpr-edge: warning: {frame.error}; frame skipped (and its ground-truth row)", err=True)
 
-        result = evaluate(source, truth, matchers, tolerance, min_confidence, skip)
+        result = evaluate(source, truth, matchers, tolerance, min_confidence, skip, curves)
         sim = result.similarity
         if save_similarity:
             with atomic_output(save_similarity) as tmp, open(tmp, "wb") as f:
@@ -150,3 +163,17 @@ def evaluate_cmd(
             report.plot_matrix(matrix_out, sim, result.truth, result.reports, title)
         if route_out:
             report.plot_route(route_out, result.positions, result.truth, result.reports, title)
+
+
+def _calibrated_modes(path: Path) -> list[str]:
+    """The modes a calibration file holds (its every field is checked when a mode's curve is loaded)."""
+    import json
+
+    try:
+        doc = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise VprError(f"{path}: not a vpr-edge calibration ({getattr(e, 'strerror', None) or e})") from None
+    modes = doc.get("modes") if isinstance(doc, dict) and doc.get("kind") == "calibration" else None
+    if not isinstance(modes, dict):
+        raise VprError(f"{path}: not a vpr-edge calibration (evaluate --save-calibration writes one)")
+    return list(modes)

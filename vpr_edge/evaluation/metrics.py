@@ -153,3 +153,35 @@ def transition_delays(mapped: np.ndarray, found: np.ndarray, lost: np.ndarray) -
     happened within the run."""
     mapped = np.asarray(mapped, bool)
     return first_event_delays(mapped, np.asarray(found, bool)), first_event_delays(~mapped, np.asarray(lost, bool))
+
+
+def answered_shares(correct: np.ndarray, lost: np.ndarray, mapped: np.ndarray) -> tuple[float, float]:
+    """(share of answered frames that are right, share of mapped frames answered right): the first is the
+    precision a vehicle sees at the lost threshold (an answer for an unmapped place is wrong), the second its
+    recall. Inputs (Q,) bool; NaN where no frame is answered / mapped."""
+    answered = ~lost
+    right = correct & answered
+    return (float(right.sum() / answered.sum()) if answered.any() else float("nan"),
+            float((right & mapped).sum() / mapped.sum()) if mapped.any() else float("nan"))
+
+
+def reliability(confidence: np.ndarray, correct: np.ndarray, bins: int = 10) -> tuple[float, list[dict]]:
+    """Expected calibration error and the reliability table of ``confidence`` (Q,) in [0, 1] against
+    ``correct`` (Q,) bool: ``bins`` equal-width bins of confidence (the last closed); per non-empty bin its
+    range, count, mean confidence and share right; ECE = sum over bins of count / Q * |share right - mean
+    confidence|."""
+    conf = np.clip(np.asarray(confidence, np.float64), 0.0, 1.0)
+    ok = np.asarray(correct, bool)
+    if len(conf) == 0:
+        return float("nan"), []
+    idx = np.minimum((conf * bins).astype(int), bins - 1)
+    table, ece = [], 0.0
+    for b in range(bins):
+        sel = idx == b
+        n = int(sel.sum())
+        if n:
+            mean_conf, share = float(conf[sel].mean()), float(ok[sel].mean())
+            ece += n / len(conf) * abs(share - mean_conf)
+            table.append({"from": b / bins, "to": (b + 1) / bins, "n": n, "confidence": round(mean_conf, 6),
+                          "right": round(share, 6)})
+    return float(ece), table

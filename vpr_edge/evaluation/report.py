@@ -15,14 +15,16 @@ from vpr_edge.files import atomic_output
 from vpr_edge.positions import Positions
 
 _COLUMNS = ("R@1", "R@5", "R@10", "AUC", "AP", "P@R=1", "R@P=1", "med.err", "lost-off", "lost-on", "lock", "exit",
-            "ms/frame")
+            "ans.ok", "map.ok", "ECE", "ms/frame")
 
 
 def table(reports: dict[str, ModeReport]) -> str:
     """A fixed-width table, one row per mode. lost-off / lost-on: share of frames of unmapped / mapped
     places reported lost ('-' where the mode has no lost state or there are no such frames). lock / exit: frames
     a stream took to answer correctly after entering mapped places (its start, then each re-entry) / to report
-    lost after leaving them, one figure per entry / exit joined by '/' ('never': not within that stretch)."""
+    lost after leaving them, one figure per entry / exit joined by '/' ('never': not within that stretch).
+    ans.ok / map.ok: share of answered (not lost) frames that are right / of mapped frames answered right.
+    ECE: the expected calibration error of the confidence, with a calibration ('-' without)."""
     def cell(v: float, fmt: str = "{:.3f}") -> str:
         return "-" if v != v else fmt.format(v)
 
@@ -32,6 +34,7 @@ def table(reports: dict[str, ModeReport]) -> str:
         vals = [*r.recall.values(), r.auc, r.ap, r.precision_at_full_recall, r.recall_at_full_precision]
         cells = [cell(v) for v in vals] + [cell(r.median_error, "{:.1f}"), cell(r.lost_unmapped),
                                            cell(r.lost_mapped), delays_text(r.lock_frames), delays_text(r.exit_frames),
+                                           cell(r.answered_right), cell(r.mapped_right), cell(r.ece),
                                            cell(r.match_ms, "{:.2f}")]
         lines.append(f"{name:<{width}} " + " ".join(f"{c:>8s}" for c in cells))
     metres = {name: r.metres for name, r in reports.items() if r.metres is not None}
@@ -51,7 +54,8 @@ def delays_text(frames: Sequence[float | None]) -> str:
 
 
 JSON_SCHEMA_VERSION = 5   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres;
-#                          5: front_end (the model file run and its form)
+#                          5: front_end (the model file run and its form), answered_right, mapped_right, ece
+#                          and reliability per mode
 
 
 def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, reports: dict[str, ModeReport],

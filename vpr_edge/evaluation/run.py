@@ -3,6 +3,7 @@ per matcher. ``vpr-edge evaluate`` parses options and prints what this returns; 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -126,9 +127,11 @@ def check_truth_fits(truth: np.ndarray, gt_shape: tuple[int, ...] | None, sim: n
 
 
 def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None = None, tolerance: int = 1,
-             min_confidence: float | None = None, on_skip: sources.OnSkip = lambda frame: None) -> Evaluation:
+             min_confidence: float | None = None, on_skip: sources.OnSkip = lambda frame: None,
+             calibration: dict[str, Callable[[float], float]] | None = None) -> Evaluation:
     """Run every matcher (default: ``default_matchers``) on one similarity matrix from ``source`` and score
-    it against ``truth`` (frames that do not decode go to ``on_skip`` and lose their ground-truth row).
+    it against ``truth`` (frames that do not decode go to ``on_skip`` and lose their ground-truth row); the
+    modes with a curve in ``calibration`` (mode -> score-to-probability) also get its calibration error.
     VprError, before the work where it can be, for a bad source, ground truth or combination."""
     source.check()
     if min_confidence is not None and not math.isfinite(min_confidence):
@@ -159,7 +162,8 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
         rows = rows[sims.kept]
     check_truth_fits(rows, gt_shape, sims.cosine, truth.name)
     by_kind = {"cosine": sims.cosine, "svm": sims.svm}
-    reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions)
+    reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions,
+                                   (calibration or {}).get(name))
                for name, m in chosen.items()}
     return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms, rows,
                       sims.positions, sims.front)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -41,6 +42,10 @@ class ModeReport:
     lost: np.ndarray | None = field(default=None, repr=False, compare=False)      # (Q,) bool
     correct: np.ndarray | None = field(default=None, repr=False, compare=False)   # (Q,) bool, within tolerance
     scores: np.ndarray | None = field(default=None, repr=False, compare=False)    # (Q,) each answer's score
+    answered_right: float = float("nan")   # share of answered (not lost) frames that are right
+    mapped_right: float = float("nan")     # share of mapped frames answered right
+    ece: float = float("nan")              # with a calibration: expected calibration error of the confidence
+    reliability: tuple = ()                # ... and its reliability table (metrics.reliability)
 
     def as_json(self) -> dict:
         """The keys of ``evaluate --json`` (NaN as null)."""
@@ -53,20 +58,29 @@ class ModeReport:
             "median_error": num(self.median_error), "lost_unmapped": num(self.lost_unmapped),
             "lost_mapped": num(self.lost_mapped), "ms_per_frame": num(self.match_ms),
             "lock_frames": [num(v) for v in self.lock_frames], "exit_frames": [num(v) for v in self.exit_frames],
+            "answered_right": num(self.answered_right), "mapped_right": num(self.mapped_right),
+            "ece": num(self.ece), "reliability": list(self.reliability),
             "settings": self.settings} | ({"metres": {k: num(v) for k, v in self.metres.items()}}
                                           if self.metres is not None else {})
 
 
 def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, tolerance: int = 1,
-                  min_confidence: float | None = None, positions: Positions | None = None) -> ModeReport:
+                  min_confidence: float | None = None, positions: Positions | None = None,
+                  calibration: Callable[[float], float] | None = None) -> ModeReport:
     """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics); with the
-    references' ``positions``, the error in metres too."""
+    references' ``positions``, the error in metres too; with a ``calibration`` (score -> probability right,
+    ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error."""
     t0 = time.perf_counter()
     result = matcher.run(sim, k=max(RECALL_KS))
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)
     threshold = matcher.min_confidence if min_confidence is None else min_confidence
-    return replace(score_result(result, truth, tolerance, threshold, ms, positions),
-                   settings=matcher.params | {"min_confidence": threshold})
+    report = replace(score_result(result, truth, tolerance, threshold, ms, positions),
+                     settings=matcher.params | {"min_confidence": threshold})
+    if calibration is not None:
+        confidence = np.array([calibration(float(s)) for s in report.scores])
+        ece, table = metrics.reliability(confidence, report.correct)
+        report = replace(report, ece=ece, reliability=tuple(table))
+    return report
 
 
 def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshold: float | None = None,
@@ -83,6 +97,7 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
         return float(lost[mask].mean()) if threshold is not None and mask.any() else float("nan")
 
     lock, exits = metrics.transition_delays(mapped, correct[:, 0] & ~lost, lost)
+    answered_right, mapped_right = metrics.answered_shares(correct[:, 0], lost, mapped)
     return ModeReport({k: metrics.recall_at_k(correct, mapped, k) for k in RECALL_KS},
                       metrics.auc_trapezoid(curve), metrics.average_precision(curve),
                       metrics.precision_at_full_recall(curve), metrics.recall_at_full_precision(curve),
@@ -91,4 +106,5 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
                       exit_frames=tuple(exits.tolist()) if threshold is not None else (),
                       metres=None if positions is None else metrics.metre_summary(
                           metrics.metre_errors(result.refs, truth, positions.coords, positions.geo), lost),
-                      refs=result.refs, lost=lost, correct=correct[:, 0], scores=result.scores)
+                      refs=result.refs, lost=lost, correct=correct[:, 0], scores=result.scores,
+                      answered_right=answered_right, mapped_right=mapped_right)

@@ -1,0 +1,79 @@
+#!/usr/bin/env python3
+"""Does a confidence calibrated on one dataset mean the same on another? Leave one dataset out, both ways.
+
+    vpr-edge evaluate --map out/DS/map.npz --queries out/DS/KIND --gt out/DS/KIND.csv --modes single \\
+        --save-similarity out/sims/DS.KIND.npy          # for every stream KIND of both datasets
+    python tools/calibration_check.py --sims out/sims --streams out/corridor out/nordland-dev [--modes stream]
+
+For each mode, the answers of every derived stream of one dataset (similarity matrices SIMS/DS.KIND.npy,
+ground truth STREAMS/KIND.csv) are pooled and a calibration is fitted on them (``vpr_edge.calibration.fit``,
+what ``evaluate --save-calibration`` writes); it is then scored on every stream of the other dataset and of
+its own: the expected calibration error (``metrics.reliability``, 10 bins), the share of answered frames
+right and of mapped frames answered right at the mode's lost threshold. ``--write DIR`` keeps each fitted
+calibration as DIR/DS.json (for ``localize --calibration`` / ``evaluate --calibration``).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from vpr_edge import calibration  # noqa: E402
+from vpr_edge.evaluation import metrics  # noqa: E402
+from vpr_edge.evaluation import truth as groundtruth  # noqa: E402
+from vpr_edge.evaluation.scoring import evaluate_mode  # noqa: E402
+from vpr_edge.matchers import get_matcher  # noqa: E402
+
+KINDS = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--sims", type=Path, required=True, help="folder of DS.KIND.npy similarity matrices")
+    p.add_argument("--streams", type=Path, nargs=2, required=True, help="two derive_streams folders (DS = name)")
+    p.add_argument("--modes", default="stream,single")
+    p.add_argument("--tolerance", type=int, default=2)
+    p.add_argument("--write", type=Path, default=None)
+    a = p.parse_args()
+    for mode in a.modes.split(","):
+        reports = {}
+        for folder in a.streams:
+            for kind in KINDS:
+                sim = np.load(a.sims / f"{folder.name}.{kind}.npy", allow_pickle=False).astype(np.float64)
+                truth = groundtruth.load_csv(folder / f"{kind}.csv")
+                reports[folder.name, kind] = evaluate_mode(get_matcher(mode), sim, truth, a.tolerance)
+        curves = {}
+        for folder in a.streams:
+            mine = [r for (ds, _), r in reports.items() if ds == folder.name]
+            curves[folder.name] = calibration.fit(np.concatenate([r.scores for r in mine]),
+                                                  np.concatenate([r.correct for r in mine]), a.tolerance)
+            if a.write:
+                a.write.mkdir(parents=True, exist_ok=True)
+                calibration.write(a.write / f"{folder.name}.json", {mode: curves[folder.name]},
+                                  f"{folder} (all derived streams)")
+        print(f"\n{mode}, tolerance {a.tolerance}: ECE of the confidence per stream, calibrated on each dataset\n")
+        print("| scored on | calibrated on | " + " | ".join(KINDS) + " | all | answered right | mapped right |")
+        print("|---|---|" + "---|" * (len(KINDS) + 3))
+        for folder in a.streams:
+            mine = [reports[folder.name, k] for k in KINDS]
+            for fitted in a.streams:
+                curve = curves[fitted.name]
+                eces = []
+                for r in mine:
+                    eces.append(metrics.reliability(np.array([curve(float(s)) for s in r.scores]), r.correct)[0])
+                pooled = metrics.reliability(np.array([curve(float(s)) for r in mine for s in r.scores]),
+                                             np.concatenate([r.correct for r in mine]))[0]
+                own = " (own)" if fitted == folder else ""
+                print(f"| {folder.name} | {fitted.name}{own} | " + " | ".join(f"{e:.3f}" for e in eces)
+                      + f" | {pooled:.3f} | " + " / ".join(f"{r.answered_right:.3f}" for r in mine)
+                      + " | " + " / ".join(f"{r.mapped_right:.3f}" for r in mine) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
