@@ -74,6 +74,8 @@ def main() -> int:
     p.add_argument("--kinds", default="aligned,speed2", help="streams, comma-separated, or all")
     p.add_argument("--encoding", default="ifv", help="ifv, fv or vlad (PCAxCOMPONENTS as for ifv)")
     p.add_argument("--tolerance", type=int, default=1, help="frames either side counted right (evaluate's)")
+    p.add_argument("--alpha", type=float, default=FitSettings.alpha, help="signed power normalisation (ifv, vlad)")
+    p.add_argument("--no-whiten", action="store_true", help="PCA without whitening")
     p.add_argument("--configs", default="0x128,64x128,32x128,64x64,32x64,32x32,16x64,24x32")
     p.add_argument("--fits", default=f"{FitSettings.max_descriptors}x{FitSettings.iterations}",
                    help="codebook fits DESCRIPTORSxITERATIONS, comma-separated (default build-map's)")
@@ -108,14 +110,14 @@ def main() -> int:
         for seed in (int(s) for s in a.seeds.split(",")):
             t1 = time.perf_counter()
             settings = FitSettings(n_components=comps, pca_dim=pca or None, seed=seed, max_descriptors=n_desc,
-                                   iterations=iters)
+                                   iterations=iters, alpha=a.alpha, whiten=not a.no_whiten)
             pm = map_from_local(ref_local, None, front, [f.name for f in refs], "ref", a.encoding,
                                 settings=settings)
             fit_s = time.perf_counter() - t1
             ref_enc = pm.stored.dense()
             q_enc = {k: pm.encoder.transform_chunked(v[0]) for k, v in queries.items()}
             for storage in a.storages.split(","):
-                row = {"encoding": a.encoding, "pca": pca, "components": comps, "fit": fit, "seed": seed, "storage": storage,
+                row = {"encoding": a.encoding, "alpha": a.alpha, "whiten": not a.no_whiten, "pca": pca, "components": comps, "fit": fit, "seed": seed, "storage": storage,
                        "dim": pm.encoder.dim,
                        "bytes": bytes_per_place(pm.encoder.dim, storage), "fit_s": round(fit_s, 1)}
                 for k, (_, truth) in queries.items():
