@@ -138,3 +138,50 @@ def test_derive_streams_checks_before_writing(tmp_path: Path, small_refs: Path, 
     assert proc.returncode == 2 and len(lines) == 1, proc.stderr
     assert lines[0].startswith("derive_streams: error: ") and needle in lines[0]
     assert not (tmp_path / "streams").exists()                  # nothing written
+
+
+@pytest.mark.slow
+def test_bench_e2e_and_calibration_check(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
+    """bench_e2e: a row per configuration with accuracy, per-frame time beside the yardstick, bytes a place
+    and build time; calibration_check: the ECE table for a calibration fitted on each of two datasets."""
+    import json
+    import shutil
+
+    data = tmp_path / "pair"
+    shutil.copytree(small_refs, data / "ref")
+    shutil.copytree(small_queries, data / "query")
+    streams = tmp_path / "streams"
+    tool("derive_streams.py", "--dataset", str(data), "--out", str(streams), "--kinds", "aligned,speed2",
+         "--map-places", "24")
+    text = tool("bench_e2e.py", "--streams", str(streams), "--kinds", "aligned,speed2", "--config",
+                "small=--components 4", "--config", "small-int8=--components 4|--precision int8")
+    doc = json.loads((streams / "bench" / "bench.json").read_text())
+    assert len(doc["yardstick_ms"]) == 2 and all(y > 0 for y in doc["yardstick_ms"])
+    rows = {r["config"]: r for r in doc["rows"]}
+    assert rows["small"]["bytes_per_place"] == 2 * 4 * 24 + 4 and rows["small"]["form"] == "fp32: asked for"
+    assert rows["small-int8"]["model"].endswith(".int8.onnx")
+    for r in rows.values():
+        assert r["build_s"] > 0 and r["startup_s"] > 0
+        assert all(0 <= s["r1"] <= 1 and s["wall_ms"] > 0 for s in r["streams"].values())
+    assert "| small | efficientnet_lite0_stage5_160x120.onnx (fp32) |" in text
+    # two "datasets": the same streams under two names, so either calibration fits the other exactly as its own
+    sims = tmp_path / "sims"
+    sims.mkdir()
+    for name in ("one", "two"):
+        shutil.copytree(streams, tmp_path / name, ignore=shutil.ignore_patterns("bench"))
+        for kind in ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour"):
+            src = streams / ("speed2" if kind == "speed2" else "aligned")
+            if kind not in ("aligned", "speed2"):
+                shutil.copytree(src, tmp_path / name / kind)
+                shutil.copy(streams / f"{src.name}.csv", tmp_path / name / f"{kind}.csv")
+            proc = subprocess.run([sys.executable, "-m", "vpr_edge", "evaluate", "--map",
+                                   str(streams / "bench" / "small.npz"), "--queries", str(tmp_path / name / kind),
+                                   "--gt", str(tmp_path / name / f"{kind}.csv"), "--modes", "single",
+                                   "--save-similarity", str(sims / f"{name}.{kind}.npy")],
+                                  capture_output=True, text=True, timeout=600)
+            assert proc.returncode == 0, proc.stderr
+    text = tool("calibration_check.py", "--sims", str(sims), "--streams", str(tmp_path / "one"),
+                str(tmp_path / "two"), "--modes", "stream", "--write", str(tmp_path / "cal"))
+    rows = [line.split("|") for line in text.splitlines() if line.startswith("| one") or line.startswith("| two")]
+    assert len(rows) == 4 and all(r[3:11] == r2[3:11] for r, r2 in zip(rows[::2], rows[1::2]))   # same ECEs
+    assert json.loads((tmp_path / "cal" / "one.json").read_text())["kind"] == "calibration"
