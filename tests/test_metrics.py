@@ -143,3 +143,22 @@ def test_answered_shares_against_counts() -> None:
     assert right == pytest.approx(2 / 4)               # answered: 0, 2, 4, 5; right: 0, 4
     assert found == pytest.approx(2 / 5)
     assert np.isnan(answered_shares(correct, np.ones(6, bool), mapped)[0])
+
+
+def test_calibration_recovers_a_known_curve_and_its_error_elsewhere() -> None:
+    """Answers right with probability p(score) = score: the isotonic calibration recovers p, its ECE on fresh
+    draws is near 0; on answers right with probability score**2 (another route) it is off by the known
+    E|s - s**2| = 1/6 (s uniform on [0, 1])."""
+    from vpr_edge.calibration import fit
+    from vpr_edge.evaluation.metrics import reliability
+
+    rng = np.random.default_rng(11)
+    s = rng.random(20_000)
+    curve = fit(s, rng.random(20_000) < s, tolerance=2)
+    grid = np.linspace(0.05, 0.95, 19)
+    assert np.abs(np.array([curve(x) for x in grid]) - grid).max() < 0.06
+    fresh = rng.random(20_000)
+    conf = np.array([curve(x) for x in fresh])
+    assert reliability(conf, rng.random(20_000) < fresh)[0] < 0.02
+    ece_elsewhere = reliability(conf, rng.random(20_000) < fresh ** 2)[0]
+    assert ece_elsewhere == pytest.approx(1 / 6, abs=0.02)
