@@ -56,7 +56,9 @@ def test_help() -> None:
                                           (["localize", "-m", "a", "-s", "b", "--window", "-1"], "--window"),
                                           (["evaluate", "--modes"], "--modes"),
                                           (["evaluate", "--similarity", "s.npy", "--window", "-1"], "--window"),
-                                          (["localize", "-m", "a", "-s", "b", "--param"], "--param")])
+                                          (["localize", "-m", "a", "-s", "b", "--param"], "--param"),
+                                          (["localize", "-m", "a", "-s", "b", "--precision", "fp16"], "--precision"),
+                                          (["build-map", "r", "-o", "m.npz", "--pca-dim", "-1"], "--pca-dim")])
 def test_usage_errors_are_one_line(argv: list[str], needle: str) -> None:
     proc = run(*argv)
     assert proc.returncode == 2 and proc.stdout == ""

@@ -17,6 +17,18 @@ def tool(name: str, *args: str) -> str:
     return proc.stdout
 
 
+def derived(tmp_path: Path, refs: Path, queries: Path, kinds: str) -> tuple[Path, Path]:
+    """A dataset folder (ref/, query/) of the given frames and its derived streams ``kinds`` (all 24 mapped)."""
+    import shutil
+
+    data = tmp_path / "pair"
+    shutil.copytree(refs, data / "ref")
+    shutil.copytree(queries, data / "query")
+    streams = tmp_path / "streams"
+    tool("derive_streams.py", "--dataset", str(data), "--out", str(streams), "--kinds", kinds, "--map-places", "24")
+    return data, streams
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("mapped", [False, True])
 def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> None:
@@ -46,14 +58,8 @@ def test_bench_map_reports_each_size(tmp_path: Path, small_refs: Path) -> None:
 @pytest.mark.slow
 def test_thesis_grid_writes_tables_and_curves(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
     import json
-    import shutil
 
-    data = tmp_path / "pair"
-    shutil.copytree(small_refs, data / "ref")
-    shutil.copytree(small_queries, data / "query")
-    streams = tmp_path / "streams"
-    tool("derive_streams.py", "--dataset", str(data), "--out", str(streams), "--kinds", "speed2",
-         "--map-places", "24")
+    data, streams = derived(tmp_path, small_refs, small_queries, "speed2")
     out = tmp_path / "grid"
     text = tool("thesis_grid.py", "--dataset", str(data), "--stream", str(streams / "speed2"), "--out", str(out),
                 "--groups", "handcrafted,encodings", "--components", "4")
@@ -147,12 +153,7 @@ def test_bench_e2e_and_calibration_check(tmp_path: Path, small_refs: Path, small
     import json
     import shutil
 
-    data = tmp_path / "pair"
-    shutil.copytree(small_refs, data / "ref")
-    shutil.copytree(small_queries, data / "query")
-    streams = tmp_path / "streams"
-    tool("derive_streams.py", "--dataset", str(data), "--out", str(streams), "--kinds", "aligned,speed2",
-         "--map-places", "24")
+    _, streams = derived(tmp_path, small_refs, small_queries, "aligned,speed2")
     text = tool("bench_e2e.py", "--streams", str(streams), "--kinds", "aligned,speed2", "--config",
                 "small=--components 4", "--config", "small-int8=--components 4|--precision int8")
     doc = json.loads((streams / "bench" / "bench.json").read_text())

@@ -75,8 +75,8 @@ def write(path: str | os.PathLike[str], curves: dict[str, Curve], source: str) -
         tmp.write_text(json.dumps(doc, indent=1) + "\n")
 
 
-def load(path: str | os.PathLike[str], mode: str) -> Curve:
-    """Mode ``mode``'s curve from a calibration file, every field checked (VprError naming the file)."""
+def _read(path: str | os.PathLike[str]) -> dict:
+    """A calibration file's modes (JSON object per mode), its kind and schema checked (VprError naming it)."""
     try:
         with open(path) as f:
             doc = json.load(f)
@@ -90,8 +90,21 @@ def load(path: str | os.PathLike[str], mode: str) -> Curve:
         raise VprError(f"{path}: calibration schema {doc.get('schema')} is not supported (this vpr-edge reads "
                        f"{CALIBRATION_SCHEMA})")
     modes = doc.get("modes")
-    if not isinstance(modes, dict) or mode not in modes:
-        have = ", ".join(modes) if isinstance(modes, dict) else "none"
+    if not isinstance(modes, dict):
+        raise VprError(f"{path}: not a vpr-edge calibration (no modes)")
+    return modes
+
+
+def modes(path: str | os.PathLike[str]) -> list[str]:
+    """The modes a calibration file holds (each curve is checked when ``load`` reads it)."""
+    return list(_read(path))
+
+
+def load(path: str | os.PathLike[str], mode: str) -> Curve:
+    """Mode ``mode``'s curve from a calibration file, every field checked (VprError naming the file)."""
+    modes = _read(path)
+    if mode not in modes:
+        have = ", ".join(modes) or "none"
         raise VprError(f"{path}: no calibration for mode {mode} (it has {have}); run evaluate --modes {mode} "
                        f"--save-calibration")
     m = modes[mode]

@@ -122,7 +122,7 @@ def evaluate_cmd(
         if calibration_in is not None:
             from vpr_edge import calibration as calibration_io
 
-            held = _calibrated_modes(calibration_in)
+            held = calibration_io.modes(calibration_in)
             curves = {name: calibration_io.load(calibration_in, name) for name in matchers if name in held}
             if not curves:
                 raise VprError(f"{calibration_in}: no calibration for modes {','.join(matchers)} (it has "
@@ -164,16 +164,3 @@ def evaluate_cmd(
         if route_out:
             report.plot_route(route_out, result.positions, result.truth, result.reports, title)
 
-
-def _calibrated_modes(path: Path) -> list[str]:
-    """The modes a calibration file holds (its every field is checked when a mode's curve is loaded)."""
-    import json
-
-    try:
-        doc = json.loads(Path(path).read_text())
-    except (OSError, UnicodeDecodeError, ValueError) as e:
-        raise VprError(f"{path}: not a vpr-edge calibration ({getattr(e, 'strerror', None) or e})") from None
-    modes = doc.get("modes") if isinstance(doc, dict) and doc.get("kind") == "calibration" else None
-    if not isinstance(modes, dict):
-        raise VprError(f"{path}: not a vpr-edge calibration (evaluate --save-calibration writes one)")
-    return list(modes)
