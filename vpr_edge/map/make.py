@@ -15,8 +15,8 @@ from vpr_edge.encoders import ENCODERS, Encoder, FitSettings, load_codebook
 from vpr_edge.encoders.base import DEFAULT_PCA_DIM
 from vpr_edge.errors import VprError, warn
 from vpr_edge.features import FrontEnd, make_front_end
-from vpr_edge.files import check_not_input, check_writable, writer_lock
 from vpr_edge.features.choice import bundled_for_sha256, model_for_frame
+from vpr_edge.files import check_not_input, check_writable, writer_lock
 from vpr_edge.images import list_images, load_image, read_stamps
 from vpr_edge.map.build import Progress, build_map, check_fits
 from vpr_edge.map.front import map_front_end
