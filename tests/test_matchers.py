@@ -380,3 +380,13 @@ def test_parse_params_reads_each_default_type_and_refuses_bad_items() -> None:
             matcher.parse_params(bad)
     with pytest.raises(ValueError, match="unknown DTW variant"):
         dtw.parse_params(["variant=fastest"])
+
+
+def test_road_matcher_takes_whole_numbers_for_real_parameters() -> None:
+    """From Python a real-valued parameter may come as an int (``params={"memory": 25}``): the matcher runs as
+    with the same float (it once kept an int64 array for the running means and failed on the first frame)."""
+    sim = planted(np.random.default_rng(4), 60, route([(1.0, 30)], start=5))
+    floats = {k: v for k, v in get_matcher("stream").params.items() if isinstance(v, float) and v == int(v)}
+    assert "memory" in floats
+    as_ints = get_matcher("stream").with_params(**{k: int(v) for k, v in floats.items()})
+    np.testing.assert_array_equal(as_ints.run(sim).refs, get_matcher("stream").run(sim).refs)

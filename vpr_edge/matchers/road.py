@@ -106,7 +106,7 @@ class RoadMatcher:
         # per reference, the decayed number of frames in its mean (starts as if `memory` frames of mean 0) and
         # the frame count when it was last seen: a reference outside a local search's window is not updated,
         # and when seen again its old mean weighs as much as its age allows (an EMA over time, not over updates)
-        self._weight = np.full(n_refs, memory)
+        self._weight = np.full(n_refs, float(memory))
         self._seen = np.zeros(n_refs, np.int64)
         self._t = 0                       # frames counted for the means (not those of a stopped vehicle)
 
