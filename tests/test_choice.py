@@ -96,9 +96,13 @@ def test_build_map_chooses_by_camera_and_localize_by_precision(tmp_path: Path, s
     assert given.form == "int8: given"
     with pytest.raises(VprError, match="pass --model with the map's model"):
         map_front_end(pm, out, bundled_model(int8_form(LARGE_MODEL_FILE)))
-    for precision in ("fp32", "int8"):
+    for precision in ("fp32", "int8", "auto"):
         proc = run("localize", "-m", out, "-s", small_queries, "--precision", precision, "--mode", "single")
         assert proc.returncode == 0 and len(proc.stdout.splitlines()) == 25, proc.stderr
+        said = [line for line in proc.stderr.splitlines() if "--precision auto" in line]
+        assert len(said) == (precision == "auto"), proc.stderr     # what auto chose is said, on stderr
+        if said:
+            assert SMALL_MODEL_FILE.removesuffix(".onnx") in said[0] and ("int8: " in said[0] or "fp32: " in said[0])
     js = tmp_path / "e.json"
     gt = tmp_path / "gt.csv"
     gt.write_text("query,references\n" + "".join(f"{i},{i}\n" for i in range(24)))

@@ -142,6 +142,9 @@ def localize_cmd(
         localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
                               min_confidence=min_confidence, threads=threads, calibration=calibration,
                               precision=precision.value)
+        if precision.value == "auto" and "form" in localizer.front_description:   # what auto chose, said once
+            typer.echo(f"vpr-edge: --precision auto: {localizer.front_description['model']} "
+                       f"({localizer.front_description['form']})", err=True)
         chosen = fmt.value if fmt else (suffix_fmt or "csv")
         skipped = 0
 
