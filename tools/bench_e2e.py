@@ -31,8 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from vpr_edge.resources import LARGE_MODEL_FILE, bundled_model  # noqa: E402
-
-KINDS = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
+from vpr_edge.evaluation.streams import KINDS  # noqa: E402
 
 
 def yardstick_ms(runs: int = 40) -> float:

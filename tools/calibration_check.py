@@ -28,8 +28,7 @@ from vpr_edge.evaluation import metrics  # noqa: E402
 from vpr_edge.evaluation import truth as groundtruth  # noqa: E402
 from vpr_edge.evaluation.scoring import evaluate_mode  # noqa: E402
 from vpr_edge.matchers import get_matcher  # noqa: E402
-
-KINDS = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
+from vpr_edge.evaluation.streams import KINDS  # noqa: E402
 
 
 def main() -> int:

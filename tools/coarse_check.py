@@ -28,15 +28,14 @@ from vpr_edge.index.coarse import CoarseSearch  # noqa: E402
 from vpr_edge.evaluation.scoring import score_result  # noqa: E402
 from vpr_edge.images import list_images, load_image  # noqa: E402
 from vpr_edge.matchers import run_online, run_rows  # noqa: E402
-
-KINDS = "aligned,speed2,speed3,stop-and-go,variable,partial,detour"
+from vpr_edge.evaluation.streams import KINDS  # noqa: E402
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--map", type=Path, required=True)
     p.add_argument("--streams", type=Path, required=True, help="derive_streams output: KIND/ and KIND.csv")
-    p.add_argument("--kinds", default=KINDS)
+    p.add_argument("--kinds", default=",".join(KINDS))
     p.add_argument("--keep", type=int, default=1024, help="exact values for the best KEEP by sign agreement")
     p.add_argument("--calib", type=int, default=512, help="exact values of CALIB fixed random references")
     p.add_argument("--tolerance", type=int, default=1)

@@ -21,8 +21,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from vpr_edge.evaluation.report import delays_text  # noqa: E402
-
-KINDS = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
+from vpr_edge.evaluation.streams import KINDS  # noqa: E402
 
 
 def main() -> int:

@@ -39,8 +39,7 @@ from vpr_edge.map.build import extract_all  # noqa: E402
 from vpr_edge.map import map_from_local  # noqa: E402
 from vpr_edge.matchers import get_matcher  # noqa: E402
 from vpr_edge.threads import use_threads  # noqa: E402
-
-KINDS = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
+from vpr_edge.evaluation.streams import KINDS  # noqa: E402
 
 
 def cached_local(files: list[Path], front, folder: Path) -> np.ndarray:
