@@ -157,6 +157,7 @@ def test_calibration_recovers_a_known_curve_and_its_error_elsewhere() -> None:
     curve = fit(s, rng.random(20_000) < s, tolerance=2)
     grid = np.linspace(0.05, 0.95, 19)
     assert np.abs(np.array([curve(x) for x in grid]) - grid).max() < 0.06
+    np.testing.assert_array_equal(curve.of(grid), [curve(x) for x in grid])     # the array form, the same values
     fresh = rng.random(20_000)
     conf = np.array([curve(x) for x in fresh])
     assert reliability(conf, rng.random(20_000) < fresh)[0] < 0.02

@@ -62,10 +62,8 @@ def main() -> int:
             mine = [reports[folder.name, k] for k in KINDS]
             for fitted in a.streams:
                 curve = curves[fitted.name]
-                eces = []
-                for r in mine:
-                    eces.append(metrics.reliability(np.array([curve(float(s)) for s in r.scores]), r.correct)[0])
-                pooled = metrics.reliability(np.array([curve(float(s)) for r in mine for s in r.scores]),
+                eces = [metrics.reliability(curve.of(r.scores), r.correct)[0] for r in mine]
+                pooled = metrics.reliability(curve.of(np.concatenate([r.scores for r in mine])),
                                              np.concatenate([r.correct for r in mine]))[0]
                 own = " (own)" if fitted == folder else ""
                 print(f"| {folder.name} | {fitted.name}{own} | " + " | ".join(f"{e:.3f}" for e in eces)

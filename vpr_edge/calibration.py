@@ -60,6 +60,10 @@ class Curve:
         """The probability that an answer with this score is right, in [0, 1]."""
         return float(np.interp(score, self.scores, self.confidence))
 
+    def of(self, scores: np.ndarray) -> np.ndarray:
+        """``__call__`` over an array of scores (Q,) at once -> (Q,) float64."""
+        return np.interp(np.asarray(scores, np.float64), self.scores, self.confidence)
+
 
 def fit(scores: np.ndarray, correct: np.ndarray, tolerance: int) -> Curve:
     x, y = isotonic(scores, correct)
@@ -95,14 +99,20 @@ def _read(path: str | os.PathLike[str]) -> dict:
     return modes
 
 
-def modes(path: str | os.PathLike[str]) -> list[str]:
-    """The modes a calibration file holds (each curve is checked when ``load`` reads it)."""
-    return list(_read(path))
-
-
 def load(path: str | os.PathLike[str], mode: str) -> Curve:
     """Mode ``mode``'s curve from a calibration file, every field checked (VprError naming the file)."""
+    return _curve(path, _read(path), mode)
+
+
+def load_held(path: str | os.PathLike[str], names: list[str]) -> tuple[dict[str, Curve], list[str]]:
+    """The curves of the modes ``names`` that the file holds (each checked as ``load`` does), and every mode it
+    holds; the file is read once."""
     modes = _read(path)
+    return {name: _curve(path, modes, name) for name in names if name in modes}, list(modes)
+
+
+def _curve(path: str | os.PathLike[str], modes: dict, mode: str) -> Curve:
+    """Mode ``mode``'s curve out of a file's ``modes`` (``_read``), every field checked."""
     if mode not in modes:
         have = ", ".join(modes) or "none"
         raise VprError(f"{path}: no calibration for mode {mode} (it has {have}); run evaluate --modes {mode} "

@@ -122,8 +122,7 @@ def evaluate_cmd(
         if calibration_in is not None:
             from vpr_edge import calibration as calibration_io
 
-            held = calibration_io.modes(calibration_in)
-            curves = {name: calibration_io.load(calibration_in, name) for name in matchers if name in held}
+            curves, held = calibration_io.load_held(calibration_in, list(matchers))
             if not curves:
                 raise VprError(f"{calibration_in}: no calibration for modes {','.join(matchers)} (it has "
                                f"{', '.join(held) or 'none'})")

@@ -3,17 +3,17 @@ per matcher. ``vpr-edge evaluate`` parses options and prints what this returns; 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from vpr_edge.calibration import Curve
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation import sources
-from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
+from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.matchers import MATCHERS, Matcher, get_matcher
 from vpr_edge.positions import Positions
 
@@ -128,7 +128,7 @@ def check_truth_fits(truth: np.ndarray, gt_shape: tuple[int, ...] | None, sim: n
 
 def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None = None, tolerance: int = 1,
              min_confidence: float | None = None, on_skip: sources.OnSkip = lambda frame: None,
-             calibration: dict[str, Callable[[float], float]] | None = None) -> Evaluation:
+             calibration: dict[str, Curve] | None = None) -> Evaluation:
     """Run every matcher (default: ``default_matchers``) on one similarity matrix from ``source`` and score
     it against ``truth`` (frames that do not decode go to ``on_skip`` and lose their ground-truth row); the
     modes with a curve in ``calibration`` (mode -> score-to-probability) also get its calibration error.

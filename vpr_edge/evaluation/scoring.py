@@ -2,12 +2,12 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from vpr_edge.calibration import Curve
 from vpr_edge.matchers import Matcher, Result
 from vpr_edge.evaluation import metrics
 from vpr_edge.positions import Positions
@@ -66,7 +66,7 @@ class ModeReport:
 
 def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, tolerance: int = 1,
                   min_confidence: float | None = None, positions: Positions | None = None,
-                  calibration: Callable[[float], float] | None = None) -> ModeReport:
+                  calibration: Curve | None = None) -> ModeReport:
     """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics); with the
     references' ``positions``, the error in metres too; with a ``calibration`` (score -> probability right,
     ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error."""
@@ -77,8 +77,7 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     report = replace(score_result(result, truth, tolerance, threshold, ms, positions),
                      settings=matcher.params | {"min_confidence": threshold})
     if calibration is not None:
-        confidence = np.array([calibration(float(s)) for s in report.scores])
-        ece, table = metrics.reliability(confidence, report.correct)
+        ece, table = metrics.reliability(calibration.of(report.scores), report.correct)
         report = replace(report, ece=ece, reliability=tuple(table))
     return report
 
