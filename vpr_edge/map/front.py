@@ -6,8 +6,9 @@ from pathlib import Path
 
 from vpr_edge.errors import VprError
 from vpr_edge.features import FrontEnd, make_front_end
-from vpr_edge.features.choice import DEFAULT_PRECISION, bundled_for_sha256, choose_form
+from vpr_edge.features.choice import DEFAULT_PRECISION, bundled_for_sha256, choose_form, int8_sibling
 from vpr_edge.features.cnn import resolve_model
+from vpr_edge.files import file_sha256
 from vpr_edge.map.model import PlaceMap
 
 
@@ -38,24 +39,31 @@ def map_front_end(place_map: PlaceMap, map_path: str | os.PathLike[str], model: 
             raise VprError(f"{map_path}: map was built with the {name} front end, which takes no model; "
                            f"drop --model")
         return make_front_end(name, spec=place_map.features)
-    front = make_front_end("cnn", map_model_path(place_map, model), threads, spec=place_map.features)
-    if front.fingerprint == place_map.meta.get("model_sha256") and front.source_fingerprint is None:
-        path, why = choose_form(front.path, precision)
-        if path != front.path:
-            fast = make_front_end("cnn", path, threads, spec=place_map.features)
-            if fast.source_fingerprint == front.fingerprint:
+    path, recorded = map_model_path(place_map, model), place_map.meta.get("model_sha256")
+    # an int8 form to run instead: only its session is opened (the fp32 file is checked by its hash)
+    if (precision != "fp32" and path.is_file() and int8_sibling(path) is not None
+            and file_sha256(path) == recorded):
+        chosen, why = choose_form(path, precision)
+        if chosen != path:
+            fast = make_front_end("cnn", chosen, threads, spec=place_map.features)
+            if fast.source_fingerprint == recorded:
                 fast.form = why
                 return fast
             if precision == "int8":
-                raise VprError(f"{path}: not quantised from {front.path.name} (its metadata names another "
+                raise VprError(f"{chosen}: not quantised from {path.name} (its metadata names another "
                                f"source); --precision int8 cannot be met")
-            why = f"fp32: {path.name} was quantised from another model"
+            why = f"fp32: {chosen.name} was quantised from another model"
+        front = make_front_end("cnn", path, threads, spec=place_map.features)
         front.form = why
         return front
-    if front.source_fingerprint is not None and front.source_fingerprint == place_map.meta.get("model_sha256"):
+    front = make_front_end("cnn", path, threads, spec=place_map.features)
+    if front.fingerprint == recorded and front.source_fingerprint is None:
+        front.form = choose_form(front.path, precision)[1]    # fp32 (VprError: int8 asked, no int8 form)
+        return front
+    if front.source_fingerprint is not None and front.source_fingerprint == recorded:
         front.form = "int8: given"      # an int8 form of the map's model, named by --model
         return front
-    if front.fingerprint != place_map.meta.get("model_sha256"):
+    if front.fingerprint != recorded:
         m, given = place_map.meta.get("model", {}), front.identity()
         info = given.get("model", {})
         raise VprError(
