@@ -13,6 +13,7 @@ import pytest
 from vpr_edge import Localizer
 from vpr_edge.errors import VprError
 from vpr_edge.images import load_image, open_stream
+from vpr_edge.matchers import stillness
 
 
 @pytest.fixture(scope="module")
@@ -109,6 +110,28 @@ def test_local_search_reads_only_the_window(api_map: Path, small_queries: Path) 
     pushed = [loc.push(load_image(f)) for f in files]
     assert min(sizes) < len(loc.names)                 # some frames read a window (+ the probe sample)
     enc = loc.encode([load_image(f) for f in files])
-    want = loc.matcher.run(loc.similarity(enc))
+    want = loc.matcher.run(loc.similarity(enc), still=stillness(enc))
     assert [m.ref_index if not m.lost else int(r) for m, r in zip(pushed, want.refs)] == list(want.refs)
     np.testing.assert_allclose([m.score for m in pushed], want.scores, atol=1e-5)
+
+
+def test_push_gives_the_matcher_the_motion_cue(api_map: Path, small_queries: Path) -> None:
+    """A stream with stops (frames repeated): push answers as the matcher does on the whole similarity matrix
+    with each frame's likeness to the one before (``stillness``, what evaluate passes), not as it does
+    without the cue; reset forgets the previous frame."""
+    files = sorted(small_queries.iterdir())
+    order = [0, 1, 2, 3, 4, 5, 5, 5, 5, 5, 5, 5, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 10, 11, 12, 13, 14]
+    images = [load_image(files[i]) for i in order]
+    loc = Localizer(api_map, threads=1)
+    pushed = [loc.push(im) for im in images]
+    enc = loc.encode(images)
+    cue = stillness(enc)
+    assert np.isnan(cue[0]) and np.allclose(cue[[6, 7, 12, 17]], 1.0) and (cue[[1, 13, 22]] < 0.99).all()
+    want = loc.matcher.run(loc.similarity(enc), still=cue)
+    blind = loc.matcher.run(loc.similarity(enc))
+    assert [m.ref_index if not m.lost else int(r) for m, r in zip(pushed, want.refs)] == list(want.refs)
+    np.testing.assert_allclose([m.score for m in pushed], want.scores, atol=1e-5)
+    assert not np.allclose(want.scores, blind.scores, atol=1e-5)      # the cue changed something
+    loc.reset()
+    again = [loc.push(im) for im in images]
+    np.testing.assert_allclose([m.score for m in again], want.scores, atol=1e-5)

@@ -10,7 +10,7 @@ import pytest
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.matchers.contrast import local_contrast
-from vpr_edge.matchers.base import step
+from vpr_edge.matchers.base import step, stillness
 from vpr_edge.matchers.road import RoadMatcher
 from vpr_edge.matchers.seqslam import SeqSLAMOnline, enhanced_difference, seqslam_match, speeds
 
@@ -197,13 +197,19 @@ def test_evaluate_reports_lock_on_and_exit_delays() -> None:
     assert single.exit_frames == () and len(single.lock_frames) == 2
 
 
-def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, stop_gain, stop_decay):
-    """RoadMatcher written as plain loops over states, from its docstring."""
+def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, stop_gain, stop_decay, still=0.0,
+               cues=None):
+    """RoadMatcher written as plain loops over states, from its docstring (``cues``: each frame's motion cue,
+    NaN = none)."""
     n_refs = sim.shape[1]
     n_speeds, n_pos = int(round(vmax * grid)) + 1, n_refs * grid
     h = np.zeros((n_speeds, n_pos))
     mean, weight, stopped, out = np.zeros(n_refs), memory, False, []
-    for s in sim:
+    for t, s in enumerate(sim):
+        cue = np.nan if cues is None else cues[t]
+        gain, s_decay = stop_gain, stop_decay                 # no cue: the stop_gain rule
+        if still > 0 and cue == cue:
+            gain, s_decay = (0.0, 1.0) if cue >= still else (0.0, decay)
         z = (s - s.mean()) / s.std()
         zr = z - mean
         if not stopped:
@@ -214,8 +220,8 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, s
             for p in range(n_pos):
                 prev = max((h[u, p - v] - turn * abs(v - u) for u in range(n_speeds)), default=0.0) if p >= v else 0.0
                 e = zr[p // grid] - bias
-                if v == 0:   # standing still: decays by stop_decay, a positive excess counts stop_gain of itself
-                    new[v, p] = max(0.0, max(0.0, stop_decay * prev) + (stop_gain * e if e > 0 else e))
+                if v == 0:   # standing still: decays by s_decay, a positive excess counts gain of itself
+                    new[v, p] = max(0.0, max(0.0, s_decay * prev) + (gain * e if e > 0 else e))
                 else:
                     new[v, p] = max(0.0, max(0.0, decay * prev) + e)
         h = new
@@ -239,6 +245,74 @@ def test_road_matcher_against_plain_loops(grid: int, vmax: float, stop_gain: flo
     assert [r for r, _ in got] == [r for r, _ in want]
     np.testing.assert_allclose([c for _, c in got], [c for _, c in want], atol=1e-5)   # float32 state
     assert any(c >= 1 for _, c in got) and any(c < 1 for _, c in got)   # both locked and unlocked frames
+
+
+def test_road_matcher_motion_cue_against_plain_loops() -> None:
+    """Frames with a cue at or above ``still`` (a stop), below it (motion) and without one (NaN: the stop_gain
+    rule), against the loops; the cue changes the answers' scores."""
+    rng = np.random.default_rng(5)
+    places = route([(1.0, 10), (0.0, 8), (1.0, 6), (0.5, 6)], start=1)
+    sim = planted(rng, 20, places, noise=0.6)
+    cues = np.where(np.r_[False, places[1:] == places[:-1]], 1.0, 0.4)
+    cues[[0, 15, 16]] = np.nan
+    params = {"vmax": 1.5, "grid": 2, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 6.0, "lock": 3.0,
+              "rival_window": 2, "stop_gain": 0.3, "stop_decay": 0.95, "still": 0.99}
+    got = MATCHERS["stream"].with_params(**params).run(sim, k=1, still=cues)
+    want = naive_road(sim, **params, cues=cues)
+    assert list(got.refs) == [r for r, _ in want]
+    np.testing.assert_allclose(got.scores, [c for _, c in want], atol=1e-5)
+    blind = naive_road(sim, **params)
+    assert not np.allclose([c for _, c in want], [c for _, c in blind], atol=1e-3)
+    off = MATCHERS["stream"].with_params(**params | {"still": 0.0}).run(sim, k=1, still=cues)   # 0: cue unused
+    np.testing.assert_allclose(off.scores, [c for _, c in blind], atol=1e-5)
+
+
+def test_stillness_against_a_loop() -> None:
+    enc = np.random.default_rng(0).normal(size=(6, 5))
+    enc[3] = 2.5 * enc[2]          # the same view again (scale does not matter)
+    enc[5] = 0.0                   # no direction: no cue
+    got = stillness(enc)
+    assert np.isnan(got[0]) and np.isnan(got[5]) and got[3] == pytest.approx(1.0)
+    for i in (1, 2, 4):
+        a, b = enc[i], enc[i - 1]
+        assert got[i] == pytest.approx(a @ b / np.linalg.norm(a) / np.linalg.norm(b))
+
+
+def test_road_matcher_long_stop_held_with_the_motion_cue() -> None:
+    """A stop of 120 frames on a mapped place, its view repeated with fresh noise: with the motion cue (the
+    camera is seen to stand: the stopped state holds its score) every stopped frame stays locked within 2
+    places of the stop over eight noise draws; without it (the stop_gain rule alone) the lock fades in most
+    draws."""
+    matcher = get_matcher("stream")
+    held, held_blind = 0, 0
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        places = np.concatenate([route([(1.0, 80)], start=20), np.full(120, 100), route([(1.0, 60)], start=101)])
+        sim = planted(rng, 400, places)
+        cues = np.where(np.r_[False, places[1:] == places[:-1]], 1.0, 0.5)
+        stop = slice(80, 200)
+        for res, n in ((matcher.run(sim, still=cues), 0), (matcher.run(sim), 1)):
+            ok = bool(np.all(res.scores[stop] >= matcher.min_confidence) and np.all(np.abs(res.refs[stop] - 100) <= 2))
+            held, held_blind = (held + ok, held_blind) if n == 0 else (held, held_blind + ok)
+    assert held == 8 and held_blind <= 2, (held, held_blind)
+
+
+def test_road_matcher_off_map_stop_with_the_motion_cue_stays_lost() -> None:
+    """Off the map for 10 moving frames, then stopped for 30 frames where the view resembles place 300 as a
+    true match would: with the cue saying moving, then stopped, the repeated view builds no lock (a stop holds
+    a lock, it does not make one): lost through at least 90% of the stop over eight draws, locked on 300 in
+    at most 10% (counting each repeat in full instead locks on it in 85%)."""
+    matcher = get_matcher("stream")
+    places = np.concatenate([route([(1.0, 40)], start=50), np.full(10, -1), np.full(30, 300)])
+    cues = np.full(len(places), 0.5)
+    cues[51:] = 1.0
+    stop = slice(50, 80)
+    lost, parked = [], []
+    for seed in range(8):
+        res = matcher.run(planted(np.random.default_rng(seed), 600, places), still=cues)
+        lost.append(np.mean(res.scores[stop] < matcher.min_confidence))
+        parked.append(np.mean((res.refs[stop] == 300) & (res.scores[stop] >= matcher.min_confidence)))
+    assert np.mean(lost) >= 0.9 and np.mean(parked) <= 0.1, (np.mean(lost), np.mean(parked))
 
 
 @pytest.mark.parametrize("n_refs", [2, 3, 4])

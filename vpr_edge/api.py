@@ -27,7 +27,7 @@ from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.images import MIN_SIDE, Frame
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.map import PlaceMap, load_map, map_front_end
-from vpr_edge.matchers import Matcher, get_matcher, step
+from vpr_edge.matchers import Matcher, get_matcher, step, stillness
 from vpr_edge.threads import use_threads
 
 
@@ -134,6 +134,7 @@ class Localizer:
                                                          self._online.searches_locally) else None
         self._lock = threading.Lock()
         self._count = 0
+        self._previous: np.ndarray | None = None   # the last frame's encoding (the motion cue's other half)
 
     @property
     def front_description(self) -> dict:
@@ -160,7 +161,8 @@ class Localizer:
         return self.map.scores(encodings, self.matcher.scores, refs)
 
     def _step(self, enc: np.ndarray) -> tuple[int, float, float | None]:
-        """Match one encoding (D,): only the similarities the matcher asks for are computed (a local search
+        """Match one encoding (D,), with its motion cue (its likeness to the previous frame's encoding,
+        ``matchers.stillness``): only the similarities the matcher asks for are computed (a local search
         around a locked position reads a window of the map, not all of it; with ``coarse``, a whole-route
         frame reads the signs and the best candidates)."""
         def similarity(refs: np.ndarray | None) -> np.ndarray:
@@ -168,7 +170,12 @@ class Localizer:
                 return self._coarse.similarity(enc)
             return self.similarity(enc[None], refs)[0]
 
-        ref, score = step(self._online, similarity)
+        still = None
+        if self._previous is not None:
+            cue = stillness(np.stack([self._previous, enc]))[1]
+            still = float(cue) if np.isfinite(cue) else None
+        self._previous = enc
+        ref, score = step(self._online, similarity, still)
         return ref, score, self._online.position()
 
     def _line(self, index: int, name: str, ref: int, score: float, stamp: float | None = None,
@@ -226,3 +233,4 @@ class Localizer:
             if self._online is not None:
                 self._online.reset()
             self._count = 0
+            self._previous = None

@@ -35,7 +35,8 @@ def evaluate_cmd(
     topic: Optional[str] = typer.Option(None, help="With a bag as --queries: its image topic."),
     similarity: Optional[Path] = typer.Option(None, "--similarity", help="Evaluate a (Q, R) float .npy "
                                               "similarity matrix instead (rows = queries, higher = more "
-                                              "alike), e.g. from another tool's descriptors; no model needed."),
+                                              "alike), e.g. from another tool's descriptors; no model needed "
+                                              "(and no motion cue: mode stream then runs its stop_gain rule)."),
     refs: Optional[Path] = typer.Option(None, "--refs", help="With --features pixels: the reference folder."),
     features: FeaturesOpt = typer.Option(FeaturesOpt.map, help="map: the map's CNN features and encoding; "
                                          "pixels: SeqSLAM's front end (grey, 64x32, patch-normalised, "

@@ -66,12 +66,13 @@ class ModeReport:
 
 def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, tolerance: int = 1,
                   min_confidence: float | None = None, positions: Positions | None = None,
-                  calibration: Curve | None = None) -> ModeReport:
+                  calibration: Curve | None = None, still: np.ndarray | None = None) -> ModeReport:
     """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics); with the
     references' ``positions``, the error in metres too; with a ``calibration`` (score -> probability right,
-    ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error."""
+    ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error. ``still`` (Q,): each
+    frame's motion cue (``matchers.stillness`` of the query encodings; None: a bare similarity matrix)."""
     t0 = time.perf_counter()
-    result = matcher.run(sim, k=max(RECALL_KS))
+    result = matcher.run(sim, k=max(RECALL_KS), still=still)
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)
     threshold = matcher.min_confidence if min_confidence is None else min_confidence
     report = replace(score_result(result, truth, tolerance, threshold, ms, positions),

@@ -29,6 +29,7 @@ class Similarities:
     encode_ms: float = float("nan")
     positions: Positions | None = None     # the references' (a map built with --positions)
     front: dict | None = None              # with a map: {"model": file run, "form": "int8: AVX512-VNNI", ...}
+    still: np.ndarray | None = None        # with a map: (Q,) each row's motion cue (``matchers.stillness``)
 
 
 def sad_similarity(queries: np.ndarray, refs: np.ndarray, chunk: int = 16) -> np.ndarray:
@@ -72,7 +73,8 @@ def _finish(queries: str | os.PathLike[str], kept: list[int], t0: float, cosine:
 def from_pixels(refs: str | os.PathLike[str], queries: str | os.PathLike[str], n_truth: int, truth_src: str,
                 on_skip: OnSkip, topic: str | None = None) -> Similarities:
     """SeqSLAM's front end (``features.patches.pixel_descriptor``) on the reference folder and the query
-    frames, compared by minus the mean absolute difference."""
+    frames, compared by minus the mean absolute difference. No motion cue: raw low-resolution pixels of a
+    moving camera are often as alike as a stopped one's (docs/design.md, "Matching")."""
     from vpr_edge.features.patches import pixel_descriptor
 
     frames = _count_checked(queries, n_truth, truth_src, topic)
@@ -93,8 +95,10 @@ def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], 
              on_skip: OnSkip, model: Path | None = None, batch_size: int = 8, threads: int = 0,
              svm: bool = False, topic: str | None = None, precision: str = "auto") -> Similarities:
     """The query frames encoded as the map's references were (``api.Localizer``), their cosine similarities
-    to the map's references, and with ``svm`` the map's per-place SVM decision values."""
+    to the map's references, with ``svm`` the map's per-place SVM decision values, and each decoded frame's
+    motion cue (its likeness to the decoded frame before it, as ``localize`` computes it)."""
     from vpr_edge.api import Localizer, encode_frames
+    from vpr_edge.matchers import stillness
 
     frames = _count_checked(queries, n_truth, truth_src, topic)
     loc = Localizer(map_path, model=model, mode="single", threads=threads, precision=precision)
@@ -110,4 +114,5 @@ def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], 
     stacked = np.stack(enc)
     cosine = loc.similarity(stacked).astype(np.float64)
     scores = loc.map.scores(stacked, "svm").astype(np.float64) if svm else None
-    return replace(_finish(queries, kept, t0, cosine, scores, loc.map.positions), front=loc.front_description)
+    return replace(_finish(queries, kept, t0, cosine, scores, loc.map.positions), front=loc.front_description,
+                   still=stillness(stacked))

@@ -9,6 +9,10 @@ An *online* matcher sees one row at a time, past frames only: ``update(row) -> (
 ``ranking()`` gives its per-reference preference for that frame. Running it over a matrix row by row is its
 offline form, so every matcher, online or not, can be evaluated with ``run(sim)``.
 
+An online matcher may also take a motion cue per frame, ``still``: the cosine similarity of the frame's
+encoding to the previous frame's (near 1: the camera saw the same view again, so the vehicle stands; None:
+not known, as for the first frame or a bare similarity matrix). Matchers without a use for it ignore it.
+
 An online matcher may search locally: ``wanted()`` names the references whose similarities its next frame
 needs (None: all, what ``WholeRoute`` matchers always answer), and ``update(values, refs)`` takes just those.
 ``step`` drives every online matcher that way, so that the Localizer computes only the similarities asked for
@@ -39,9 +43,11 @@ class OnlineMatcher(Protocol):
     def wanted(self) -> np.ndarray | None:
         """References (sorted int array) whose similarities the next ``update`` needs; None: all of them."""
 
-    def update(self, sim_row: np.ndarray, refs: np.ndarray | None = None) -> tuple[int, float]:
+    def update(self, sim_row: np.ndarray, refs: np.ndarray | None = None,
+               still: float | None = None) -> tuple[int, float]:
         """Similarities of the new frame to the references ``refs`` (what ``wanted()`` asked for; None: all
-        R, ``sim_row`` (R,)) -> (best reference, score)."""
+        R, ``sim_row`` (R,)) and its motion cue ``still`` (see the module docstring) -> (best reference,
+        score)."""
 
     def ranking(self) -> np.ndarray:
         """Per-reference preference (R,) after the last update (higher = better); ties broken by index."""
@@ -95,28 +101,54 @@ def lead_with(refs: np.ndarray, cand: np.ndarray) -> np.ndarray:
     return np.concatenate([refs[:, None], rest[:, : cand.shape[1] - 1]], axis=1)
 
 
-def step(matcher: OnlineMatcher, similarity: Callable[[np.ndarray | None], np.ndarray]) -> tuple[int, float]:
+def step(matcher: OnlineMatcher, similarity: Callable[[np.ndarray | None], np.ndarray],
+         still: float | None = None) -> tuple[int, float]:
     """One frame: ``similarity(refs)`` gives the frame's similarities to the references ``refs`` (sorted int
-    array; None = all, (R,)); ``refs`` is what the matcher's ``wanted()`` asks for, if it has one."""
+    array; None = all, (R,)); ``refs`` is what the matcher's ``wanted()`` asks for, if it has one. ``still``:
+    the frame's motion cue (``stillness``), passed on."""
     refs = matcher.wanted()
-    return matcher.update(similarity(refs), refs)
+    return matcher.update(similarity(refs), refs, still)
 
 
-def run_online(matcher: OnlineMatcher, sim: np.ndarray, k: int = 10) -> Result:
+def stillness(encodings: np.ndarray) -> np.ndarray:
+    """Encodings (Q, D) of consecutive frames -> each frame's cosine similarity to the previous one (Q,)
+    float64, NaN for the first (and next to an all-zero encoding): the motion cue ``still`` (1 = the same
+    view again)."""
+    enc = np.asarray(encodings, np.float64)
+    norm = np.linalg.norm(enc, axis=1)
+    out = np.full(len(enc), np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out[1:] = np.einsum("ij,ij->i", enc[1:], enc[:-1]) / (norm[1:] * norm[:-1])
+    out[~np.isfinite(out)] = np.nan
+    return out
+
+
+def _cue(still: np.ndarray | None, i: int) -> float | None:
+    """Frame ``i``'s motion cue from a (Q,) array (NaN or no array: None)."""
+    if still is None or not np.isfinite(still[i]):
+        return None
+    return float(still[i])
+
+
+def run_online(matcher: OnlineMatcher, sim: np.ndarray, k: int = 10, still: np.ndarray | None = None) -> Result:
     """Feed the rows of ``sim`` (Q, R) to an online matcher in order (through ``step``: a local search sees
-    only the references it asks for); collect its answers and top-k."""
-    return run_rows(matcher, lambda i, idx: sim[i] if idx is None else sim[i, idx], sim.shape[0], sim.shape[1], k)
+    only the references it asks for), with each frame's motion cue from ``still`` (Q,) if given; collect its
+    answers and top-k."""
+    return run_rows(matcher, lambda i, idx: sim[i] if idx is None else sim[i, idx], sim.shape[0], sim.shape[1], k,
+                    still)
 
 
 def run_rows(matcher: OnlineMatcher, rows: Callable[[int, np.ndarray | None], np.ndarray], q: int, r: int,
-             k: int = 10) -> Result:
+             k: int = 10, still: np.ndarray | None = None) -> Result:
     """``run_online`` with frame i's similarities to references ``idx`` (None: all R) given by
     ``rows(i, idx)``, for rows computed on demand (a coarse whole-route search, ``tools/coarse_check.py``)."""
+    if still is not None and len(still) != q:
+        raise ValueError(f"need a motion cue per frame: {len(still)} for {q} frames")
     refs = np.empty(q, np.int64)
     scores = np.empty(q, np.float64)
     ranked = np.empty((q, min(k, r)), np.int64)
     for i in range(q):
-        refs[i], scores[i] = step(matcher, lambda idx: rows(i, idx))
+        refs[i], scores[i] = step(matcher, lambda idx: rows(i, idx), _cue(still, i))
         ranked[i] = top_k(matcher.ranking(), k)
     return Result(refs, scores, lead_with(refs, ranked))
 
@@ -187,14 +219,15 @@ class Matcher:
             raise ValueError(f"matcher {self.name!r} is offline only")
         return self.start(n_refs, **self.params)
 
-    def run(self, sim: np.ndarray, k: int = 10) -> Result:
-        """Match every row of ``sim`` (Q, R); online matchers see the rows in order, past frames only."""
+    def run(self, sim: np.ndarray, k: int = 10, still: np.ndarray | None = None) -> Result:
+        """Match every row of ``sim`` (Q, R); online matchers see the rows in order, past frames only, each
+        with its motion cue from ``still`` (Q,) if given (``stillness``; offline matchers ignore it)."""
         sim = np.asarray(sim)
         if sim.ndim != 2 or 0 in sim.shape:
             raise ValueError(f"similarity matrix must be 2-D and non-empty, got shape {sim.shape}")
         if self.align is not None:
             return self.align(sim, k, **self.params)
-        return run_online(self.stream(sim.shape[1]), sim, k)
+        return run_online(self.stream(sim.shape[1]), sim, k, still)
 
 
 def param_key(item: str) -> str:

@@ -35,9 +35,14 @@ STREAM: dict[str, Param] = {
     "check": Param(100, "local search: every this many firmly locked frames, search the whole route ..."),
     "span": Param(5, "... for this many frames"),
     "hold": Param(2.0, "a lock is firm (local search allowed) at this many times the lock score"),
-    "stop_gain": Param(0.3, "at speed 0, the share of a frame's positive evidence counted (standing still is "
-                            "not new evidence)"),
-    "stop_decay": Param(0.95, "at speed 0, the decay of the trajectory score (a lock holds through a stop)"),
+    "stop_gain": Param(0.3, "without a motion cue: at speed 0, the share of a frame's positive evidence counted "
+                            "(standing still is not new evidence)"),
+    "stop_decay": Param(0.95, "without a motion cue: at speed 0, the decay of the trajectory score (a lock holds "
+                              "through a stop)"),
+    "still": Param(0.99, "motion cue: a frame whose encoding has at least this cosine similarity to the previous "
+                         "frame's shows a stopped camera (speed 0 holds its score, gains nothing); below it the "
+                         "camera moves (speed 0 gains nothing, decays as the others); 0 = no cue: stop_gain "
+                         "and stop_decay for every frame"),
 }
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),

@@ -27,6 +27,16 @@ moving one and lock on where nothing is mapped. So at speed 0 a frame's excess z
 instead of ``decay``, holding a lock through a stop rather than rebuilding it. (What it
 changed on the derived streams: docs/results.md, "Evaluating".)
 
+Whether the vehicle stands is also seen in the query stream itself, without the map: a stopped camera sees
+the same view again, so consecutive frames' encodings are near-identical, while a moving one's differ. With
+that motion cue (``update``'s ``still``: the frame's cosine similarity to the previous frame's encoding), a
+frame at least ``still`` alike its predecessor is a stop: speed 0 holds what its trajectory had (no decay)
+and gains nothing from the repeated view (a negative excess still counts), so a lock holds through a stop of
+any length and a stop where nothing was locked (off the map, in front of a look-alike) builds no lock. A
+frame less alike is motion: speed 0 gains nothing and decays as the other speeds do, so a stopped or parked
+hypothesis cannot keep the lead while the camera moves on. Without a cue (the first frame, a bare
+similarity matrix, ``still`` = 0) the ``stop_gain`` / ``stop_decay`` rule above holds for every frame.
+
 The answer is the position of the best state. Its score does two jobs, so it has two parts:
 
     score = [H_best >= lock] + uniqueness,   uniqueness = 1 - (H_rival + 1) / (H_best + 1)  in [0, 1)
@@ -70,7 +80,7 @@ class RoadMatcher:
 
     def __init__(self, n_refs: int, *, vmax: float, grid: int, decay: float, bias: float, turn: float,
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
-                 hold: float, stop_gain: float, stop_decay: float) -> None:
+                 hold: float, stop_gain: float, stop_decay: float, still: float) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``)."""
         if n_refs < 1:
             raise ValueError("need at least one reference")
@@ -78,12 +88,14 @@ class RoadMatcher:
             raise ValueError(f"decay must be in (0, 1), got {decay}")
         if not (0.0 <= stop_gain <= 1.0 and 0.0 < stop_decay < 1.0):
             raise ValueError(f"need stop_gain in [0, 1] and stop_decay in (0, 1), got {stop_gain}, {stop_decay}")
+        if not 0.0 <= still <= 1.0:
+            raise ValueError(f"still must be in [0, 1] (0: no motion cue), got {still}")
         if grid < 1 or vmax < 0 or memory < 1 or window < 0 or probe < 2:
             raise ValueError(f"need grid >= 1, vmax >= 0, memory >= 1, window >= 0, probe >= 2 (got {grid}, "
                              f"{vmax}, {memory}, {window}, {probe})")
         self.n_refs, self.grid, self.decay, self.bias = n_refs, grid, decay, bias
         self.turn, self.memory, self.lock, self.rival_window = turn, memory, lock, max(0, int(rival_window))
-        self.stop_gain, self.stop_decay = stop_gain, stop_decay
+        self.stop_gain, self.stop_decay, self.still = stop_gain, stop_decay, still
         self.n_speeds = int(round(vmax * grid)) + 1
         # local search pays only where the window is a small part of the route
         self.window = int(window) if window and n_refs > 4 * window else 0
@@ -137,10 +149,10 @@ class RoadMatcher:
             run += (z - run) / weight
         return out
 
-    def _advance(self, a: int, b: int) -> None:
+    def _advance(self, a: int, b: int, gain: float, stop_decay: float) -> None:
         """One frame of the recursion on state columns [a, b) (z already in ``self._z[a:b]``): the max over
         v' of H(v', p) - turn * |v - v'| (forward and backward passes over speeds), shifted v grid steps
-        ahead, decayed, plus z (at speed 0: decayed by ``stop_decay``, plus ``stop_gain`` of a positive z),
+        ahead, decayed, plus z (at speed 0: decayed by ``stop_decay``, plus ``gain`` of a positive z),
         floored at 0. Columns left of ``a`` feed it as predecessors."""
         a0 = max(0, a - (self.n_speeds - 1))
         m, new, w = self._m[:, : b - a0], self._new[:, : b - a], b - a
@@ -157,21 +169,32 @@ class RoadMatcher:
                 new[v, :-k] = 0.0
                 new[v, -k:] = m[v, : max(0, w + k)]   # nothing when the step is longer than the columns
         new[1:] *= self.decay
-        new[0] *= self.stop_decay
+        new[0] *= stop_decay
         np.maximum(new, 0.0, out=new)
         z, zs, neg = self._z[a:b], self._zs[0, :w], self._zs[1, :w]
         new[1:] += z
         np.maximum(z, 0.0, out=zs)
-        zs *= self.stop_gain
+        zs *= gain
         np.minimum(z, 0.0, out=neg)
         zs += neg
         new[0] += zs
         np.maximum(new, 0.0, out=new)
         self.h[:, a:b] = new
 
-    def update(self, sim_row: np.ndarray, refs: np.ndarray | None = None) -> tuple[int, float]:
+    def _stop_rule(self, still: float | None) -> tuple[float, float]:
+        """(share of a positive z counted at speed 0, speed 0's decay) for a frame with motion cue ``still``
+        (see the module docstring)."""
+        if still is None or not self.still:
+            return self.stop_gain, self.stop_decay
+        if still >= self.still:
+            return 0.0, 1.0
+        return 0.0, self.decay
+
+    def update(self, sim_row: np.ndarray, refs: np.ndarray | None = None,
+               still: float | None = None) -> tuple[int, float]:
         """Similarities of the new frame -> (reference at the best state, score in [0, 2); >= 1: locked).
-        ``sim_row`` covers every reference (R,), or with ``refs`` exactly the references ``wanted()`` named."""
+        ``sim_row`` covers every reference (R,), or with ``refs`` exactly the references ``wanted()`` named;
+        ``still``: the frame's motion cue (cosine similarity to the previous frame's encoding; None: none)."""
         s = np.asarray(sim_row, np.float64)
         lo, hi = self._win if self._win is not None else (0, self.n_refs)
         if refs is not None:
@@ -186,7 +209,7 @@ class RoadMatcher:
         z = self._z[lo * g:hi * g].reshape(hi - lo, g)
         z[:] = self._normalise(part, lo, float(probe.mean()), float(probe.std()))[:, None]
         z -= self.bias
-        self._advance(lo * g, hi * g)
+        self._advance(lo * g, hi * g, *self._stop_rule(still))
         h = self.h[:, lo * g:hi * g]
         flat = int(np.argmax(h))
         self._stopped = flat < h.shape[1]          # the best trajectory has speed 0

@@ -88,7 +88,7 @@ class SeqSLAMOnline(WholeRoute):
         self._frames = 0
         self._values = np.zeros(n_refs)
 
-    def update(self, sim_row: np.ndarray, refs: None = None) -> tuple[int, float]:
+    def update(self, sim_row: np.ndarray, refs: None = None, still: float | None = None) -> tuple[int, float]:
         """Similarities (R,) of the new frame -> (reference at the end of the best trajectory, ratio score)."""
         d = -local_contrast(sim_row, self.r_window)
         self._ring[1:] = self._ring[:-1]

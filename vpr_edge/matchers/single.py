@@ -13,7 +13,7 @@ class BestMatch(WholeRoute):
         self.n_refs = n_refs
         self._row = np.zeros(n_refs)
 
-    def update(self, sim_row: np.ndarray, refs: None = None) -> tuple[int, float]:
+    def update(self, sim_row: np.ndarray, refs: None = None, still: float | None = None) -> tuple[int, float]:
         """Similarities (R,) -> (argmax, its similarity)."""
         self._row = np.asarray(sim_row, np.float64)
         best = int(np.argmax(self._row))

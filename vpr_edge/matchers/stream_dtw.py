@@ -35,7 +35,7 @@ class StreamingDTW(WholeRoute):
         self.weight = np.zeros(n_refs, np.float64)    # decayed number of steps on that path
         self.frames = 0
 
-    def update(self, sim_row: np.ndarray, refs: None = None) -> tuple[int, float]:
+    def update(self, sim_row: np.ndarray, refs: None = None, still: float | None = None) -> tuple[int, float]:
         """Advance by one query frame given its similarity to every reference (R,); return (ref, score)."""
         s = np.asarray(sim_row, np.float64)
         if s.shape != (self.n_refs,):
