@@ -1,12 +1,11 @@
 #!/usr/bin/env python3
 """Does a confidence calibrated on one dataset mean the same on another? Leave one dataset out, both ways.
 
-    vpr-edge evaluate --map out/DS/map.npz --queries out/DS/KIND --gt out/DS/KIND.csv --modes single \\
-        --save-similarity out/sims/DS.KIND.npy          # for every stream KIND of both datasets
-    python tools/calibration_check.py --sims out/sims --streams out/corridor out/nordland-dev [--modes stream]
+    python tools/calibration_check.py --streams out/corridor out/nordland-dev [--modes stream]
 
-For each mode, the answers of every derived stream of one dataset (similarity matrices SIMS/DS.KIND.npy,
-ground truth STREAMS/KIND.csv) are pooled and a calibration is fitted on them (``vpr_edge.calibration.fit``,
+For each mode, the answers of every derived stream of one dataset (``evaluate``, the function behind
+``vpr-edge evaluate``, on STREAMS/KIND with the map STREAMS/map.npz and ground truth STREAMS/KIND.csv, so the
+stream mode gets its motion cue as ``localize`` does) are pooled and a calibration is fitted on them (``vpr_edge.calibration.fit``,
 what ``evaluate --save-calibration`` writes); it is then scored on every stream of the other dataset and of
 its own: the expected calibration error (``metrics.reliability``, 10 bins), the share of answered frames
 right and of mapped frames answered right at the mode's lost threshold. ``--write DIR`` keeps each fitted
@@ -25,27 +24,27 @@ sys.path.insert(0, str(ROOT))
 
 from vpr_edge import calibration  # noqa: E402
 from vpr_edge.evaluation import metrics  # noqa: E402
-from vpr_edge.evaluation import truth as groundtruth  # noqa: E402
-from vpr_edge.evaluation.scoring import evaluate_mode  # noqa: E402
+from vpr_edge.evaluation import Source, Truth, evaluate  # noqa: E402
 from vpr_edge.matchers import get_matcher  # noqa: E402
 from vpr_edge.evaluation.streams import KINDS  # noqa: E402
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--sims", type=Path, required=True, help="folder of DS.KIND.npy similarity matrices")
-    p.add_argument("--streams", type=Path, nargs=2, required=True, help="two derive_streams folders (DS = name)")
+    p.add_argument("--streams", type=Path, nargs=2, required=True,
+                   help="two derive_streams folders (DS = name), each with its map.npz")
     p.add_argument("--modes", default="stream,single")
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--write", type=Path, default=None)
     a = p.parse_args()
-    for mode in a.modes.split(","):
-        reports = {}
-        for folder in a.streams:
-            for kind in KINDS:
-                sim = np.load(a.sims / f"{folder.name}.{kind}.npy", allow_pickle=False).astype(np.float64)
-                truth = groundtruth.load_csv(folder / f"{kind}.csv")
-                reports[folder.name, kind] = evaluate_mode(get_matcher(mode), sim, truth, a.tolerance)
+    modes = {m: get_matcher(m) for m in a.modes.split(",")}
+    every = {}
+    for folder in a.streams:
+        for kind in KINDS:
+            every[folder.name, kind] = evaluate(Source(map=folder / "map.npz", queries=folder / kind),
+                                                Truth(gt=folder / f"{kind}.csv"), modes, a.tolerance).reports
+    for mode in modes:
+        reports = {key: r[mode] for key, r in every.items()}
         curves = {}
         for folder in a.streams:
             mine = [r for (ds, _), r in reports.items() if ds == folder.name]
