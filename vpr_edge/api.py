@@ -104,7 +104,9 @@ class Localizer:
     None: onnxruntime's default, BLAS untouched). ``coarse``: a local-search matcher's whole-route frames use
     ``coarse.CoarseSearch`` (signs, exact values for the best candidates); None = on maps of at least
     ``COARSE_MIN_REFS`` references. Construction is thread-safe (nothing global but the
-    BLAS limit); ``push`` may be called from any thread, one frame at a time (a lock orders them).
+    BLAS limit); ``push`` may be called from any thread, one frame at a time (a lock orders them). Each frame
+    is matched with its motion cue (its encoding's likeness to the previous frame's: ``matchers.stillness``),
+    so frames of one stream must be pushed in order; ``reset`` starts a new stream.
     Raises VprError for a bad map or model, ValueError for an unknown mode or parameter.
     """
 
