@@ -13,7 +13,7 @@ import pytest
 from vpr_edge import Localizer
 from vpr_edge.errors import VprError
 from vpr_edge.images import load_image, open_stream
-from vpr_edge.matchers import stillness
+from vpr_edge.matchers import get_matcher, stillness
 
 
 @pytest.fixture(scope="module")
@@ -135,3 +135,30 @@ def test_push_gives_the_matcher_the_motion_cue(api_map: Path, small_queries: Pat
     loc.reset()
     again = [loc.push(im) for im in images]
     np.testing.assert_allclose([m.score for m in again], want.scores, atol=1e-5)
+
+
+def test_evaluate_runs_the_stream_matcher_as_localize_does(api_map: Path, small_queries: Path,
+                                                            tmp_path: Path) -> None:
+    """evaluate from a map computes the same motion cue as Localizer (each decoded frame's likeness to the one
+    before), so its stream answers and scores on a stream with stops are those of push."""
+    import shutil
+
+    from vpr_edge.evaluation import Source, Truth, evaluate
+    from vpr_edge.evaluation.streams import write_ground_truth
+
+    files = sorted(small_queries.iterdir())
+    order = [0, 1, 2, 3, 4, 5, 5, 5, 5, 5, 5, 5, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 10, 11, 12, 13, 14]
+    stream = tmp_path / "stops"
+    stream.mkdir()
+    for i, src in enumerate(order):
+        shutil.copy(files[src], stream / f"{i:04d}{files[src].suffix}")
+    write_ground_truth(tmp_path / "stops.csv", [[i] for i in order])
+    report = evaluate(Source(map=api_map, queries=stream, threads=1), Truth(gt=tmp_path / "stops.csv"),
+                      {"stream": get_matcher("stream")}, tolerance=1).reports["stream"]
+    loc = Localizer(api_map, threads=1)
+    pushed = [loc.push(load_image(f)) for f in sorted(stream.iterdir())]
+    np.testing.assert_allclose([m.score for m in pushed], report.scores, atol=1e-5)
+    assert [m.ref_index for m in pushed if not m.lost] == [int(r) for r, lost in zip(report.refs, report.lost)
+                                                           if not lost]
+    blind = get_matcher("stream").run(loc.similarity(loc.encode([load_image(f) for f in sorted(stream.iterdir())])))
+    assert not np.allclose(blind.scores, report.scores, atol=1e-5)       # the cue made a difference here
