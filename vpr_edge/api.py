@@ -27,7 +27,7 @@ from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.images import MIN_SIDE, Frame
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.map import PlaceMap, load_map, map_front_end
-from vpr_edge.matchers import Matcher, get_matcher, step, stillness
+from vpr_edge.matchers import Matcher, cue_at, get_matcher, step, stillness
 from vpr_edge.threads import use_threads
 
 
@@ -172,10 +172,7 @@ class Localizer:
                 return self._coarse.similarity(enc)
             return self.similarity(enc[None], refs)[0]
 
-        still = None
-        if self._previous is not None:
-            cue = stillness(np.stack([self._previous, enc]))[1]
-            still = float(cue) if np.isfinite(cue) else None
+        still = None if self._previous is None else cue_at(stillness(np.stack([self._previous, enc])), 1)
         self._previous = enc
         ref, score = step(self._online, similarity, still)
         return ref, score, self._online.position()

@@ -123,8 +123,8 @@ def stillness(encodings: np.ndarray) -> np.ndarray:
     return out
 
 
-def _cue(still: np.ndarray | None, i: int) -> float | None:
-    """Frame ``i``'s motion cue from a (Q,) array (NaN or no array: None)."""
+def cue_at(still: np.ndarray | None, i: int) -> float | None:
+    """Frame ``i``'s motion cue from a (Q,) array of them (``stillness``; NaN or no array: None)."""
     if still is None or not np.isfinite(still[i]):
         return None
     return float(still[i])
@@ -148,7 +148,7 @@ def run_rows(matcher: OnlineMatcher, rows: Callable[[int, np.ndarray | None], np
     scores = np.empty(q, np.float64)
     ranked = np.empty((q, min(k, r)), np.int64)
     for i in range(q):
-        refs[i], scores[i] = step(matcher, lambda idx: rows(i, idx), _cue(still, i))
+        refs[i], scores[i] = step(matcher, lambda idx: rows(i, idx), cue_at(still, i))
         ranked[i] = top_k(matcher.ranking(), k)
     return Result(refs, scores, lead_with(refs, ranked))
 
