@@ -32,7 +32,7 @@ def derived(tmp_path: Path, refs: Path, queries: Path, kinds: str) -> tuple[Path
 @pytest.mark.slow
 @pytest.mark.parametrize("mapped", [False, True])
 def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> None:
-    extra = ["--mmap", str(tmp_path / "refs.npz"), "--coarse"] if mapped else []
+    extra = ["--mmap", str(tmp_path / "refs.npz"), "--coarse", "--cue"] if mapped else []
     out = tool("bench_matcher.py", "--refs", "300", "--frames", "2000", "--dim", "32", "--checkpoints",
                "500,2000", "--storage", "int8", "--window", "20", *extra)
     rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
@@ -41,6 +41,7 @@ def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> 
     assert all(float(r[-1]) > 0.3 for r in rows)          # mostly by the local search
     assert all(float(r[4]) > 0 and float(r[5]) > 0 and float(r[7]) > 0 for r in rows)   # RSS columns filled
     assert ("memory-mapped from" in out) == mapped and (tmp_path / "refs.npz").is_file() == mapped
+    assert f"motion cue {'on' if mapped else 'off'}" in out
 
 
 @pytest.mark.slow
@@ -180,3 +181,8 @@ def test_bench_e2e_and_calibration_check(tmp_path: Path, small_refs: Path, small
     rows = [line.split("|") for line in text.splitlines() if line.startswith("| one") or line.startswith("| two")]
     assert len(rows) == 4 and all(r[3:11] == r2[3:11] for r, r2 in zip(rows[::2], rows[1::2]))   # same ECEs
     assert json.loads((tmp_path / "cal" / "one.json").read_text())["kind"] == "calibration"
+    text = tool("lost_tradeoff.py", "--streams", str(tmp_path / "one"), "--locks", "5,6")
+    rows = [line.split("|")[1:-1] for line in text.splitlines() if line.startswith("| one")]
+    assert [r[1].strip() for r in rows] == ["5", "6"]
+    for r in rows:   # no unmapped frames here: nothing to lose, nothing to exit
+        assert r[2].strip() == "nan" and r[3].strip() == "-" and 0 <= float(r[6].split()[0]) <= 1

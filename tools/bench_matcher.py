@@ -13,6 +13,10 @@ the process's own, anonymous; pages of mapped files, i.e. of the map with --mmap
 +-1 reference) over the mapped frames so far and the share of frames searched locally.
 Random unit encodings of --dim dims: the similarity column scales with D. ``--coarse``: the frames that
 search the whole route go through ``coarse.CoarseSearch`` as ``Localizer`` does on large maps.
+``--cue``: each frame is matched with its motion cue as ``Localizer`` matches it (``matchers.stillness`` of
+this and the previous query encoding, timed with the match), and a stopped vehicle's frame is the previous
+frame plus ``--stop-noise`` sensor noise (a standing camera sees its view again) instead of a fresh noisy copy
+of the reference; without it no cue is given and a stop's frames are independent draws, as before.
 """
 from __future__ import annotations
 
@@ -29,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from vpr_edge.index.coarse import CoarseSearch  # noqa: E402
 from vpr_edge.index.encodings import Encodings, STORAGES  # noqa: E402
-from vpr_edge.matchers import get_matcher, step  # noqa: E402
+from vpr_edge.matchers import cue_at, get_matcher, step, stillness  # noqa: E402
 from vpr_edge.files import read_npz, write_npz  # noqa: E402
 
 
@@ -61,6 +65,10 @@ def main() -> int:
     p.add_argument("--mmap", type=Path, default=None, metavar="FILE",
                    help="write the stored references to FILE (a map-style .npz) and read them back memory-mapped, "
                    "as localize opens a map, so that RSS counts only the pages the frames touch")
+    p.add_argument("--cue", action="store_true", help="give each frame its motion cue (cosine to the previous "
+                   "query) and make a stopped vehicle's frames near-repeats of the one before")
+    p.add_argument("--stop-noise", type=float, default=0.01,
+                   help="with --cue: noise of a stopped frame relative to the previous one (default 0.01)")
     p.add_argument("--checkpoints", default="1000,10000,100000")
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args()
@@ -87,7 +95,7 @@ def main() -> int:
         coarse.signs
         print(f"signs packed in {1e3 * (time.perf_counter() - t0):.0f} ms ({coarse.signs.nbytes / 1e6:.1f} MB)")
     print(f"map {a.refs} refs x {a.dim} dims {a.storage} ({stored.values.nbytes / 1e6:.1f} MB), {a.frames} frames, "
-          f"matcher {a.matcher} {matcher.params}")
+          f"matcher {a.matcher} {matcher.params}, motion cue {'on' if a.cue else 'off'}")
     print(f"{'frames':>8s} {'ms/frame':>9s} {'sim ms':>7s} {'match ms':>8s} {'RSS MB':>8s} {'anon MB':>8s} "
           f"{'file MB':>8s} {'peak MB':>8s} {'acc+-1':>7s} {'local':>6s}")
     pos, detour, speed, until = 0.0, 0, 1.0, 0
@@ -95,6 +103,7 @@ def main() -> int:
     correct = counted = local = 0
     last = 0
     sim_s = [0.0]
+    previous: np.ndarray | None = None
 
     def similarity(idx: np.ndarray | None) -> np.ndarray:
         t0 = time.perf_counter()
@@ -115,12 +124,19 @@ def main() -> int:
                 speed, until = float(route.choice([0.0, 0.5, 1.0, 2.0, 3.0])), t + int(route.integers(20, 201))
             pos = (pos + speed) % a.refs
             true = int(pos)
-            q = stored.dense_row(true) + noise_scale * rng.normal(size=a.dim).astype(np.float32)
+            if a.cue and speed == 0.0 and previous is not None:   # a standing camera: its view again
+                q = previous + a.stop_noise * noise_scale * rng.normal(size=a.dim).astype(np.float32)
+            else:
+                q = stored.dense_row(true) + noise_scale * rng.normal(size=a.dim).astype(np.float32)
         local += getattr(dtw, "wanted", lambda: None)() is not None
         sim_s[0] = 0.0
         t0 = time.perf_counter()
-        ref, _ = step(dtw, similarity)
+        still = None
+        if a.cue and previous is not None:
+            still = cue_at(stillness(np.stack([previous, q])), 1)
+        ref, _ = step(dtw, similarity, still)
         t1 = time.perf_counter()
+        previous = q
         t_sim += sim_s[0]
         t_dtw += t1 - t0 - sim_s[0]
         if true >= 0:

@@ -1,0 +1,75 @@
+#!/usr/bin/env python3
+"""What the stream matcher's lost threshold trades: off-map frames reported lost against mapped frames
+answered right, on every derived stream of each dataset.
+
+    python tools/lost_tradeoff.py --streams out/corridor out/nordland-dev [--locks 5,6,6.5,7,8] [--tolerance 2]
+
+For each folder (``tools/derive_streams.py`` output with its map.npz) every stream is evaluated once
+(``evaluate``, the function behind ``vpr-edge evaluate``: the map's front end, the motion cue) with the
+``stream`` matcher at each ``lock`` (``--param lock=L``; everything else default) and prints, per lock: the
+detour's unmapped frames reported lost, frames from leaving the map to the first lost frame and from
+re-entering to the first right answer; the lowest share of answered frames right and of mapped frames answered
+right over the streams (and which stream); the largest drop of a stream's mapped frames answered right from
+the default ``lock`` (always run); the mean ``stream`` R@1 and AUC. Only which answers are called lost moves
+with ``lock`` (the trajectory search is the same), so the table is the trade-off the threshold allows.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from vpr_edge.evaluation import Source, Truth, evaluate  # noqa: E402
+from vpr_edge.evaluation.streams import KINDS  # noqa: E402
+from vpr_edge.matchers import get_matcher  # noqa: E402
+from vpr_edge.matchers.params import STREAM  # noqa: E402
+
+
+def _frames(v: tuple[float, ...]) -> str:
+    """Delays per run -> '6' / '6, 2' ('never' where it did not happen in the run)."""
+    return ", ".join("never" if np.isnan(x) else f"{x:.0f}" for x in v) or "-"
+
+
+def _or_inf(v: float) -> float:
+    """A share for ``min``: NaN (nothing to count) ranks last."""
+    return float("inf") if np.isnan(v) else v
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--streams", type=Path, nargs="+", required=True, help="derive_streams folders with map.npz")
+    p.add_argument("--locks", default="5,6,6.5,7,8", help="lost thresholds to compare (the default is 6)")
+    p.add_argument("--tolerance", type=int, default=2)
+    a = p.parse_args()
+    default = float(STREAM["lock"].default)
+    locks = sorted({float(x) for x in a.locks.split(",")} | {default})
+    modes = {f"lock={x:g}": get_matcher("stream").with_params(lock=x) for x in locks}
+    print(f"stream matcher, tolerance {a.tolerance}; worst stream in brackets\n")
+    print("| dataset | `lock` | detour unmapped lost | exit frames | re-lock frames | min answered right "
+          "| min mapped right | mapped right, largest drop | mean R@1 / AUC |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for folder in a.streams:
+        reports = {kind: evaluate(Source(map=folder / "map.npz", queries=folder / kind),
+                                  Truth(gt=folder / f"{kind}.csv"), modes, a.tolerance).reports for kind in KINDS}
+        for name in modes:
+            per = {kind: r[name] for kind, r in reports.items()}
+            detour = per["detour"]
+            ans = min(KINDS, key=lambda k: _or_inf(per[k].answered_right))   # NaN: nothing answered
+            got = min(KINDS, key=lambda k: _or_inf(per[k].mapped_right))
+            drop = {k: per[k].mapped_right - reports[k][f"lock={default:g}"].mapped_right for k in KINDS}
+            worst = min(KINDS, key=drop.get)
+            print(f"| {folder.name} | {name.split('=')[1]} | {detour.lost_unmapped:.3f} | "
+                  f"{_frames(detour.exit_frames)} | {_frames(detour.lock_frames[1:])} | "
+                  f"{per[ans].answered_right:.3f} ({ans}) | {per[got].mapped_right:.3f} ({got}) | "
+                  f"{drop[worst]:+.3f} ({worst}) | {np.mean([per[k].recall[1] for k in KINDS]):.3f} / "
+                  f"{np.mean([per[k].auc for k in KINDS]):.3f} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
