@@ -3,14 +3,16 @@
 answered right, on every derived stream of each dataset.
 
     python tools/lost_tradeoff.py --streams out/corridor out/nordland-dev [--locks 5,6,6.5,7,8] [--tolerance 2]
+        [--param decay=0.85 ...]
 
 For each folder (``tools/derive_streams.py`` output with its map.npz) every stream is evaluated once
 (``evaluate``, the function behind ``vpr-edge evaluate``: the map's front end, the motion cue) with the
-``stream`` matcher at each ``lock`` (``--param lock=L``; everything else default) and prints, per lock: the
+``stream`` matcher at each ``lock`` (``--param lock=L``; everything else default, or as ``--param`` sets it
+for every row) and prints, per lock: the
 detour's unmapped frames reported lost, frames from leaving the map to the first lost frame and from
 re-entering to the first right answer; the lowest share of answered frames right and of mapped frames answered
 right over the streams (and which stream); the largest drop of a stream's mapped frames answered right from
-the default ``lock`` (always run); the mean ``stream`` R@1 and AUC. Only which answers are called lost moves
+the default ``lock`` (always run, with the same ``--param`` values); the mean ``stream`` R@1 and AUC. Only which answers are called lost moves
 with ``lock`` (the trajectory search is the same), so the table is the trade-off the threshold allows.
 """
 from __future__ import annotations
@@ -45,11 +47,15 @@ def main() -> int:
     p.add_argument("--streams", type=Path, nargs="+", required=True, help="derive_streams folders with map.npz")
     p.add_argument("--locks", default="5,6,6.5,7,8", help="lost thresholds to compare (the default is 6)")
     p.add_argument("--tolerance", type=int, default=2)
+    p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="another stream parameter for every row (as `vpr-edge evaluate --param`)")
     a = p.parse_args()
+    fixed = get_matcher("stream").parse_params(a.param)
     default = float(STREAM["lock"].default)
     locks = sorted({float(x) for x in a.locks.split(",")} | {default})
-    modes = {f"lock={x:g}": get_matcher("stream").with_params(lock=x) for x in locks}
-    print(f"stream matcher, tolerance {a.tolerance}; worst stream in brackets\n")
+    modes = {f"lock={x:g}": get_matcher("stream").with_params(**fixed, lock=x) for x in locks}
+    print(f"stream matcher{''.join(f' {k}={v}' for k, v in fixed.items())}, tolerance {a.tolerance}; "
+          "worst stream in brackets\n")
     print("| dataset | `lock` | detour unmapped lost | exit frames | re-lock frames | min answered right "
           "| min mapped right | mapped right, largest drop | mean R@1 / AUC |")
     print("|---|---|---|---|---|---|---|---|---|")
