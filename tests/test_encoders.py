@@ -238,6 +238,22 @@ def test_fit_with_whitened_pca(clustered: tuple[np.ndarray, np.ndarray]) -> None
     np.testing.assert_allclose(y.var(axis=0), 1.0, rtol=0.01)
 
 
+def test_fit_survives_identical_descriptors() -> None:
+    """A third of the descriptors identical (flat regions: HOG of a uniform sky, as on nordland-dev): a GMM
+    component collapses onto them and scikit-learn's float32 EM fails; the fit goes on in float64 and finds the
+    cluster, with a tiny but positive variance."""
+    rng = np.random.default_rng(12)
+    x = rng.normal(size=(6000, 8)) + 5.0
+    x[:2000] = x[0]
+    enc = fit_encoder("ifv", x.reshape(600, 10, 8), None, FitSettings(n_components=8), 10)
+    gmm = enc.gmm
+    assert np.all(np.isfinite(gmm.means)) and np.all(gmm.variances > 0)
+    np.testing.assert_allclose(gmm.weights.sum(), 1.0)
+    near = np.linalg.norm(gmm.means - x[0], axis=1).argmin()
+    assert np.linalg.norm(gmm.means[near] - x[0]) < 1e-3 and gmm.variances[near].max() < 1e-3
+    assert gmm.weights[near] > 0.3
+
+
 def test_idf_counts_reference_images_holding_each_word() -> None:
     rng = np.random.default_rng(11)
     local = rng.normal(size=(20, 6, 2))

@@ -11,7 +11,7 @@ import warnings
 import numpy as np
 
 from vpr_edge.encoders.base import FitSettings, Pca
-from vpr_edge.errors import VprError
+from vpr_edge.errors import VprError, warn
 
 
 def require_sklearn() -> None:
@@ -92,12 +92,26 @@ def fit_gmm(x: np.ndarray, s: FitSettings) -> tuple[np.ndarray, np.ndarray, np.n
     rng = np.random.default_rng(s.seed)
     pool = x if len(x) <= INIT_SAMPLE else x[np.sort(rng.choice(len(x), INIT_SAMPLE, replace=False))]
     seeds, _ = kmeans_plusplus(pool, m, random_state=s.seed)
-    with warnings.catch_warnings():  # stopping EM early is the chosen trade (docs/results.md); not worth a warning
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        gm = GaussianMixture(n_components=m, covariance_type="diag", reg_covar=reg, max_iter=s.iterations,
-                             random_state=s.seed, init_params="random_from_data",
-                             weights_init=np.full(m, 1.0 / m, np.float32), means_init=seeds.astype(np.float32),
-                             precisions_init=np.full((m, k), 1.0 / reg, np.float32)).fit(x)
+    def em(data: np.ndarray, reg: float):
+        dt = data.dtype
+        with warnings.catch_warnings():  # stopping EM early is the chosen trade (docs/results.md): no warning
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            return GaussianMixture(n_components=m, covariance_type="diag", reg_covar=reg, max_iter=s.iterations,
+                                   random_state=s.seed, init_params="random_from_data",
+                                   weights_init=np.full(m, 1.0 / m, dt), means_init=seeds.astype(dt),
+                                   precisions_init=np.full((m, k), 1.0 / reg, dt)).fit(data)
+
+    try:
+        gm = em(x, reg)
+    except ValueError:
+        # a component collapsed onto identical descriptors (flat image regions: HOG of a uniform sky), whose
+        # float32 variance rounds to <= 0: EM again in float64, then with a floor 1,000 times higher
+        try:
+            gm = em(x.astype(np.float64), reg)
+        except ValueError:
+            warn("codebook: descriptors too alike for the default variance floor; refitted with 1e-3 of their "
+                 "variance as the floor")
+            gm = em(x.astype(np.float64), 1e3 * reg)
     return (gm.weights_.astype(np.float64), gm.means_.astype(np.float64), gm.covariances_.astype(np.float64))
 
 
