@@ -32,9 +32,11 @@ the same view again, so consecutive frames' encodings are near-identical, while 
 that motion cue (``update``'s ``still``: the frame's cosine similarity to the previous frame's encoding), a
 frame at least ``still`` alike its predecessor is a stop: speed 0 holds what its trajectory had (no decay)
 and gains nothing from the repeated view (a negative excess still counts), so a lock holds through a stop of
-any length and a stop where nothing was locked (off the map, in front of a look-alike) builds no lock. A
-frame less alike is motion: speed 0 gains nothing and decays as the other speeds do, so a stopped or parked
-hypothesis cannot keep the lead while the camera moves on. Without a cue (the first frame, a bare
+any length and a stop where nothing was locked (off the map, in front of a look-alike) builds no lock; and
+the moving speeds gain nothing from it either (they decay, and a negative excess counts), so a trajectory
+that carries on past the stop place cannot feed on the next places' likeness to the repeated view and
+overrun the stop. A frame less alike is motion: speed 0 gains nothing and decays as the other speeds do, so
+a stopped or parked hypothesis cannot keep the lead while the camera moves on. Without a cue (the first frame, a bare
 similarity matrix, ``still`` = 0) the ``stop_gain`` / ``stop_decay`` rule above holds for every frame.
 
 The answer is the position of the best state. Its score does two jobs, so it has two parts:
@@ -149,11 +151,12 @@ class RoadMatcher:
             run += (z - run) / weight
         return out
 
-    def _advance(self, a: int, b: int, gain: float, stop_decay: float) -> None:
+    def _advance(self, a: int, b: int, gain: float, stop_decay: float, stood: bool = False) -> None:
         """One frame of the recursion on state columns [a, b) (z already in ``self._z[a:b]``): the max over
         v' of H(v', p) - turn * |v - v'| (forward and backward passes over speeds), shifted v grid steps
-        ahead, decayed, plus z (at speed 0: decayed by ``stop_decay``, plus ``gain`` of a positive z),
-        floored at 0. Columns left of ``a`` feed it as predecessors."""
+        ahead, decayed, plus z (at speed 0: decayed by ``stop_decay``, plus ``gain`` of a positive z; with
+        ``stood``, the moving speeds too add only a negative z), floored at 0. Columns left of ``a`` feed it
+        as predecessors."""
         a0 = max(0, a - (self.n_speeds - 1))
         m, new, w = self._m[:, : b - a0], self._new[:, : b - a], b - a
         np.copyto(m, self.h[:, a0:b])
@@ -172,23 +175,23 @@ class RoadMatcher:
         new[0] *= stop_decay
         np.maximum(new, 0.0, out=new)
         z, zs, neg = self._z[a:b], self._zs[0, :w], self._zs[1, :w]
-        new[1:] += z
+        np.minimum(z, 0.0, out=neg)
+        new[1:] += neg if stood else z
         np.maximum(z, 0.0, out=zs)
         zs *= gain
-        np.minimum(z, 0.0, out=neg)
         zs += neg
         new[0] += zs
         np.maximum(new, 0.0, out=new)
         self.h[:, a:b] = new
 
-    def _stop_rule(self, still: float | None) -> tuple[float, float]:
-        """(share of a positive z counted at speed 0, speed 0's decay) for a frame with motion cue ``still``
-        (see the module docstring)."""
+    def _stop_rule(self, still: float | None) -> tuple[float, float, bool]:
+        """(share of a positive z counted at speed 0, speed 0's decay, whether the camera stands: the moving
+        speeds then gain nothing) for a frame with motion cue ``still`` (see the module docstring)."""
         if still is None or not self.still:
-            return self.stop_gain, self.stop_decay
+            return self.stop_gain, self.stop_decay, False
         if still >= self.still:
-            return 0.0, 1.0
-        return 0.0, self.decay
+            return 0.0, 1.0, True
+        return 0.0, self.decay, False
 
     def update(self, sim_row: np.ndarray, refs: np.ndarray | None = None,
                still: float | None = None) -> tuple[int, float]:
