@@ -233,24 +233,26 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, s
     mean, weight, stopped, out = np.zeros(n_refs), memory, False, []
     for t, s in enumerate(sim):
         cue = np.nan if cues is None else cues[t]
-        gain, s_decay, stood = stop_gain, stop_decay, False   # no cue: the stop_gain rule
+        gain, s_decay, stands = stop_gain, stop_decay, False   # no cue: the stop_gain rule
         if still > 0 and cue == cue:
-            gain, s_decay, stood = (0.0, 1.0, True) if cue >= still else (0.0, decay, False)
-        z = (s - s.mean()) / s.std()
-        zr = z - mean
-        if not stopped:
-            weight = (1 - 1 / memory) * weight + 1
-            mean = mean + (z - mean) / weight
-        new = np.zeros_like(h)
-        for v in range(n_speeds):
-            for p in range(n_pos):
-                prev = max((h[u, p - v] - turn * abs(v - u) for u in range(n_speeds)), default=0.0) if p >= v else 0.0
-                e = zr[p // grid] - bias
-                if v == 0:   # standing still: decays by s_decay, a positive excess counts gain of itself
-                    new[v, p] = max(0.0, max(0.0, s_decay * prev) + (gain * e if e > 0 else e))
-                else:        # moving: a positive excess counts unless the camera stands
-                    new[v, p] = max(0.0, max(0.0, decay * prev) + (min(e, 0.0) if stood else e))
-        h = new
+            gain, s_decay, stands = 0.0, decay, cue >= still
+        if not stands:   # a standing camera's frame leaves the state (and the hub means) as they were
+            z = (s - s.mean()) / s.std()
+            zr = z - mean
+            if not stopped:
+                weight = (1 - 1 / memory) * weight + 1
+                mean = mean + (z - mean) / weight
+            new = np.zeros_like(h)
+            for v in range(n_speeds):
+                for p in range(n_pos):
+                    prev = max((h[u, p - v] - turn * abs(v - u) for u in range(n_speeds)),
+                               default=0.0) if p >= v else 0.0
+                    e = zr[p // grid] - bias
+                    if v == 0:   # speed 0: decays by s_decay, a positive excess counts gain of itself
+                        new[v, p] = max(0.0, max(0.0, s_decay * prev) + (gain * e if e > 0 else e))
+                    else:
+                        new[v, p] = max(0.0, max(0.0, decay * prev) + e)
+            h = new
         v_best, p_best = np.unravel_index(np.argmax(h), h.shape)
         stopped, ref, best = v_best == 0, p_best // grid, h[v_best, p_best]
         rival = max([h[:, p].max() for p in range(n_pos) if abs(p // grid - ref) > rival_window], default=0.0)

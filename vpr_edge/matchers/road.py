@@ -30,13 +30,15 @@ changed on the derived streams: docs/results.md, "Evaluating".)
 Whether the vehicle stands is also seen in the query stream itself, without the map: a stopped camera sees
 the same view again, so consecutive frames' encodings are near-identical, while a moving one's differ. With
 that motion cue (``update``'s ``still``: the frame's cosine similarity to the previous frame's encoding), a
-frame at least ``still`` alike its predecessor is a stop: speed 0 holds what its trajectory had (no decay)
-and gains nothing from the repeated view (a negative excess still counts), so a lock holds through a stop of
-any length and a stop where nothing was locked (off the map, in front of a look-alike) builds no lock; and
-the moving speeds gain nothing from it either (they decay, and a negative excess counts), so a trajectory
-that carries on past the stop place cannot feed on the next places' likeness to the repeated view and
-overrun the stop. A frame less alike is motion: speed 0 gains nothing and decays as the other speeds do, so
-a stopped or parked hypothesis cannot keep the lead while the camera moves on. Without a cue (the first frame, a bare
+frame at least ``still`` alike its predecessor shows the camera standing: its view again, which says
+nothing new about where the vehicle is, so the frame leaves the state as it was (no decay, no gain, no
+move along the route, hub means not updated) and the answer stays. A lock thus holds through a stop of any
+length, a stop where nothing was locked (off the map, in front of a look-alike) builds no lock, a trajectory
+cannot run on past the stop place on the next places' likeness to the repeated view, and a crawl shown as
+repeated frames is followed at its speed in the frames that move. A frame less alike is motion: speed 0
+gains nothing and decays as the other speeds do, so a stopped or parked hypothesis cannot keep the lead
+while the camera moves on. (A camera creeping so slowly that every frame is at least ``still`` alike the one
+before reads as standing: the answer waits for a frame that differs more.) Without a cue (the first frame, a bare
 similarity matrix, ``still`` = 0) the ``stop_gain`` / ``stop_decay`` rule above holds for every frame.
 
 The answer is the position of the best state. Its score does two jobs, so it has two parts:
@@ -151,12 +153,11 @@ class RoadMatcher:
             run += (z - run) / weight
         return out
 
-    def _advance(self, a: int, b: int, gain: float, stop_decay: float, stood: bool = False) -> None:
+    def _advance(self, a: int, b: int, gain: float, stop_decay: float) -> None:
         """One frame of the recursion on state columns [a, b) (z already in ``self._z[a:b]``): the max over
         v' of H(v', p) - turn * |v - v'| (forward and backward passes over speeds), shifted v grid steps
-        ahead, decayed, plus z (at speed 0: decayed by ``stop_decay``, plus ``gain`` of a positive z; with
-        ``stood``, the moving speeds too add only a negative z), floored at 0. Columns left of ``a`` feed it
-        as predecessors."""
+        ahead, decayed, plus z (at speed 0: decayed by ``stop_decay``, plus ``gain`` of a positive z),
+        floored at 0. Columns left of ``a`` feed it as predecessors."""
         a0 = max(0, a - (self.n_speeds - 1))
         m, new, w = self._m[:, : b - a0], self._new[:, : b - a], b - a
         np.copyto(m, self.h[:, a0:b])
@@ -175,23 +176,26 @@ class RoadMatcher:
         new[0] *= stop_decay
         np.maximum(new, 0.0, out=new)
         z, zs, neg = self._z[a:b], self._zs[0, :w], self._zs[1, :w]
-        np.minimum(z, 0.0, out=neg)
-        new[1:] += neg if stood else z
+        new[1:] += z
         np.maximum(z, 0.0, out=zs)
         zs *= gain
+        np.minimum(z, 0.0, out=neg)
         zs += neg
         new[0] += zs
         np.maximum(new, 0.0, out=new)
         self.h[:, a:b] = new
 
-    def _stop_rule(self, still: float | None) -> tuple[float, float, bool]:
-        """(share of a positive z counted at speed 0, speed 0's decay, whether the camera stands: the moving
-        speeds then gain nothing) for a frame with motion cue ``still`` (see the module docstring)."""
+    def stands(self, still: float | None) -> bool:
+        """Whether a frame with motion cue ``still`` shows a standing camera (its view again): such a frame
+        leaves the state as it was (see the module docstring)."""
+        return still is not None and bool(self.still) and still >= self.still
+
+    def _stop_rule(self, still: float | None) -> tuple[float, float]:
+        """(share of a positive z counted at speed 0, speed 0's decay) for a frame that moves, with motion cue
+        ``still`` (see the module docstring)."""
         if still is None or not self.still:
-            return self.stop_gain, self.stop_decay, False
-        if still >= self.still:
-            return 0.0, 1.0, True
-        return 0.0, self.decay, False
+            return self.stop_gain, self.stop_decay
+        return 0.0, self.decay
 
     def update(self, sim_row: np.ndarray, refs: np.ndarray | None = None,
                still: float | None = None) -> tuple[int, float]:
@@ -209,10 +213,11 @@ class RoadMatcher:
         else:
             part, probe = s[lo:hi], s[self._probe] if self._win is not None else s
         g = self.grid
-        z = self._z[lo * g:hi * g].reshape(hi - lo, g)
-        z[:] = self._normalise(part, lo, float(probe.mean()), float(probe.std()))[:, None]
-        z -= self.bias
-        self._advance(lo * g, hi * g, *self._stop_rule(still))
+        if not self.stands(still):   # a standing camera's view again says nothing new: the state stays
+            z = self._z[lo * g:hi * g].reshape(hi - lo, g)
+            z[:] = self._normalise(part, lo, float(probe.mean()), float(probe.std()))[:, None]
+            z -= self.bias
+            self._advance(lo * g, hi * g, *self._stop_rule(still))
         h = self.h[:, lo * g:hi * g]
         flat = int(np.argmax(h))
         self._stopped = flat < h.shape[1]          # the best trajectory has speed 0
