@@ -306,6 +306,49 @@ def test_stillness_against_a_loop() -> None:
         assert got[i] == pytest.approx(a @ b / np.linalg.norm(a) / np.linalg.norm(b))
 
 
+def test_anchored_stillness_against_a_loop() -> None:
+    """With a threshold, each frame is compared with the last frame whose cue fell below it (the anchor); a
+    camera creeping by steps of cosine 0.995 (each 0.1 rad on to the previous frame) shows motion every other
+    frame against the anchor, where frame-to-frame it would look standing forever."""
+    rng = np.random.default_rng(1)
+    enc = rng.normal(size=(12, 6))
+    enc[[4, 5, 6]] = enc[3] + 1e-4 * rng.normal(size=(3, 6))   # standing
+    enc[9] = 0.0                                               # no cue; becomes the anchor
+    got = stillness(enc, 0.99)
+    anchor, want = 0, [np.nan]
+    for t in range(1, len(enc)):
+        na, nt = np.linalg.norm(enc[anchor]), np.linalg.norm(enc[t])
+        want.append(enc[t] @ enc[anchor] / (na * nt) if na > 0 and nt > 0 else np.nan)
+        if not (want[-1] >= 0.99):
+            anchor = t
+    np.testing.assert_allclose(got, want, equal_nan=True)
+    assert np.isnan(got[10]) and (got[[4, 5, 6]] > 0.99).all()
+    theta = 0.1 * np.arange(20)
+    creep = np.c_[np.cos(theta), np.sin(theta), np.zeros((20, 3))]
+    assert (stillness(creep)[1:] > 0.99).all()                      # frame to frame: always standing
+    moving = stillness(creep, 0.99)[1:] < 0.99
+    assert moving[1::2].all() and not moving[0::2].any()            # against the anchor: every other frame
+
+
+def test_road_matcher_follows_a_creep_with_the_anchored_cue() -> None:
+    """A vehicle creeping at a quarter place a frame whose frames each differ from the one before by less
+    than the standing threshold: with the cue against the last frame that moved it is followed; with a
+    frame-to-frame cue every frame would read as standing, the state would freeze and the answer stay
+    where the creep began."""
+    matcher = get_matcher("stream")
+    places = np.concatenate([route([(1.0, 40)], start=50), route([(0.25, 120)], start=90)])
+    theta = np.r_[np.arange(40) * 2.0, 80 + 0.1 * np.arange(120)]       # moving: unrelated views; creeping: 0.1 rad a frame
+    enc = np.c_[np.cos(theta), np.sin(theta), np.zeros((160, 3))]
+    enc[:40, 2:] = np.random.default_rng(0).normal(size=(40, 3))
+    for seed in range(4):
+        sim = planted(np.random.default_rng(seed), 400, places)
+        follows = matcher.run(sim, still=matcher.cue(enc))
+        frozen = matcher.run(sim, still=stillness(enc))
+        late = slice(100, None)
+        assert np.mean(np.abs(follows.refs[late] - places[late]) <= 2) > 0.9
+        assert np.mean(np.abs(frozen.refs[late] - places[late]) <= 2) < 0.2
+
+
 def test_road_matcher_long_stop_held_with_the_motion_cue() -> None:
     """A stop of 120 frames on a mapped place, its view repeated with fresh noise: with the motion cue (the
     camera is seen to stand: the stopped state holds its score) every stopped frame stays locked within 2

@@ -14,7 +14,7 @@ the process's own, anonymous; pages of mapped files, i.e. of the map with --mmap
 Random unit encodings of --dim dims: the similarity column scales with D. ``--coarse``: the frames that
 search the whole route go through ``coarse.CoarseSearch`` as ``Localizer`` does on large maps.
 ``--cue``: each frame is matched with its motion cue as ``Localizer`` matches it (``matchers.stillness`` of
-this and the previous query encoding, timed with the match), and a stopped vehicle's frame is the previous
+this query encoding and the last one that moved, timed with the match), and a stopped vehicle's frame is the previous
 frame plus ``--stop-noise`` sensor noise (a standing camera sees its view again) instead of a fresh noisy copy
 of the reference; without it no cue is given and a stop's frames are independent draws, as before.
 """
@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from vpr_edge.index.coarse import CoarseSearch  # noqa: E402
 from vpr_edge.index.encodings import Encodings, STORAGES  # noqa: E402
-from vpr_edge.matchers import cue_at, get_matcher, step, stillness  # noqa: E402
+from vpr_edge.matchers import cue_at, get_matcher, stands, step, stillness  # noqa: E402
 from vpr_edge.files import read_npz, write_npz  # noqa: E402
 
 
@@ -103,7 +103,8 @@ def main() -> int:
     correct = counted = local = 0
     last = 0
     sim_s = [0.0]
-    previous: np.ndarray | None = None
+    previous: np.ndarray | None = None   # the last query (a standing camera's next frame repeats it)
+    anchor: np.ndarray | None = None     # the last query that moved (the motion cue's other half)
 
     def similarity(idx: np.ndarray | None) -> np.ndarray:
         t0 = time.perf_counter()
@@ -132,8 +133,10 @@ def main() -> int:
         sim_s[0] = 0.0
         t0 = time.perf_counter()
         still = None
-        if a.cue and previous is not None:
-            still = cue_at(stillness(np.stack([previous, q])), 1)
+        if a.cue:
+            still = None if anchor is None else cue_at(stillness(np.stack([anchor, q])), 1)
+            if not stands(still, matcher.still_threshold):
+                anchor = q
         ref, _ = step(dtw, similarity, still)
         t1 = time.perf_counter()
         previous = q

@@ -163,7 +163,8 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     check_truth_fits(rows, gt_shape, sims.cosine, truth.name)
     by_kind = {"cosine": sims.cosine, "svm": sims.svm}
     reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions,
-                                   (calibration or {}).get(name), sims.still)
+                                   (calibration or {}).get(name),
+                                   None if sims.encodings is None else m.cue(sims.encodings))
                for name, m in chosen.items()}
     return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms, rows,
                       sims.positions, sims.front)

@@ -70,7 +70,7 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics); with the
     references' ``positions``, the error in metres too; with a ``calibration`` (score -> probability right,
     ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error. ``still`` (Q,): each
-    frame's motion cue (``matchers.stillness`` of the query encodings; None: a bare similarity matrix)."""
+    frame's motion cue (``Matcher.cue`` of the query encodings; None: a bare similarity matrix)."""
     t0 = time.perf_counter()
     result = matcher.run(sim, k=max(RECALL_KS), still=still)
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)

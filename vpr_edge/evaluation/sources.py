@@ -29,7 +29,7 @@ class Similarities:
     encode_ms: float = float("nan")
     positions: Positions | None = None     # the references' (a map built with --positions)
     front: dict | None = None              # with a map: {"model": file run, "form": "int8: AVX512-VNNI", ...}
-    still: np.ndarray | None = None        # with a map: (Q,) each row's motion cue (``matchers.stillness``)
+    encodings: np.ndarray | None = None    # with a map: (Q, D) the query encodings (each matcher's motion cue)
 
 
 def sad_similarity(queries: np.ndarray, refs: np.ndarray, chunk: int = 16) -> np.ndarray:
@@ -96,9 +96,8 @@ def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], 
              svm: bool = False, topic: str | None = None, precision: str = "auto") -> Similarities:
     """The query frames encoded as the map's references were (``api.Localizer``), their cosine similarities
     to the map's references, with ``svm`` the map's per-place SVM decision values, and each decoded frame's
-    motion cue (its likeness to the decoded frame before it, as ``localize`` computes it)."""
+    query encodings (from which each matcher's motion cue is computed, as ``localize`` computes it)."""
     from vpr_edge.api import Localizer, encode_frames
-    from vpr_edge.matchers import stillness
 
     frames = _count_checked(queries, n_truth, truth_src, topic)
     loc = Localizer(map_path, model=model, mode="single", threads=threads, precision=precision)
@@ -115,4 +114,4 @@ def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], 
     cosine = loc.similarity(stacked).astype(np.float64)
     scores = loc.map.scores(stacked, "svm").astype(np.float64) if svm else None
     return replace(_finish(queries, kept, t0, cosine, scores, loc.map.positions), front=loc.front_description,
-                   still=stillness(stacked))
+                   encodings=stacked)

@@ -10,8 +10,12 @@ An *online* matcher sees one row at a time, past frames only: ``update(row) -> (
 offline form, so every matcher, online or not, can be evaluated with ``run(sim)``.
 
 An online matcher may also take a motion cue per frame, ``still``: the cosine similarity of the frame's
-encoding to the previous frame's (near 1: the camera saw the same view again, so the vehicle stands; None:
-not known, as for the first frame or a bare similarity matrix). Matchers without a use for it ignore it.
+encoding to the last frame that moved (the previous frame, unless the camera has been standing: near 1, the
+camera sees the same view again; None: not known, as for the first frame or a bare similarity matrix).
+A frame *stands* when its cue is at least the matcher's ``still`` parameter (``stands``); the frame it is
+compared with, the anchor, moves on to each frame that does not stand, so a camera creeping by steps too
+small to tell apart still shows motion once it has crept far enough (``stillness``). Matchers without a use
+for the cue ignore it.
 
 An online matcher may search locally: ``wanted()`` names the references whose similarities its next frame
 needs (None: all, what ``WholeRoute`` matchers always answer), and ``update(values, refs)`` takes just those.
@@ -110,16 +114,31 @@ def step(matcher: OnlineMatcher, similarity: Callable[[np.ndarray | None], np.nd
     return matcher.update(similarity(refs), refs, still)
 
 
-def stillness(encodings: np.ndarray) -> np.ndarray:
-    """Encodings (Q, D) of consecutive frames -> each frame's cosine similarity to the previous one (Q,)
-    float64, NaN for the first (and next to an all-zero encoding): the motion cue ``still`` (1 = the same
-    view again)."""
+def stands(still: float | None, threshold: float | None) -> bool:
+    """Whether a frame with motion cue ``still`` shows a standing camera for a matcher whose ``still``
+    parameter is ``threshold`` (None or 0: the cue is not used, nothing stands)."""
+    return still is not None and bool(threshold) and still >= threshold
+
+
+def stillness(encodings: np.ndarray, threshold: float | None = None) -> np.ndarray:
+    """Encodings (Q, D) of consecutive frames -> each frame's motion cue (Q,) float64: its cosine similarity
+    to the anchor, the last frame that did not stand (``stands`` with ``threshold``; None: no frame stands,
+    so the anchor is always the previous frame). NaN for the first frame and next to an all-zero encoding
+    (no cue; such a frame becomes the anchor). 1 = the same view again."""
     enc = np.asarray(encodings, np.float64)
     norm = np.linalg.norm(enc, axis=1)
     out = np.full(len(enc), np.nan)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out[1:] = np.einsum("ij,ij->i", enc[1:], enc[:-1]) / (norm[1:] * norm[:-1])
-    out[~np.isfinite(out)] = np.nan
+    if not threshold:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[1:] = np.einsum("ij,ij->i", enc[1:], enc[:-1]) / (norm[1:] * norm[:-1])
+        out[~np.isfinite(out)] = np.nan
+        return out
+    anchor = 0
+    for t in range(1, len(enc)):
+        if norm[t] > 0 and norm[anchor] > 0:
+            out[t] = float(enc[t] @ enc[anchor]) / (norm[t] * norm[anchor])
+        if not stands(cue_at(out, t), threshold):
+            anchor = t
     return out
 
 
@@ -218,6 +237,17 @@ class Matcher:
         if self.start is None:
             raise ValueError(f"matcher {self.name!r} is offline only")
         return self.start(n_refs, **self.params)
+
+    @property
+    def still_threshold(self) -> float | None:
+        """The cue at or above which a frame stands for this matcher (its ``still`` parameter; None: it
+        reads no motion cue)."""
+        return self.params.get("still") or None
+
+    def cue(self, encodings: np.ndarray) -> np.ndarray:
+        """Each frame's motion cue (Q,) for this matcher from the stream's encodings (Q, D): ``stillness``
+        with its threshold (what ``Localizer`` computes frame by frame)."""
+        return stillness(encodings, self.still_threshold)
 
     def run(self, sim: np.ndarray, k: int = 10, still: np.ndarray | None = None) -> Result:
         """Match every row of ``sim`` (Q, R); online matchers see the rows in order, past frames only, each

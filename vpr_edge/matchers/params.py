@@ -39,8 +39,8 @@ STREAM: dict[str, Param] = {
                             "(standing still is not new evidence)"),
     "stop_decay": Param(0.95, "without a motion cue: at speed 0, the decay of the trajectory score (a lock holds "
                               "through a stop)"),
-    "still": Param(0.99, "motion cue: a frame whose encoding has at least this cosine similarity to the previous "
-                         "frame's shows a standing camera and leaves the state as it was (the answer stays); "
+    "still": Param(0.99, "motion cue: a frame whose encoding has at least this cosine similarity to the last "
+                         "moving frame's shows a standing camera and leaves the state as it was (the answer stays); "
                          "below it the camera moves (speed 0 gains nothing, decays as the others); 0 = no cue: "
                          "stop_gain and stop_decay for every frame"),
 }

@@ -29,16 +29,16 @@ changed on the derived streams: docs/results.md, "Evaluating".)
 
 Whether the vehicle stands is also seen in the query stream itself, without the map: a stopped camera sees
 the same view again, so consecutive frames' encodings are near-identical, while a moving one's differ. With
-that motion cue (``update``'s ``still``: the frame's cosine similarity to the previous frame's encoding), a
-frame at least ``still`` alike its predecessor shows the camera standing: its view again, which says
+that motion cue (``update``'s ``still``: the frame's cosine similarity to the encoding of the last frame that
+moved, ``base.stillness``), a frame at least ``still`` alike it shows the camera standing: its view again, which says
 nothing new about where the vehicle is, so the frame leaves the state as it was (no decay, no gain, no
 move along the route, hub means not updated) and the answer stays. A lock thus holds through a stop of any
 length, a stop where nothing was locked (off the map, in front of a look-alike) builds no lock, a trajectory
 cannot run on past the stop place on the next places' likeness to the repeated view, and a crawl shown as
 repeated frames is followed at its speed in the frames that move. A frame less alike is motion: speed 0
 gains nothing and decays as the other speeds do, so a stopped or parked hypothesis cannot keep the lead
-while the camera moves on. (A camera creeping so slowly that every frame is at least ``still`` alike the one
-before reads as standing: the answer waits for a frame that differs more.) Without a cue (the first frame, a bare
+while the camera moves on. (A camera creeping by steps too small to tell apart reads as standing until it has
+crept far enough from the last frame that moved; that frame then moves.) Without a cue (the first frame, a bare
 similarity matrix, ``still`` = 0) the ``stop_gain`` / ``stop_decay`` rule above holds for every frame.
 
 The answer is the position of the best state. Its score does two jobs, so it has two parts:
@@ -70,6 +70,8 @@ frames outside the window, its old mean is weighted by (1 - 1/memory)^k.
 from __future__ import annotations
 
 import numpy as np
+
+from vpr_edge.matchers.base import stands
 
 
 def _beyond(per_ref: np.ndarray, i: int, w: int) -> float:
@@ -188,7 +190,7 @@ class RoadMatcher:
     def stands(self, still: float | None) -> bool:
         """Whether a frame with motion cue ``still`` shows a standing camera (its view again): such a frame
         leaves the state as it was (see the module docstring)."""
-        return still is not None and bool(self.still) and still >= self.still
+        return stands(still, self.still)
 
     def _stop_rule(self, still: float | None) -> tuple[float, float]:
         """(share of a positive z counted at speed 0, speed 0's decay) for a frame that moves, with motion cue
