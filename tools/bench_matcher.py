@@ -14,7 +14,7 @@ the process's own, anonymous; pages of mapped files, i.e. of the map with --mmap
 Random unit encodings of --dim dims: the similarity column scales with D. ``--coarse``: the frames that
 search the whole route go through ``coarse.CoarseSearch`` as ``Localizer`` does on large maps.
 ``--cue``: each frame is matched with its motion cue as ``Localizer`` matches it (``matchers.stillness`` of
-this query encoding and the last one that moved, timed with the match), and a stopped vehicle's frame is the previous
+this query encoding and the last one that moved, ``matchers.MotionCue``, timed with the match), and a stopped vehicle's frame is the previous
 frame plus ``--stop-noise`` sensor noise (a standing camera sees its view again) instead of a fresh noisy copy
 of the reference; without it no cue is given and a stop's frames are independent draws, as before.
 """
@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from vpr_edge.index.coarse import CoarseSearch  # noqa: E402
 from vpr_edge.index.encodings import Encodings, STORAGES  # noqa: E402
-from vpr_edge.matchers import cue_at, get_matcher, stands, step, stillness  # noqa: E402
+from vpr_edge.matchers import MotionCue, get_matcher, step  # noqa: E402
 from vpr_edge.files import read_npz, write_npz  # noqa: E402
 
 
@@ -104,7 +104,7 @@ def main() -> int:
     last = 0
     sim_s = [0.0]
     previous: np.ndarray | None = None   # the last query (a standing camera's next frame repeats it)
-    anchor: np.ndarray | None = None     # the last query that moved (the motion cue's other half)
+    cue = MotionCue(matcher.still_threshold) if a.cue else None
 
     def similarity(idx: np.ndarray | None) -> np.ndarray:
         t0 = time.perf_counter()
@@ -132,12 +132,7 @@ def main() -> int:
         local += getattr(dtw, "wanted", lambda: None)() is not None
         sim_s[0] = 0.0
         t0 = time.perf_counter()
-        still = None
-        if a.cue:
-            still = None if anchor is None else cue_at(stillness(np.stack([anchor, q])), 1)
-            if not stands(still, matcher.still_threshold):
-                anchor = q
-        ref, _ = step(dtw, similarity, still)
+        ref, _ = step(dtw, similarity, cue(q) if cue is not None else None)
         t1 = time.perf_counter()
         previous = q
         t_sim += sim_s[0]

@@ -27,7 +27,7 @@ from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.images import MIN_SIDE, Frame
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.map import PlaceMap, load_map, map_front_end
-from vpr_edge.matchers import Matcher, cue_at, get_matcher, stands, step, stillness
+from vpr_edge.matchers import Matcher, MotionCue, get_matcher, step
 from vpr_edge.threads import use_threads
 
 
@@ -105,7 +105,7 @@ class Localizer:
     ``coarse.CoarseSearch`` (signs, exact values for the best candidates); None = on maps of at least
     ``COARSE_MIN_REFS`` references. Construction is thread-safe (nothing global but the
     BLAS limit); ``push`` may be called from any thread, one frame at a time (a lock orders them). Each frame
-    is matched with its motion cue (its encoding's likeness to the last frame that moved: ``matchers.stillness``),
+    is matched with its motion cue (its encoding's likeness to the last frame that moved: ``matchers.MotionCue``),
     so frames of one stream must be pushed in order; ``reset`` starts a new stream.
     Raises VprError for a bad map or model, ValueError for an unknown mode or parameter.
     """
@@ -136,7 +136,7 @@ class Localizer:
                                                          self._online.searches_locally) else None
         self._lock = threading.Lock()
         self._count = 0
-        self._anchor: np.ndarray | None = None   # the last moving frame's encoding (the motion cue's other half)
+        self._cue = MotionCue(self.matcher.still_threshold)   # each frame's likeness to the last that moved
 
     @property
     def front_description(self) -> dict:
@@ -164,7 +164,7 @@ class Localizer:
 
     def _step(self, enc: np.ndarray) -> tuple[int, float, float | None]:
         """Match one encoding (D,), with its motion cue (its likeness to the encoding of the last frame that
-        moved, ``matchers.stillness``): only the similarities the matcher asks for are computed (a local search
+        moved, ``matchers.MotionCue``): only the similarities the matcher asks for are computed (a local search
         around a locked position reads a window of the map, not all of it; with ``coarse``, a whole-route
         frame reads the signs and the best candidates)."""
         def similarity(refs: np.ndarray | None) -> np.ndarray:
@@ -172,10 +172,7 @@ class Localizer:
                 return self._coarse.similarity(enc)
             return self.similarity(enc[None], refs)[0]
 
-        still = None if self._anchor is None else cue_at(stillness(np.stack([self._anchor, enc])), 1)
-        if not stands(still, self.matcher.still_threshold):
-            self._anchor = enc
-        ref, score = step(self._online, similarity, still)
+        ref, score = step(self._online, similarity, self._cue(enc))
         return ref, score, self._online.position()
 
     def _line(self, index: int, name: str, ref: int, score: float, stamp: float | None = None,
@@ -233,4 +230,4 @@ class Localizer:
             if self._online is not None:
                 self._online.reset()
             self._count = 0
-            self._anchor = None
+            self._cue.reset()

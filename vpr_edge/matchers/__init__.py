@@ -1,9 +1,9 @@
 """Matchers: pure functions of a similarity matrix (or a stream of its rows): one contract (``base``), one
 module each, one registry (``registry.MATCHERS``), every parameter defined once (``params``)."""
-from vpr_edge.matchers.base import (Matcher, OnlineMatcher, Result, WholeRoute, cue_at, param_key, run_online,
-                                    run_rows, stands, step, stillness, top_k)
+from vpr_edge.matchers.base import (Matcher, MotionCue, OnlineMatcher, Result, WholeRoute, cue_at, param_key,
+                                    run_online, run_rows, stands, step, stillness, top_k)
 from vpr_edge.matchers.params import Param
 from vpr_edge.matchers.registry import MATCHERS, get_matcher
 
-__all__ = ["MATCHERS", "Matcher", "OnlineMatcher", "Param", "Result", "WholeRoute", "cue_at", "get_matcher", "param_key",
-           "run_online", "run_rows", "stands", "step", "stillness", "top_k"]
+__all__ = ["MATCHERS", "Matcher", "MotionCue", "OnlineMatcher", "Param", "Result", "WholeRoute", "cue_at",
+           "get_matcher", "param_key", "run_online", "run_rows", "stands", "step", "stillness", "top_k"]

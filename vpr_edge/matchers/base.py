@@ -120,25 +120,49 @@ def stands(still: float | None, threshold: float | None) -> bool:
     return still is not None and bool(threshold) and still >= threshold
 
 
+class MotionCue:
+    """The motion cue of a stream, frame by frame: each encoding's cosine similarity to the anchor, the last
+    frame that did not stand (``stands`` with ``threshold``; None: no frame stands, so the anchor is always
+    the previous frame). None for the first frame and next to an all-zero encoding (such a frame becomes
+    the anchor). What ``Localizer`` runs per frame and ``stillness`` over a whole stream."""
+
+    def __init__(self, threshold: float | None = None) -> None:
+        self.threshold = threshold
+        self._anchor: np.ndarray | None = None
+        self._norm = 0.0
+
+    def __call__(self, encoding: np.ndarray) -> float | None:
+        """The next frame's encoding (D,) -> its cue (1 = the same view again; None: none)."""
+        enc = np.asarray(encoding, np.float64)
+        norm = float(np.linalg.norm(enc))
+        still = None
+        if self._anchor is not None and norm > 0 and self._norm > 0:
+            still = float(enc @ self._anchor) / (norm * self._norm)
+        if not stands(still, self.threshold):
+            self._anchor, self._norm = enc, norm
+        return still
+
+    def reset(self) -> None:
+        """Forget the stream."""
+        self._anchor, self._norm = None, 0.0
+
+
 def stillness(encodings: np.ndarray, threshold: float | None = None) -> np.ndarray:
-    """Encodings (Q, D) of consecutive frames -> each frame's motion cue (Q,) float64: its cosine similarity
-    to the anchor, the last frame that did not stand (``stands`` with ``threshold``; None: no frame stands,
-    so the anchor is always the previous frame). NaN for the first frame and next to an all-zero encoding
-    (no cue; such a frame becomes the anchor). 1 = the same view again."""
+    """Encodings (Q, D) of consecutive frames -> each frame's motion cue (Q,) float64 (``MotionCue`` with
+    ``threshold``), NaN where there is none."""
     enc = np.asarray(encodings, np.float64)
-    norm = np.linalg.norm(enc, axis=1)
     out = np.full(len(enc), np.nan)
-    if not threshold:
+    if not threshold:   # the anchor is always the previous frame: all frames at once
+        norm = np.linalg.norm(enc, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             out[1:] = np.einsum("ij,ij->i", enc[1:], enc[:-1]) / (norm[1:] * norm[:-1])
         out[~np.isfinite(out)] = np.nan
         return out
-    anchor = 0
-    for t in range(1, len(enc)):
-        if norm[t] > 0 and norm[anchor] > 0:
-            out[t] = float(enc[t] @ enc[anchor]) / (norm[t] * norm[anchor])
-        if not stands(cue_at(out, t), threshold):
-            anchor = t
+    cue = MotionCue(threshold)
+    for t, e in enumerate(enc):
+        still = cue(e)
+        if still is not None:
+            out[t] = still
     return out
 
 
@@ -246,7 +270,7 @@ class Matcher:
 
     def cue(self, encodings: np.ndarray) -> np.ndarray:
         """Each frame's motion cue (Q,) for this matcher from the stream's encodings (Q, D): ``stillness``
-        with its threshold (what ``Localizer`` computes frame by frame)."""
+        with its threshold (what ``Localizer`` computes frame by frame with a ``MotionCue``)."""
         return stillness(encodings, self.still_threshold)
 
     def run(self, sim: np.ndarray, k: int = 10, still: np.ndarray | None = None) -> Result:

@@ -203,7 +203,8 @@ class RoadMatcher:
                still: float | None = None) -> tuple[int, float]:
         """Similarities of the new frame -> (reference at the best state, score in [0, 2); >= 1: locked).
         ``sim_row`` covers every reference (R,), or with ``refs`` exactly the references ``wanted()`` named;
-        ``still``: the frame's motion cue (cosine similarity to the previous frame's encoding; None: none)."""
+        ``still``: the frame's motion cue (cosine similarity to the last moving frame's encoding,
+        ``base.MotionCue``; None: none)."""
         s = np.asarray(sim_row, np.float64)
         lo, hi = self._win if self._win is not None else (0, self.n_refs)
         if refs is not None:
