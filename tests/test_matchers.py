@@ -101,6 +101,12 @@ def test_seqslam_difference_is_non_negative() -> None:
     assert d.min() == 0.0
 
 
+def stop_cues(places: np.ndarray, moving: float = 0.5) -> np.ndarray:
+    """A motion cue per frame of a planted route: 1.0 where the frame repeats the place before (the camera
+    stands), ``moving`` elsewhere."""
+    return np.where(np.r_[False, places[1:] == places[:-1]], 1.0, moving)
+
+
 def route(speed_runs: list[tuple[float, int]], start: float = 0.0) -> np.ndarray:
     pos, out = start, []
     for speed, frames in speed_runs:
@@ -281,7 +287,7 @@ def test_road_matcher_motion_cue_against_plain_loops() -> None:
     rng = np.random.default_rng(5)
     places = route([(1.0, 10), (0.0, 8), (1.0, 6), (0.5, 6)], start=1)
     sim = planted(rng, 20, places, noise=0.6)
-    cues = np.where(np.r_[False, places[1:] == places[:-1]], 1.0, 0.4)
+    cues = stop_cues(places, 0.4)
     cues[[0, 15, 16]] = np.nan
     params = {"vmax": 1.5, "grid": 2, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 6.0, "lock": 3.0,
               "rival_window": 2, "stop_gain": 0.3, "stop_decay": 0.95, "still": 0.99}
@@ -351,7 +357,7 @@ def test_road_matcher_follows_a_creep_with_the_anchored_cue() -> None:
 
 def test_road_matcher_long_stop_held_with_the_motion_cue() -> None:
     """A stop of 120 frames on a mapped place, its view repeated with fresh noise: with the motion cue (the
-    camera is seen to stand: the stopped state holds its score) every stopped frame stays locked within 2
+    camera is seen to stand: its frames leave the state as it was) every stopped frame stays locked within 2
     places of the stop over eight noise draws; without it (the stop_gain rule alone) the lock fades in most
     draws."""
     matcher = get_matcher("stream")
@@ -360,7 +366,7 @@ def test_road_matcher_long_stop_held_with_the_motion_cue() -> None:
         rng = np.random.default_rng(seed)
         places = np.concatenate([route([(1.0, 80)], start=20), np.full(120, 100), route([(1.0, 60)], start=101)])
         sim = planted(rng, 400, places)
-        cues = np.where(np.r_[False, places[1:] == places[:-1]], 1.0, 0.5)
+        cues = stop_cues(places)
         stop = slice(80, 200)
         for res, n in ((matcher.run(sim, still=cues), 0), (matcher.run(sim), 1)):
             ok = bool(np.all(res.scores[stop] >= matcher.min_confidence) and np.all(np.abs(res.refs[stop] - 100) <= 2))
@@ -380,7 +386,7 @@ def test_road_matcher_stop_not_overrun_with_the_motion_cue() -> None:
         sim = planted(rng, 400, places)
         stop = np.flatnonzero(places == 100)[1:]               # the frames that repeat the view
         sim[stop[:, None], np.arange(101, 104)[None]] += 0.8
-        cues = np.where(np.r_[False, places[1:] == places[:-1]], 1.0, 0.5)
+        cues = stop_cues(places)
         res = matcher.run(sim, still=cues)
         assert np.all(np.abs(res.refs[stop] - 100) <= 1), (seed, res.refs[stop])
         assert np.all(res.scores[stop] >= matcher.min_confidence)

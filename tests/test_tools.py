@@ -44,6 +44,23 @@ def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> 
     assert f"motion cue {'on' if mapped else 'off'}" in out
 
 
+@pytest.mark.parametrize("name, args, needle", [
+    ("lost_tradeoff.py", ["--streams", "{tmp}", "--locks", "x"], "--locks 'x': want positive numbers"),
+    ("lost_tradeoff.py", ["--streams", "{tmp}", "--locks", "0,6"], "--locks '0,6': want positive numbers"),
+    ("lost_tradeoff.py", ["--streams", "{tmp}", "--param", "nope=1"], "--param 'nope=1': stream takes KEY=VALUE"),
+    ("lost_tradeoff.py", ["--streams", "{tmp}"], "not a derive_streams folder with its map"),
+    ("bench_matcher.py", ["--stop-noise", "-1"], "--stop-noise must be >= 0"),
+])
+def test_new_tools_refuse_bad_input_in_one_line(tmp_path: Path, name: str, args: list[str], needle: str) -> None:
+    """One line on stderr naming the problem, exit 2, before any work (nothing written)."""
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / name), *[x.format(tmp=tmp_path) for x in args]],
+                          capture_output=True, text=True, timeout=120)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert lines[0].startswith(f"{name[:-3]}: error: ") and needle in lines[0]
+    assert proc.stdout == "" and list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.slow
 def test_bench_map_reports_each_size(tmp_path: Path, small_refs: Path) -> None:
     m = tmp_path / "m.npz"

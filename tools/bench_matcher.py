@@ -13,8 +13,8 @@ the process's own, anonymous; pages of mapped files, i.e. of the map with --mmap
 +-1 reference) over the mapped frames so far and the share of frames searched locally.
 Random unit encodings of --dim dims: the similarity column scales with D. ``--coarse``: the frames that
 search the whole route go through ``coarse.CoarseSearch`` as ``Localizer`` does on large maps.
-``--cue``: each frame is matched with its motion cue as ``Localizer`` matches it (``matchers.stillness`` of
-this query encoding and the last one that moved, ``matchers.MotionCue``, timed with the match), and a stopped vehicle's frame is the previous
+``--cue``: each frame is matched with its motion cue as ``Localizer`` matches it (``matchers.MotionCue``:
+its likeness to the last query that moved, timed with the match), and a stopped vehicle's frame is the previous
 frame plus ``--stop-noise`` sensor noise (a standing camera sees its view again) instead of a fresh noisy copy
 of the reference; without it no cue is given and a stop's frames are independent draws, as before.
 """
@@ -65,13 +65,16 @@ def main() -> int:
     p.add_argument("--mmap", type=Path, default=None, metavar="FILE",
                    help="write the stored references to FILE (a map-style .npz) and read them back memory-mapped, "
                    "as localize opens a map, so that RSS counts only the pages the frames touch")
-    p.add_argument("--cue", action="store_true", help="give each frame its motion cue (cosine to the previous "
-                   "query) and make a stopped vehicle's frames near-repeats of the one before")
+    p.add_argument("--cue", action="store_true", help="give each frame its motion cue (cosine to the last query "
+                   "that moved) and make a stopped vehicle's frames near-repeats of the one before")
     p.add_argument("--stop-noise", type=float, default=0.01,
                    help="with --cue: noise of a stopped frame relative to the previous one (default 0.01)")
     p.add_argument("--checkpoints", default="1000,10000,100000")
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args()
+    if not a.stop_noise >= 0:   # checked before the synthetic map is built
+        print(f"bench_matcher: error: --stop-noise must be >= 0, got {a.stop_noise}", file=sys.stderr)
+        return 2
     rng = np.random.default_rng(a.seed)
     route = np.random.default_rng([a.seed, 1])   # the route's speeds and detours: the same whatever --dim
     refs = rng.normal(size=(a.refs, a.dim)).astype(np.float32)

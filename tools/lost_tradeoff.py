@@ -8,12 +8,14 @@ answered right, on every derived stream of each dataset.
 For each folder (``tools/derive_streams.py`` output with its map.npz) every stream is evaluated once
 (``evaluate``, the function behind ``vpr-edge evaluate``: the map's front end, the motion cue) with the
 ``stream`` matcher at each ``lock`` (``--param lock=L``; everything else default, or as ``--param`` sets it
-for every row) and prints, per lock: the
-detour's unmapped frames reported lost, frames from leaving the map to the first lost frame and from
-re-entering to the first right answer; the lowest share of answered frames right and of mapped frames answered
-right over the streams (and which stream); the largest drop of a stream's mapped frames answered right from
-the default ``lock`` (always run, with the same ``--param`` values); the mean ``stream`` R@1 and AUC. Only which answers are called lost moves
-with ``lock`` (the trajectory search is the same), so the table is the trade-off the threshold allows.
+for every row) and prints, per lock: the detour's unmapped frames reported lost, frames from leaving the map
+to the first lost frame and from re-entering to the first right answer; the lowest share of answered frames
+right and of mapped frames answered right over the streams (and which stream); the largest drop of a
+stream's mapped frames answered right from the default ``lock`` (always run, with the same ``--param``
+values); the mean ``stream`` R@1 and AUC. Only which answers are called lost moves with ``lock`` (the
+trajectory search is the same), so the table is the trade-off the threshold allows. Bad input (a lock that is
+not a positive number, an unknown parameter, a folder without its map or streams) is one line on stderr and
+exit code 2, before any work.
 """
 from __future__ import annotations
 
@@ -26,6 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from vpr_edge.errors import VprError, one_line_errors  # noqa: E402
 from vpr_edge.evaluation import Source, Truth, evaluate  # noqa: E402
 from vpr_edge.evaluation.streams import KINDS  # noqa: E402
 from vpr_edge.matchers import get_matcher  # noqa: E402
@@ -50,9 +53,34 @@ def main() -> int:
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="another stream parameter for every row (as `vpr-edge evaluate --param`)")
     a = p.parse_args()
-    fixed = get_matcher("stream").parse_params(a.param)
+    return one_line_errors("lost_tradeoff", lambda: _run(a))
+
+
+def _locks(text: str) -> list[float]:
+    """``--locks`` "5,6.5" -> [5.0, 6.5] (VprError unless each is a positive number)."""
+    try:
+        locks = [float(x) for x in text.split(",")]
+    except ValueError:
+        locks = []
+    if not locks or not all(np.isfinite(x) and x > 0 for x in locks):
+        raise VprError(f"--locks {text!r}: want positive numbers separated by commas, e.g. 5,6.5,7")
+    return locks
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, inputs checked first: --locks, --param, each folder's map and streams."""
+    locks = _locks(a.locks)
+    try:
+        fixed = get_matcher("stream").parse_params(a.param)
+    except ValueError as e:
+        raise VprError(str(e)) from None
+    for folder in a.streams:
+        missing = [str(p) for p in [folder / "map.npz"] + [folder / k for k in KINDS] +
+                   [folder / f"{k}.csv" for k in KINDS] if not p.exists()]
+        if missing:
+            raise VprError(f"{folder}: not a derive_streams folder with its map ({missing[0]} is missing)")
     default = float(STREAM["lock"].default)
-    locks = sorted({float(x) for x in a.locks.split(",")} | {default})
+    locks = sorted(set(locks) | {default})
     modes = {f"lock={x:g}": get_matcher("stream").with_params(**fixed, lock=x) for x in locks}
     print(f"stream matcher{''.join(f' {k}={v}' for k, v in fixed.items())}, tolerance {a.tolerance}; "
           "worst stream in brackets\n")
