@@ -6,7 +6,8 @@ import pytest
 
 from vpr_edge.evaluation import truth as groundtruth
 from vpr_edge.errors import VprError
-from vpr_edge.evaluation.streams import KINDS, derive_stream, sensor_noise, write_stream
+from vpr_edge.evaluation.streams import (CAMERA, KINDS, Exposure, derive_stream, new_exposure, sensor_noise,
+                                        write_stream)
 
 
 def test_csv_with_unmapped_rows(tmp_path) -> None:
@@ -87,3 +88,25 @@ def test_write_stream_repeats_are_noisy_copies(tmp_path, small_queries) -> None:
     assert a.shape == base.shape and 2.0 < (a - base).std() < 4.0 and not np.array_equal(a, b)
     write_stream(tmp_path / "t", sources, places, n_mapped=2)             # default: the same file again
     assert sorted(p.name for p in (tmp_path / "t").iterdir())[2:4] == ["0000002.jpg", "0000003.jpg"]
+
+
+def test_camera_stops_are_stop_and_go_with_new_exposures(tmp_path, small_queries) -> None:
+    """camera-stops stops where stop-and-go does (same seed); each repeat is a new exposure: the place's image
+    shifted by a fraction of a pixel, its gain changed and noise added, so close to it but never equal, and
+    no two repeats alike."""
+    import cv2
+
+    for seed in (0, 3):
+        np.testing.assert_array_equal(derive_stream("camera-stops", 50, 60, seed),
+                                      derive_stream("stop-and-go", 50, 60, seed))
+    image = (np.arange(40 * 60 * 3) % 251).astype(np.uint8).reshape(40, 60, 3)
+    still = new_exposure(image, Exposure(noise=0.0, gain=0.0, shift=0.0), np.random.default_rng(0))
+    np.testing.assert_array_equal(still, image)                           # no noise, gain nor shift: the image
+    sources = sorted(small_queries.iterdir())[:3]
+    places = np.array([0, 1, 1, 1, 2])
+    write_stream(tmp_path / "s", sources, places, n_mapped=3, seed=1, exposure=CAMERA)
+    names = sorted(p.name for p in (tmp_path / "s").iterdir())
+    assert names == ["0000000.jpg", "0000001.jpg", "0000002.png", "0000003.png", "0000004.jpg"]
+    base = cv2.imread(str(sources[1])).astype(float)
+    a, b = (cv2.imread(str(tmp_path / "s" / n)).astype(float) for n in names[2:4])
+    assert a.shape == base.shape and 1.0 < np.abs(a - base).mean() < 8.0 and not np.array_equal(a, b)

@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from vpr_edge.index.coarse import CoarseSearch  # noqa: E402
 from vpr_edge.index.encodings import Encodings, STORAGES  # noqa: E402
-from vpr_edge.matchers import MotionCue, get_matcher, step  # noqa: E402
+from vpr_edge.matchers import get_matcher, step  # noqa: E402
 from vpr_edge.files import read_npz, write_npz  # noqa: E402
 
 
@@ -107,7 +107,7 @@ def main() -> int:
     last = 0
     sim_s = [0.0]
     previous: np.ndarray | None = None   # the last query (a standing camera's next frame repeats it)
-    cue = MotionCue(matcher.still_threshold) if a.cue else None
+    cue = matcher.motion_cue() if a.cue else None
 
     def similarity(idx: np.ndarray | None) -> np.ndarray:
         t0 = time.perf_counter()

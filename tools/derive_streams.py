@@ -5,9 +5,11 @@
 
 DATASET holds ref/ and query/ whose i-th files show the same place. OUT gets ref/ (the first --map-places
 references: the map's places), and per stream kind (aligned, speed2, speed3, stop-and-go, variable, partial,
-detour) a folder of frames OUT/KIND/ and its ground truth OUT/KIND.csv (true place, empty = unmapped).
-Frames are hard links to the dataset's files where the file system allows; with --repeat-noise S a frame that
-repeats the one before (a stop) is a noisy PNG copy instead (sensor noise of S grey levels). Then, for instance:
+detour, camera-stops) a folder of frames OUT/KIND/ and its ground truth OUT/KIND.csv (true place, empty =
+unmapped). Frames are hard links to the dataset's files where the file system allows. camera-stops stops where
+stop-and-go does, but each repeat is a new exposure as a real camera makes it (sensor noise, gain, sub-pixel
+vibration: ``streams.CAMERA``); with --repeat-noise S every other kind's repeats are noisy PNG copies too
+(sensor noise of S grey levels). Then, for instance:
 
     vpr-edge build-map OUT/ref --out OUT/map.npz
     vpr-edge evaluate --map OUT/map.npz --queries OUT/speed2 --gt OUT/speed2.csv
@@ -24,7 +26,7 @@ import numpy as np  # noqa: E402
 
 from vpr_edge.errors import VprError, one_line_errors  # noqa: E402
 from vpr_edge.images import list_images  # noqa: E402
-from vpr_edge.evaluation.streams import KINDS, derive_stream, write_stream  # noqa: E402
+from vpr_edge.evaluation.streams import CAMERA, KINDS, derive_stream, write_stream  # noqa: E402
 
 
 def main() -> int:
@@ -60,7 +62,8 @@ def _run(a: argparse.Namespace) -> int:
     write_stream(a.out / "ref", refs, np.arange(n_mapped), n_mapped, with_truth=False)
     for kind in kinds:
         places = derive_stream(kind, n_mapped, len(refs), a.seed)
-        write_stream(a.out / kind, queries, places, n_mapped, repeat_noise=a.repeat_noise, seed=a.seed)
+        write_stream(a.out / kind, queries, places, n_mapped, repeat_noise=a.repeat_noise, seed=a.seed,
+                     exposure=CAMERA if kind == "camera-stops" else None)
         print(f"{kind:12s} {len(places):6d} frames, {int((places >= n_mapped).sum()):5d} of unmapped places")
     print(f"map places: {n_mapped} of {len(refs)} (folder {a.out / 'ref'})")
     return 0

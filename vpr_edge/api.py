@@ -27,7 +27,7 @@ from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.images import MIN_SIDE, Frame
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.map import PlaceMap, load_map, map_front_end
-from vpr_edge.matchers import Matcher, MotionCue, get_matcher, step
+from vpr_edge.matchers import Matcher, get_matcher, step
 from vpr_edge.threads import use_threads
 
 
@@ -105,7 +105,8 @@ class Localizer:
     ``coarse.CoarseSearch`` (signs, exact values for the best candidates); None = on maps of at least
     ``COARSE_MIN_REFS`` references. Construction is thread-safe (nothing global but the
     BLAS limit); ``push`` may be called from any thread, one frame at a time (a lock orders them). Each frame
-    is matched with its motion cue (its encoding's likeness to the last frame that moved: ``matchers.MotionCue``),
+    is matched with its motion cue (its encoding's likeness to the last frame that moved, against the stream's
+    typical moving step: ``matchers.MotionCue``),
     so frames of one stream must be pushed in order; ``reset`` starts a new stream.
     Raises VprError for a bad map or model, ValueError for an unknown mode or parameter.
     """
@@ -116,6 +117,7 @@ class Localizer:
                  calibration: str | os.PathLike[str] | None = None, precision: str = DEFAULT_PRECISION) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
         self.map = load_map(map_path, mmap=True)
+        self.matcher = self.matcher.on_route(self.map.stored.in_order())   # where the map's drive stood
         ort_threads = 0 if threads is None else use_threads(threads)
         self.front = map_front_end(self.map, map_path, Path(model) if model else None, ort_threads, precision)
         if self.matcher.scores == "svm" and self.map.svm is None:
@@ -136,7 +138,7 @@ class Localizer:
                                                          self._online.searches_locally) else None
         self._lock = threading.Lock()
         self._count = 0
-        self._cue = MotionCue(self.matcher.still_threshold)   # each frame's likeness to the last that moved
+        self._cue = self.matcher.motion_cue()   # each frame's likeness to the last that moved
 
     @property
     def front_description(self) -> dict:

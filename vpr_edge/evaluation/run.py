@@ -162,6 +162,8 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
         rows = rows[sims.kept]
     check_truth_fits(rows, gt_shape, sims.cosine, truth.name)
     by_kind = {"cosine": sims.cosine, "svm": sims.svm}
+    if sims.references is not None:   # the map's own stops, for matchers that read them
+        chosen = {name: m.on_route(sims.references.in_order()) for name, m in chosen.items()}
     reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions,
                                    (calibration or {}).get(name),
                                    None if sims.encodings is None else m.cue(sims.encodings))

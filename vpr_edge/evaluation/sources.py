@@ -12,6 +12,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError
 from vpr_edge.images import Frame, list_images, load_image, open_stream
+from vpr_edge.index.encodings import Encodings
 from vpr_edge.positions import Positions
 
 OnSkip = Callable[[Frame], None]
@@ -30,6 +31,7 @@ class Similarities:
     positions: Positions | None = None     # the references' (a map built with --positions)
     front: dict | None = None              # with a map: {"model": file run, "form": "int8: AVX512-VNNI", ...}
     encodings: np.ndarray | None = None    # with a map: (Q, D) the query encodings (each matcher's motion cue)
+    references: Encodings | None = None    # with a map: its reference encodings (where its drive stood)
 
 
 def sad_similarity(queries: np.ndarray, refs: np.ndarray, chunk: int = 16) -> np.ndarray:
@@ -114,4 +116,4 @@ def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], 
     cosine = loc.similarity(stacked).astype(np.float64)
     scores = loc.map.scores(stacked, "svm").astype(np.float64) if svm else None
     return replace(_finish(queries, kept, t0, cosine, scores, loc.map.positions), front=loc.front_description,
-                   encodings=stacked)
+                   encodings=stacked, references=loc.map.stored)

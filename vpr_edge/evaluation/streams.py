@@ -13,20 +13,40 @@ import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from vpr_edge.errors import VprError
 from vpr_edge.images import load_image
 from vpr_edge.files import atomic_output
 
-KINDS: tuple[str, ...] = ("aligned", "speed2", "speed3", "stop-and-go", "variable", "partial", "detour")
+KINDS: tuple[str, ...] = ("aligned", "speed2", "speed3", "stop-and-go", "camera-stops", "variable", "partial",
+                          "detour")
+
+
+@dataclass(frozen=True)
+class Exposure:
+    """How a real camera's frame of a place it already showed differs from the last one: a new exposure, not
+    the same pixels. ``noise``: sigma of Gaussian sensor noise (grey levels); ``gain``: the exposure's gain
+    drawn uniformly within 1 +- gain; ``shift``: sub-pixel vibration, a translation drawn uniformly within
+    +- shift pixels on each axis (of the source image)."""
+
+    noise: float = 2.0
+    gain: float = 0.02
+    shift: float = 0.3
+
+
+CAMERA = Exposure()   # the camera-stops kind's exposures
 
 
 def derive_stream(kind: str, n_mapped: int, n_places: int, seed: int = 0) -> np.ndarray:
     """Source place index per frame of the derived stream (F,) int; values >= n_mapped are unmapped places.
 
     aligned: 1 place/frame over the map; speed2/speed3: every 2nd/3rd place; stop-and-go: runs at 1
-    place/frame broken by stops of 5-20 repeated frames; variable: speed drifting smoothly in [0.5, 3]
+    place/frame broken by stops of 5-20 repeated frames; camera-stops: the same places as stop-and-go (same
+    seed), written as a real camera shows a stop (each repeat a new exposure: ``write_stream``'s
+    ``exposure``); variable: speed drifting smoothly in [0.5, 3]
     places/frame; partial: the middle half of the map; detour: the first 40% of the map, then up to 30%
     of n_mapped frames of unmapped places, then re-entering at 60% of the map to its end.
     """
@@ -35,7 +55,7 @@ def derive_stream(kind: str, n_mapped: int, n_places: int, seed: int = 0) -> np.
         return np.arange(n_mapped)
     if kind in ("speed2", "speed3"):
         return np.arange(0, n_mapped, int(kind[-1]))
-    if kind == "stop-and-go":
+    if kind in ("stop-and-go", "camera-stops"):
         out: list[int] = []
         place = 0
         while place < n_mapped:
@@ -80,12 +100,28 @@ def sensor_noise(image: np.ndarray, sigma: float, rng: np.random.Generator) -> n
     return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
 
 
+def new_exposure(image: np.ndarray, exposure: Exposure, rng: np.random.Generator) -> np.ndarray:
+    """``image`` (H, W, 3) uint8 as the camera's next frame of the same view: shifted by a sub-pixel
+    translation (bilinear, borders reflected), scaled by a gain, plus sensor noise (``Exposure``)."""
+    import cv2
+
+    dx, dy = rng.uniform(-exposure.shift, exposure.shift, 2)
+    shifted = cv2.warpAffine(image.astype(np.float32), np.float32([[1, 0, dx], [0, 1, dy]]),
+                             (image.shape[1], image.shape[0]), flags=cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_REFLECT)
+    gained = np.clip(np.rint(shifted * rng.uniform(1 - exposure.gain, 1 + exposure.gain)), 0, 255)
+    return sensor_noise(gained.astype(np.uint8), exposure.noise, rng) if exposure.noise > 0 else \
+        gained.astype(np.uint8)
+
+
 def write_stream(out: str | os.PathLike[str], sources: Sequence[Path], places: np.ndarray, n_mapped: int,
-                 with_truth: bool = True, repeat_noise: float = 0.0, seed: int = 0) -> None:
+                 with_truth: bool = True, repeat_noise: float = 0.0, seed: int = 0,
+                 exposure: Exposure | None = None) -> None:
     """Write frames ``sources[places[i]]`` as ``out/NNNNNNN.ext`` (hard links where possible) and, with
     ``with_truth``, ``out.csv``: their ground truth (the true place, or empty for an unmapped one).
-    ``repeat_noise`` > 0: a frame showing the same place as the one before it (a stop, a slow crawl) is
-    written as a PNG with ``sensor_noise`` of that sigma instead of as the same file again (seeded)."""
+    A frame showing the same place as the one before it (a stop, a slow crawl) is written as a new PNG
+    instead of as the same file again (seeded): with ``exposure``, a camera's new exposure of the place
+    (``new_exposure``), else with ``repeat_noise`` > 0 ``sensor_noise`` of that sigma."""
     import cv2
 
     out = Path(out)
@@ -95,8 +131,10 @@ def write_stream(out: str | os.PathLike[str], sources: Sequence[Path], places: n
     rng = np.random.default_rng(seed)
     for i, p in enumerate(places):
         src = sources[int(p)]
-        if repeat_noise > 0 and i > 0 and p == places[i - 1]:
-            noisy = sensor_noise(load_image(src), repeat_noise, rng)
+        if (exposure is not None or repeat_noise > 0) and i > 0 and p == places[i - 1]:
+            image = load_image(src)
+            noisy = new_exposure(image, exposure, rng) if exposure is not None else \
+                sensor_noise(image, repeat_noise, rng)
             ok, png = cv2.imencode(".png", cv2.cvtColor(noisy, cv2.COLOR_RGB2BGR))
             if not ok:
                 raise VprError(f"{src}: cannot be encoded as PNG")

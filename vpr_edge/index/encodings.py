@@ -110,6 +110,12 @@ class Encodings:
             yield i, block
             release_pages(block)
 
+    def in_order(self, block: int = 4096) -> Iterator[np.ndarray]:
+        """The stored values in route order, a block (n <= block, D) at a time (``blocks``). Cosines between
+        these rows are the encodings' (an int8 row's scale is positive)."""
+        for _, values in self.blocks(block):
+            yield values
+
     def dense_row(self, r: int) -> np.ndarray:
         """Reference ``r`` as float32 (D,)."""
         row = self.take(np.array([r]))[0].astype(np.float32)

@@ -9,13 +9,11 @@ An *online* matcher sees one row at a time, past frames only: ``update(row) -> (
 ``ranking()`` gives its per-reference preference for that frame. Running it over a matrix row by row is its
 offline form, so every matcher, online or not, can be evaluated with ``run(sim)``.
 
-An online matcher may also take a motion cue per frame, ``still``: the cosine similarity of the frame's
-encoding to the last frame that moved (the previous frame, unless the camera has been standing: near 1, the
-camera sees the same view again; None: not known, as for the first frame or a bare similarity matrix).
-A frame *stands* when its cue is at least the matcher's ``still`` parameter (``stands``); the frame it is
-compared with, the anchor, moves on to each frame that does not stand, so a camera creeping by steps too
-small to tell apart still shows motion once it has crept far enough (``stillness``). Matchers without a use
-for the cue ignore it.
+An online matcher may also take a motion cue per frame, ``still`` (``motion``: 1 = the same view as the last
+frame that moved, 0 = as far from it as a typical moving step of this stream; None: not known, as for the first
+frame or a bare similarity matrix). A frame *stands* when its cue is at least the matcher's ``still``
+parameter (``motion.stands``). A matcher that also reads the map's own stops (``reads_route``) gets them with
+``Matcher.on_route`` (``motion.route_stands`` of the references). Matchers without a use for the cue ignore it.
 
 An online matcher may search locally: ``wanted()`` names the references whose similarities its next frame
 needs (None: all, what ``WholeRoute`` matchers always answer), and ``update(values, refs)`` takes just those.
@@ -28,12 +26,13 @@ CLI's help read them there.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
 
+from vpr_edge.matchers.motion import MEMORY, MotionCue, cue_at, route_stands, stillness
 from vpr_edge.matchers.params import Param
 
 
@@ -114,65 +113,6 @@ def step(matcher: OnlineMatcher, similarity: Callable[[np.ndarray | None], np.nd
     return matcher.update(similarity(refs), refs, still)
 
 
-def stands(still: float | None, threshold: float | None) -> bool:
-    """Whether a frame with motion cue ``still`` shows a standing camera for a matcher whose ``still``
-    parameter is ``threshold`` (None or 0: the cue is not used, nothing stands)."""
-    return still is not None and bool(threshold) and still >= threshold
-
-
-class MotionCue:
-    """The motion cue of a stream, frame by frame: each encoding's cosine similarity to the anchor, the last
-    frame that did not stand (``stands`` with ``threshold``; None: no frame stands, so the anchor is always
-    the previous frame). None for the first frame and next to an all-zero encoding (such a frame becomes
-    the anchor). What ``Localizer`` runs per frame and ``stillness`` over a whole stream."""
-
-    def __init__(self, threshold: float | None = None) -> None:
-        self.threshold = threshold
-        self._anchor: np.ndarray | None = None
-        self._norm = 0.0
-
-    def __call__(self, encoding: np.ndarray) -> float | None:
-        """The next frame's encoding (D,) -> its cue (1 = the same view again; None: none)."""
-        enc = np.asarray(encoding, np.float64)
-        norm = float(np.linalg.norm(enc))
-        still = None
-        if self._anchor is not None and norm > 0 and self._norm > 0:
-            still = float(enc @ self._anchor) / (norm * self._norm)
-        if not stands(still, self.threshold):
-            self._anchor, self._norm = enc, norm
-        return still
-
-    def reset(self) -> None:
-        """Forget the stream."""
-        self._anchor, self._norm = None, 0.0
-
-
-def stillness(encodings: np.ndarray, threshold: float | None = None) -> np.ndarray:
-    """Encodings (Q, D) of consecutive frames -> each frame's motion cue (Q,) float64 (``MotionCue`` with
-    ``threshold``), NaN where there is none."""
-    enc = np.asarray(encodings, np.float64)
-    out = np.full(len(enc), np.nan)
-    if not threshold:   # the anchor is always the previous frame: all frames at once
-        norm = np.linalg.norm(enc, axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out[1:] = np.einsum("ij,ij->i", enc[1:], enc[:-1]) / (norm[1:] * norm[:-1])
-        out[~np.isfinite(out)] = np.nan
-        return out
-    cue = MotionCue(threshold)
-    for t, e in enumerate(enc):
-        still = cue(e)
-        if still is not None:
-            out[t] = still
-    return out
-
-
-def cue_at(still: np.ndarray | None, i: int) -> float | None:
-    """Frame ``i``'s motion cue from a (Q,) array of them (``stillness``; NaN or no array: None)."""
-    if still is None or not np.isfinite(still[i]):
-        return None
-    return float(still[i])
-
-
 def run_online(matcher: OnlineMatcher, sim: np.ndarray, k: int = 10, still: np.ndarray | None = None) -> Result:
     """Feed the rows of ``sim`` (Q, R) to an online matcher in order (through ``step``: a local search sees
     only the references it asks for), with each frame's motion cue from ``still`` (Q,) if given; collect its
@@ -213,6 +153,8 @@ class Matcher:
     params: dict[str, Any] = field(default_factory=dict)
     min_confidence: float | None = None
     scores: str = "cosine"
+    reads_route: bool = False                 # start() takes ``route``: the map's standing references
+    route: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not self.params:
@@ -260,6 +202,10 @@ class Matcher:
         """A fresh online matcher over ``n_refs`` references."""
         if self.start is None:
             raise ValueError(f"matcher {self.name!r} is offline only")
+        if self.reads_route:
+            if self.route is not None and len(self.route) != n_refs:
+                raise ValueError(f"matcher {self.name!r}: route of {len(self.route)} references for {n_refs}")
+            return self.start(n_refs, route=self.route, **self.params)
         return self.start(n_refs, **self.params)
 
     @property
@@ -268,10 +214,29 @@ class Matcher:
         reads no motion cue)."""
         return self.params.get("still") or None
 
+    @property
+    def still_memory(self) -> int:
+        """Moving frames whose median step is the motion cue's typical step (its ``still_memory``)."""
+        return int(self.params.get("still_memory", MEMORY))
+
+    def motion_cue(self) -> MotionCue:
+        """A fresh ``motion.MotionCue`` with this matcher's threshold and memory (``still``,
+        ``still_memory``): what ``Localizer`` runs frame by frame."""
+        return MotionCue(self.still_threshold, self.still_memory)
+
     def cue(self, encodings: np.ndarray) -> np.ndarray:
-        """Each frame's motion cue (Q,) for this matcher from the stream's encodings (Q, D): ``stillness``
-        with its threshold (what ``Localizer`` computes frame by frame with a ``MotionCue``)."""
-        return stillness(encodings, self.still_threshold)
+        """Each frame's motion cue (Q,) for this matcher from the stream's encodings (Q, D), as
+        ``motion_cue`` gives it frame by frame (NaN where there is none)."""
+        return stillness(encodings, self.still_threshold, self.still_memory)
+
+    def on_route(self, blocks: Iterable[np.ndarray]) -> "Matcher":
+        """This matcher on a map whose references are given in route order as consecutive blocks (n, D): for
+        a matcher that ``reads_route``, with the map's standing references (``motion.route_stands``); else
+        itself."""
+        if not self.reads_route or self.still_threshold is None:
+            return self
+        return replace(self, route=route_stands(blocks, self.still_threshold,
+                                                self.still_memory))
 
     def run(self, sim: np.ndarray, k: int = 10, still: np.ndarray | None = None) -> Result:
         """Match every row of ``sim`` (Q, R); online matchers see the rows in order, past frames only, each

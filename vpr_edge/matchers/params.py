@@ -7,6 +7,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from vpr_edge.matchers.motion import MEMORY
+
 
 @dataclass(frozen=True)
 class Param:
@@ -39,10 +41,13 @@ STREAM: dict[str, Param] = {
                             "(standing still is not new evidence)"),
     "stop_decay": Param(0.95, "without a motion cue: at speed 0, the decay of the trajectory score (a lock holds "
                               "through a stop)"),
-    "still": Param(0.99, "motion cue: a frame whose encoding has at least this cosine similarity to the last "
-                         "moving frame's shows a standing camera and leaves the state as it was (the answer stays); "
-                         "below it the camera moves (speed 0 gains nothing, decays as the others); 0 = no cue: "
-                         "stop_gain and stop_decay for every frame"),
+    "still": Param(0.5, "motion cue: a frame that differs from the last moving frame by at most (1 - still) of "
+                        "this stream's typical moving step (cue >= still) shows a standing camera and leaves the "
+                        "state as it was (the answer stays), unless the map's own drive stood there too; below it "
+                        "the camera moves (speed 0 gains nothing, decays as the others); 0 = no cue: stop_gain and "
+                        "stop_decay for every frame"),
+    "still_memory": Param(MEMORY, "motion cue: moving frames whose median step (1 - cosine of encodings) is the "
+                                  "stream's typical moving step"),
 }
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),

@@ -17,7 +17,7 @@ from vpr_edge.matchers.stream_dtw import StreamingDTW
 MATCHERS: dict[str, Matcher] = {m.name: m for m in (
     Matcher("stream", "trajectories over (position, speed) with contrast-normalised similarities: any speed "
             "0-4 places/frame, lock-on anywhere, lost state (online, default)", start=RoadMatcher,
-            definitions=P.STREAM, min_confidence=1.0),
+            definitions=P.STREAM, min_confidence=1.0, reads_route=True),
     Matcher("single", "best single match per frame, no sequence information (online)", start=BestMatch),
     Matcher("stream-dtw", "decayed streaming DTW over 1 - cos (online; the first streaming matcher, kept "
             "as a baseline)", start=StreamingDTW, definitions=P.STREAM_DTW),

@@ -27,19 +27,24 @@ moving one and lock on where nothing is mapped. So at speed 0 a frame's excess z
 instead of ``decay``, holding a lock through a stop rather than rebuilding it. (What it
 changed on the derived streams: docs/results.md, "Evaluating".)
 
-Whether the vehicle stands is also seen in the query stream itself, without the map: a stopped camera sees
-the same view again, so consecutive frames' encodings are near-identical, while a moving one's differ. With
-that motion cue (``update``'s ``still``: the frame's cosine similarity to the encoding of the last frame that
-moved, ``base.stillness``), a frame at least ``still`` alike it shows the camera standing: its view again, which says
-nothing new about where the vehicle is, so the frame leaves the state as it was (no decay, no gain, no
-move along the route, hub means not updated) and the answer stays. A lock thus holds through a stop of any
-length, a stop where nothing was locked (off the map, in front of a look-alike) builds no lock, a trajectory
-cannot run on past the stop place on the next places' likeness to the repeated view, and a crawl shown as
-repeated frames is followed at its speed in the frames that move. A frame less alike is motion: speed 0
-gains nothing and decays as the other speeds do, so a stopped or parked hypothesis cannot keep the lead
-while the camera moves on. (A camera creeping by steps too small to tell apart reads as standing until it has
-crept far enough from the last frame that moved; that frame then moves.) Without a cue (the first frame, a bare
-similarity matrix, ``still`` = 0) the ``stop_gain`` / ``stop_decay`` rule above holds for every frame.
+Whether the vehicle stands is also seen in the query stream itself, without the map: a standing camera sees
+the same view again, so its frames' encodings are alike the last frame that moved, far more alike than the
+stream's moving frames are to each other. ``update``'s ``still`` is that motion cue (``motion.MotionCue``: 1 =
+the same view, 0 = as far as this stream's typical moving step); a frame with a cue of at least ``still``
+shows the camera standing: its view again, which says nothing new about where the vehicle is, so the frame
+leaves the state as it was (no decay, no gain, no move along the route, hub means not updated) and the answer
+stays. A lock thus holds through a stop of any length, a stop where nothing was locked (off the map, in front
+of a look-alike) builds no lock, a trajectory cannot run on past the stop place on the next places' likeness
+to the repeated view, and a crawl shown as repeated frames is followed at its speed in the frames that move.
+A frame less alike is motion: speed 0 gains nothing and decays as the other speeds do, so a stopped or parked
+hypothesis cannot keep the lead while the camera moves on. Without a cue (the first frame, a bare similarity
+matrix, ``still`` = 0) the ``stop_gain`` / ``stop_decay`` rule above holds for every frame.
+
+The map's own drive may have stood too (``route``: the references that stand by the same cue along the map,
+``motion.route_stands``; a train at a station): its references there show one view, and a standing frame
+answered just before such a reference is read as motion, so the answer moves on through the map's standing
+references as the frames of the mapping drive did (where it stands still, the answer would stay at the first
+of them while the rest of that stop, the same place, went by).
 
 The answer is the position of the best state. Its score does two jobs, so it has two parts:
 
@@ -71,7 +76,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vpr_edge.matchers.base import stands
+from vpr_edge.matchers.motion import stands
 
 
 def _beyond(per_ref: np.ndarray, i: int, w: int) -> float:
@@ -86,8 +91,11 @@ class RoadMatcher:
 
     def __init__(self, n_refs: int, *, vmax: float, grid: int, decay: float, bias: float, turn: float,
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
-                 hold: float, stop_gain: float, stop_decay: float, still: float) -> None:
-        """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``)."""
+                 hold: float, stop_gain: float, stop_decay: float, still: float, still_memory: int,
+                 route: np.ndarray | None = None) -> None:
+        """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
+        ``still_memory`` is the motion cue's, read where the cue is computed). ``route``: (n_refs,) bool, the
+        references where the map's drive stood (``motion.route_stands``; None: not known)."""
         if n_refs < 1:
             raise ValueError("need at least one reference")
         if not 0.0 < decay < 1.0:
@@ -102,6 +110,9 @@ class RoadMatcher:
         self.n_refs, self.grid, self.decay, self.bias = n_refs, grid, decay, bias
         self.turn, self.memory, self.lock, self.rival_window = turn, memory, lock, max(0, int(rival_window))
         self.stop_gain, self.stop_decay, self.still = stop_gain, stop_decay, still
+        if route is not None and np.shape(route) != (n_refs,):
+            raise ValueError(f"route must flag each of the {n_refs} references, got shape {np.shape(route)}")
+        self.route = None if route is None else np.asarray(route, bool)
         self.n_speeds = int(round(vmax * grid)) + 1
         # local search pays only where the window is a small part of the route
         self.window = int(window) if window and n_refs > 4 * window else 0
@@ -188,9 +199,14 @@ class RoadMatcher:
         self.h[:, a:b] = new
 
     def stands(self, still: float | None) -> bool:
-        """Whether a frame with motion cue ``still`` shows a standing camera (its view again): such a frame
-        leaves the state as it was (see the module docstring)."""
-        return stands(still, self.still)
+        """Whether a frame with motion cue ``still`` shows a standing camera (its view again) where the map's
+        drive moved on: such a frame leaves the state as it was (see the module docstring)."""
+        if not stands(still, self.still):
+            return False
+        if self.route is None or self._position is None:
+            return True
+        nxt = int(round(self._position)) + 1
+        return not (nxt < self.n_refs and self.route[nxt])
 
     def _stop_rule(self, still: float | None) -> tuple[float, float]:
         """(share of a positive z counted at speed 0, speed 0's decay) for a frame that moves, with motion cue

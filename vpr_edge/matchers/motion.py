@@ -1,0 +1,161 @@
+"""The motion cue: whether the camera stands, read from the query stream itself, relative to how much its
+frames change while it moves.
+
+A camera that stands sees the same view again, but a real camera's next frame is a new exposure (sensor
+noise, a flicker of light, a fraction of a pixel of vibration), so its encoding is alike the last one, not
+equal to it; how alike depends on the camera, the front end and the scenery. A moving camera's consecutive
+frames differ by a step that also depends on them (the frame rate, the speed, how alike the places look).
+So the cue is relative: a frame's distance from the *anchor* (the last frame that moved), ``d = 1 - cosine``
+of their encodings, against the typical step of this stream's moving frames (the median ``d`` of the last
+``memory`` frames that moved):
+
+    cue = 1 - d / typical_step          (1: the same view again; 0: as far as a typical moving step)
+
+A frame *stands* when its cue is at least the matcher's threshold ``still`` (0.5: it differs from the
+anchor by at most half a typical moving step). A standing frame keeps the anchor and adds nothing to the
+moving steps, so a stop of any length is judged against the steps of the motion before it; a camera creeping
+by steps too small to tell apart still shows motion once it has crept far enough from the anchor, and its
+steps then set the typical step. Until ``MIN_STEPS`` moving frames have been seen the typical step is
+``PRIOR_STEP`` (a cosine of 0.98 between moving frames): only a frame almost identical to the anchor stands.
+
+``route_stands`` reads the same cue along the map's references (the mapping drive's own stops: references
+that show one view, e.g. a train standing at a station).
+"""
+from __future__ import annotations
+
+from bisect import bisect_left, insort
+from collections import deque
+from collections.abc import Iterable
+
+import numpy as np
+
+MIN_STEPS = 3        # moving frames seen before their median step is trusted
+PRIOR_STEP = 0.02    # the typical moving step (1 - cosine) before that
+MEMORY = 30          # moving frames whose median step is the typical one (the ``still_memory`` parameter)
+
+
+def stands(still: float | None, threshold: float | None) -> bool:
+    """Whether a frame with motion cue ``still`` shows a standing camera for a matcher whose ``still``
+    parameter is ``threshold`` (None or 0: the cue is not used, nothing stands)."""
+    return still is not None and bool(threshold) and still >= threshold
+
+
+class _Steps:
+    """The last ``memory`` moving steps and their median, kept sorted (O(memory) a frame, no array calls)."""
+
+    def __init__(self, memory: int) -> None:
+        self.memory = memory
+        self._order: deque[float] = deque()
+        self._sorted: list[float] = []
+
+    def add(self, d: float) -> None:
+        if len(self._order) == self.memory:
+            del self._sorted[bisect_left(self._sorted, self._order.popleft())]
+        self._order.append(d)
+        insort(self._sorted, d)
+
+    def typical(self) -> float:
+        """The median step (``PRIOR_STEP`` until ``MIN_STEPS`` steps, or ``memory`` if fewer)."""
+        n = len(self._sorted)
+        if n < min(MIN_STEPS, self.memory):
+            return PRIOR_STEP
+        mid = n // 2
+        median = self._sorted[mid] if n % 2 else 0.5 * (self._sorted[mid - 1] + self._sorted[mid])
+        return max(median, 1e-12)
+
+    def clear(self) -> None:
+        self._order.clear()
+        self._sorted.clear()
+
+
+class MotionCue:
+    """The motion cue of a stream, frame by frame (module docstring): each encoding's distance from the anchor
+    (the last frame that did not stand by ``threshold``; None: no frame stands, the anchor is always the
+    previous frame) relative to the median step of the last ``memory`` frames that moved. None for the first
+    frame and next to an all-zero encoding (such a frame becomes the anchor and adds no step). What
+    ``Localizer`` runs per frame, ``stillness`` over a whole stream and ``route_stands`` along a map."""
+
+    def __init__(self, threshold: float | None = None, memory: int = MEMORY) -> None:
+        if memory < 1:
+            raise ValueError(f"the motion cue's memory must be at least 1 frame, got {memory}")
+        self.threshold, self.memory = threshold, int(memory)
+        self._anchor: np.ndarray | None = None
+        self._norm = 0.0
+        self._steps = _Steps(self.memory)
+
+    def typical_step(self) -> float:
+        """The median distance (1 - cosine) between a moving frame and its anchor, over the last ``memory``
+        moving frames (``PRIOR_STEP`` until ``MIN_STEPS`` of them, or ``memory`` if fewer)."""
+        return self._steps.typical()
+
+    def judge(self, d: float) -> tuple[float, bool]:
+        """A frame at distance ``d`` (1 - cosine) from the anchor -> (its cue, whether it stands); a frame
+        that does not stand adds its step (the caller makes it the anchor)."""
+        still = 1.0 - d / self._steps.typical()
+        standing = stands(still, self.threshold)
+        if not standing:
+            self._steps.add(d)
+        return still, standing
+
+    def __call__(self, encoding: np.ndarray) -> float | None:
+        """The next frame's encoding (D,) -> its cue (1 = the same view again, 0 = a typical moving step;
+        None: none)."""
+        enc = np.asarray(encoding, np.float64)
+        norm = float(np.linalg.norm(enc))
+        if self._anchor is None or norm == 0 or self._norm == 0:
+            self._anchor, self._norm = enc, norm
+            return None
+        still, standing = self.judge(1.0 - float(enc @ self._anchor) / (norm * self._norm))
+        if not standing:
+            self._anchor, self._norm = enc, norm
+        return still
+
+    def reset(self) -> None:
+        """Forget the stream."""
+        self._anchor, self._norm = None, 0.0
+        self._steps.clear()
+
+
+def stillness(encodings: Iterable[np.ndarray], threshold: float | None = None, memory: int = MEMORY) -> np.ndarray:
+    """Encodings (Q, D) of consecutive frames -> each frame's motion cue (Q,) float64 (``MotionCue`` with
+    ``threshold`` and ``memory``), NaN where there is none."""
+    cue = MotionCue(threshold, memory)
+    return np.array([np.nan if (c := cue(e)) is None else c for e in encodings], np.float64)
+
+
+def route_stands(blocks: Iterable[np.ndarray], threshold: float, memory: int = MEMORY) -> np.ndarray:
+    """The map's references in route order, as consecutive blocks (n, D) -> (R,) bool: True where a reference
+    stands by the motion cue (``MotionCue`` over the references: it shows the view of the last one that
+    moved, the mapping drive stood there). Consecutive cosines are computed a block at a time; only a
+    standing stretch compares with its anchor one row at a time (about 1 us a reference)."""
+    cue = MotionCue(threshold, memory)
+    out: list[np.ndarray] = []
+    anchor: np.ndarray | None = None      # unit row of the anchor, when it is not the previous row
+    prev: np.ndarray | None = None        # unit previous row (zero row: None)
+    for block in blocks:
+        x = np.asarray(block, np.float64)
+        norm = np.linalg.norm(x, axis=1)
+        unit = np.divide(x, norm[:, None], out=np.zeros_like(x), where=norm[:, None] > 0)
+        lead = unit[:1] if prev is None else prev[None]
+        cos = np.einsum("ij,ij->i", unit, np.concatenate([lead, unit[:-1]]))
+        flags = np.zeros(len(x), bool)
+        for i in range(len(x)):
+            if norm[i] == 0 or (prev is None and anchor is None):
+                anchor, prev = None, (unit[i] if norm[i] else None)   # no cue: this row becomes the anchor
+                continue
+            d = 1.0 - (cos[i] if anchor is None else float(unit[i] @ anchor))
+            _, flags[i] = cue.judge(d)
+            if flags[i]:
+                anchor = prev if anchor is None else anchor
+            else:
+                anchor = None
+            prev = unit[i]
+        out.append(flags)
+    return np.concatenate(out) if out else np.zeros(0, bool)
+
+
+def cue_at(still: np.ndarray | None, i: int) -> float | None:
+    """Frame ``i``'s motion cue from a (Q,) array of them (``stillness``; NaN or no array: None)."""
+    if still is None or not np.isfinite(still[i]):
+        return None
+    return float(still[i])
