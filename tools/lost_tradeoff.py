@@ -7,8 +7,8 @@ answered right, on every derived stream of each dataset.
 
 For each folder (``tools/derive_streams.py`` output with its map.npz) every stream is evaluated once
 (``evaluate``, the function behind ``vpr-edge evaluate``: the map's front end, the motion cue) with the
-``stream`` matcher at each ``lock`` (``--param lock=L``; everything else default, or as ``--param`` sets it
-for every row) and prints, per lock: the detour's unmapped frames reported lost, frames from leaving the map
+``stream`` matcher at each ``lock`` (``--param lock=L``; or each value of the parameter ``--vary`` names, e.g.
+``--vary evidence --values 0,1,1.5``; everything else default, or as ``--param`` sets it for every row) and prints, per lock: the detour's unmapped frames reported lost, frames from leaving the map
 to the first lost frame and from re-entering to the first right answer; the lowest share of answered frames
 right and of mapped frames answered right over the streams (and which stream); the largest drop of a
 stream's mapped frames answered right from the default ``lock`` (always run, with the same ``--param``
@@ -48,7 +48,9 @@ def _or_inf(v: float) -> float:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--streams", type=Path, nargs="+", required=True, help="derive_streams folders with map.npz")
-    p.add_argument("--locks", default="5,6,6.5,7,8", help="lost thresholds to compare (the default is 6)")
+    p.add_argument("--locks", "--values", dest="locks", default="5,6,6.5,7,8",
+                   help="values of the varied parameter to compare (default: lost thresholds around lock's 6)")
+    p.add_argument("--vary", default="lock", help="the stream parameter the rows vary (default lock; e.g. evidence)")
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="another stream parameter for every row (as `vpr-edge evaluate --param`)")
@@ -56,22 +58,27 @@ def main() -> int:
     return one_line_errors("lost_tradeoff", lambda: _run(a))
 
 
-def _locks(text: str) -> list[float]:
-    """``--locks`` "5,6.5" -> [5.0, 6.5] (VprError unless each is a positive number)."""
+def _locks(text: str, vary: str = "lock") -> list[float]:
+    """``--locks`` "5,6.5" -> [5.0, 6.5] (VprError unless each is a number, and for ``lock`` positive)."""
     try:
         locks = [float(x) for x in text.split(",")]
     except ValueError:
         locks = []
-    if not locks or not all(np.isfinite(x) and x > 0 for x in locks):
-        raise VprError(f"--locks {text!r}: want positive numbers separated by commas, e.g. 5,6.5,7")
+    if not locks or not all(np.isfinite(x) and (x > 0 or vary != "lock") for x in locks):
+        raise VprError(f"--locks {text!r}: want {'positive ' if vary == 'lock' else ''}numbers separated by "
+                       "commas, e.g. 5,6.5,7")
     return locks
 
 
 def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, inputs checked first: --locks, --param, each folder's map and streams."""
-    locks = _locks(a.locks)
+    numeric = [k for k, p in STREAM.items() if isinstance(p.default, float)]
+    if a.vary not in numeric:
+        raise VprError(f"--vary {a.vary!r}: not a numeric stream parameter ({', '.join(numeric)})")
+    locks = _locks(a.locks, a.vary)
     try:
         fixed = get_matcher("stream").parse_params(a.param)
+        get_matcher("stream").parse_params([f"{a.vary}={x}" for x in locks])
     except ValueError as e:
         raise VprError(str(e)) from None
     for folder in a.streams:
@@ -79,12 +86,12 @@ def _run(a: argparse.Namespace) -> int:
                    [folder / f"{k}.csv" for k in KINDS] if not p.exists()]
         if missing:
             raise VprError(f"{folder}: not a derive_streams folder with its map ({missing[0]} is missing)")
-    default = float(STREAM["lock"].default)
+    default = float(STREAM[a.vary].default)
     locks = sorted(set(locks) | {default})
-    modes = {f"lock={x:g}": get_matcher("stream").with_params(**fixed, lock=x) for x in locks}
+    modes = {f"{a.vary}={x:g}": get_matcher("stream").with_params(**fixed | {a.vary: x}) for x in locks}
     print(f"stream matcher{''.join(f' {k}={v}' for k, v in fixed.items())}, tolerance {a.tolerance}; "
           "worst stream in brackets\n")
-    print("| dataset | `lock` | detour unmapped lost | exit frames | re-lock frames | min answered right "
+    print(f"| dataset | `{a.vary}` | detour unmapped lost | exit frames | re-lock frames | min answered right "
           "| min mapped right | mapped right, largest drop | mean R@1 / AUC |")
     print("|---|---|---|---|---|---|---|---|---|")
     for folder in a.streams:
@@ -95,7 +102,7 @@ def _run(a: argparse.Namespace) -> int:
             detour = per["detour"]
             ans = min(KINDS, key=lambda k: _or_inf(per[k].answered_right))   # NaN: nothing answered
             got = min(KINDS, key=lambda k: _or_inf(per[k].mapped_right))
-            drop = {k: per[k].mapped_right - reports[k][f"lock={default:g}"].mapped_right for k in KINDS}
+            drop = {k: per[k].mapped_right - reports[k][f"{a.vary}={default:g}"].mapped_right for k in KINDS}
             worst = min(KINDS, key=drop.get)
             print(f"| {folder.name} | {name.split('=')[1]} | {detour.lost_unmapped:.3f} | "
                   f"{_frames(detour.exit_frames)} | {_frames(detour.lock_frames[1:])} | "

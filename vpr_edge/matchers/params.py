@@ -28,6 +28,11 @@ STREAM: dict[str, Param] = {
     "turn": Param(1.0, "cost of a change of speed, per reference per frame"),
     "memory": Param(50.0, "frames in each reference's running mean (subtracted to remove look-alike hubs)"),
     "lock": Param(6.0, "trajectory score below which the frame is reported lost"),
+    "evidence": Param(1.5, "the answer is reported lost unless its similarity stands at least this many "
+                           "standard deviations above its frame's similarities to the route (best within 1 "
+                           "reference, averaged over frames with evidence_decay; a standing frame may raise the "
+                           "average, not lower it); -99 = off"),
+    "evidence_decay": Param(0.5, "weight of the past in that average (0: this frame alone)"),
     "rival_window": Param(10, "references either side of the answer that a rival trajectory must lie beyond "
                               "(the uniqueness part of the score)"),
     "window": Param(100, "local search: references either side of a firm lock read per frame, on routes of "

@@ -48,10 +48,16 @@ of them while the rest of that stop, the same place, went by).
 
 The answer is the position of the best state. Its score does two jobs, so it has two parts:
 
-    score = [H_best >= lock] + uniqueness,   uniqueness = 1 - (H_rival + 1) / (H_best + 1)  in [0, 1)
+    score = [H_best >= lock and E >= evidence] + uniqueness,   uniqueness = 1 - (H_rival + 1) / (H_best + 1)
 
 H_best is about the summed excess of z over ``bias`` along the last ~1/(1 - decay) frames: below ``lock``
 no trajectory fits well enough and the frame is lost (the registry's min_confidence is 1.0: "locked").
+E is how far the answer stands out of what the frame sees: the answer's similarity (the best within one
+reference) in standard deviations above the frame's similarities to the route (the frame's mean and spread,
+as z uses them; the bulk of a row is the "not this place" distribution of that frame, whatever the route or
+conditions), averaged over frames (E = evidence_decay * E + (1 - evidence_decay) * e; a standing frame may
+raise E, never lower it). H remembers ~1/(1 - decay) frames, so alone it reports a vehicle that left the
+map lost only after that memory fades; E says so within a frame or two.
 H_rival is the best trajectory ending more than ``rival_window`` references away: like SeqSLAM's
 best/second-best ratio, uniqueness ranks frames by how unambiguous the answer is, which H alone does badly,
 while H decides lost better than uniqueness (docs/design.md, "Matching"). So locked frames rank above
@@ -92,7 +98,7 @@ class RoadMatcher:
     def __init__(self, n_refs: int, *, vmax: float, grid: int, decay: float, bias: float, turn: float,
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
                  hold: float, stop_gain: float, stop_decay: float, still: float, still_memory: int,
-                 route: np.ndarray | None = None) -> None:
+                 evidence: float, evidence_decay: float, route: np.ndarray | None = None) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
         ``still_memory`` is the motion cue's, read where the cue is computed). ``route``: (n_refs,) bool, the
         references where the map's drive stood (``motion.route_stands``; None: not known)."""
@@ -102,6 +108,8 @@ class RoadMatcher:
             raise ValueError(f"decay must be in (0, 1), got {decay}")
         if not (0.0 <= stop_gain <= 1.0 and 0.0 < stop_decay < 1.0):
             raise ValueError(f"need stop_gain in [0, 1] and stop_decay in (0, 1), got {stop_gain}, {stop_decay}")
+        if not 0.0 <= evidence_decay < 1.0:
+            raise ValueError(f"evidence_decay must be in [0, 1), got {evidence_decay}")
         if not 0.0 <= still <= 1.0:
             raise ValueError(f"still must be in [0, 1] (0: no motion cue), got {still}")
         if grid < 1 or vmax < 0 or memory < 1 or window < 0 or probe < 2:
@@ -110,6 +118,8 @@ class RoadMatcher:
         self.n_refs, self.grid, self.decay, self.bias = n_refs, grid, decay, bias
         self.turn, self.memory, self.lock, self.rival_window = turn, memory, lock, max(0, int(rival_window))
         self.stop_gain, self.stop_decay, self.still = stop_gain, stop_decay, still
+        self.evidence, self.evidence_decay = evidence, evidence_decay
+        self._evidence: float | None = None   # the answer's recent standing out of its rows (``evidence``)
         if route is not None and np.shape(route) != (n_refs,):
             raise ValueError(f"route must flag each of the {n_refs} references, got shape {np.shape(route)}")
         self.route = None if route is None else np.asarray(route, bool)
@@ -232,9 +242,11 @@ class RoadMatcher:
         else:
             part, probe = s[lo:hi], s[self._probe] if self._win is not None else s
         g = self.grid
-        if not self.stands(still):   # a standing camera's view again says nothing new: the state stays
+        mean, std = float(probe.mean()), max(float(probe.std()), 1e-12)
+        standing = self.stands(still)
+        if not standing:   # a standing camera's view again says nothing new: the state stays
             z = self._z[lo * g:hi * g].reshape(hi - lo, g)
-            z[:] = self._normalise(part, lo, float(probe.mean()), float(probe.std()))[:, None]
+            z[:] = self._normalise(part, lo, mean, std)[:, None]
             z -= self.bias
             self._advance(lo * g, hi * g, *self._stop_rule(still))
         h = self.h[:, lo * g:hi * g]
@@ -244,11 +256,19 @@ class RoadMatcher:
         self._position = lo + (flat % h.shape[1]) / g
         per_ref = h.max(axis=0).reshape(hi - lo, g).max(axis=1)
         rival = _beyond(per_ref, ref - lo, self.rival_window)
+        # how far the answer stands out of its frame's row, averaged; a standing frame may raise it, not lower it
+        here = (float(part[max(0, ref - lo - 1):ref - lo + 2].max()) - mean) / std
+        if self._evidence is None:
+            self._evidence = here
+        else:
+            recent = self.evidence_decay * self._evidence + (1.0 - self.evidence_decay) * here
+            self._evidence = max(self._evidence, recent) if standing else recent
+        locked = best >= self.lock and self._evidence >= self.evidence
         # firm lock: strong evidence, and no hypothesis beyond the window half as strong (seen in global frames)
         held = bool(self.window) and best >= self.hold * self.lock and \
             _beyond(per_ref, ref - lo, self.window) < 0.5 * best
         self._follow(ref, held)
-        return ref, float(best >= self.lock) + 1.0 - (rival + 1.0) / (best + 1.0)
+        return ref, float(locked) + 1.0 - (rival + 1.0) / (best + 1.0)
 
     def _follow(self, ref: int, held: bool) -> None:
         """Choose the next frame's search: around ``ref`` while firmly locked (``window`` > 0), except for
@@ -278,6 +298,7 @@ class RoadMatcher:
     def reset(self) -> None:
         """Forget the stream."""
         self._position = None
+        self._evidence = None
         self.h[:] = 0.0
         self._mean[:] = 0.0
         self._stopped = False
