@@ -91,3 +91,22 @@ def test_long_route_fits_on_a_pool_and_describes_each_image_once(
     assert mapfile.FIT_POOL == 4
     order = np.random.default_rng(3).permutation(len(files))
     assert sorted(loads[:8]) == sorted(files[i].name for i in order[:8])
+
+
+@pytest.mark.slow
+def test_library_defaults_are_the_commands(tmp_path: Path, small_refs: Path) -> None:
+    """``build_map`` with no options makes the map ``vpr-edge build-map`` makes (one owner per default: the PCA
+    to 24 dims, 41 components, IFV, int8 storage): the same codebook and the same stored encodings."""
+    from typer.testing import CliRunner
+
+    from vpr_edge.cli import app
+    from vpr_edge.map import load_map, map_front_end
+
+    out = tmp_path / "cli.map.npz"
+    assert CliRunner().invoke(app, ["build-map", str(small_refs), "-o", str(out)]).exit_code == 0
+    cli = load_map(out)
+    lib = build_map(list_images(small_refs), map_front_end(cli, out))
+    assert lib.stored.storage == cli.stored.storage == "int8"
+    assert lib.encoder.name == cli.encoder.name == "ifv" and lib.encoder.pca is not None
+    np.testing.assert_array_equal(lib.stored.values, cli.stored.values)
+    np.testing.assert_array_equal(lib.stored.scale, cli.stored.scale)

@@ -7,7 +7,7 @@ A synthetic vehicle drives the mapped route with planted speed changes: every 20
 speed in {0 (stopped), 0.5, 1, 2, 3} references per frame, and now and then leaves the route for a 50-frame
 detour; each query encoding is a noisy copy of its true reference. Each frame costs the similarities the
 matcher asks for (``matchers.step``: every reference, or a local search's window and probe) from references
-stored as a map stores them (``compact.Encodings``, --storage) and one update of the registered online
+stored as a map stores them (``index.encodings.Encodings``, --storage) and one update of the registered online
 matcher. At each checkpoint it prints the mean per-frame time since the last checkpoint, current RSS (all;
 the process's own, anonymous; pages of mapped files, i.e. of the map with --mmap) and peak RSS, R@1 (within
 +-1 reference) over the mapped frames so far and the share of frames searched locally.

@@ -168,7 +168,7 @@ def main() -> int:
     groups = a.groups.split(",")
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="vpr-grid-") as tmp:
-        grid = Grid(refs, queries, Path(tmp), FitSettings(n_components=a.components))
+        grid = Grid(refs, queries, Path(tmp), FitSettings(n_components=a.components, pca_dim=None))
         if "handcrafted" in groups:
             for front, encoding in HANDCRAFTED:
                 grid.run("handcrafted", front, front, None, [encoding], ["single", "dtw"])

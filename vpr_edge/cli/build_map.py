@@ -14,7 +14,10 @@ from vpr_edge.features import FRONT_ENDS
 from vpr_edge.features.resize import RESIZE
 from vpr_edge.encoders.base import DEFAULT_PCA_DIM
 from vpr_edge.files import output_path
-from vpr_edge.map.make import DEFAULT_ENCODING, DEFAULT_FRONT_END, DEFAULT_STORAGE, BuildOptions, plan_map, write_map
+from vpr_edge.encoders.registry import DEFAULT_ENCODING
+from vpr_edge.features.registry import DEFAULT_FRONT_END
+from vpr_edge.index.encodings import DEFAULT_STORAGE
+from vpr_edge.map.make import BuildOptions, plan_map, write_map
 
 _FIT = FitSettings()
 

@@ -8,7 +8,7 @@ Fitted state is plain arrays (``to_arrays``) plus JSON parameters (``params``): 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -27,19 +27,30 @@ DEFAULT_COMPONENTS = 41
 DEFAULT_PCA_DIM = 24
 
 
+PCA_AUTO = "auto"   # FitSettings.pca_dim: DEFAULT_PCA_DIM for descriptors of more dims that are not binary
+
+
 @dataclass(frozen=True)
 class FitSettings:
-    """How to fit an encoder on reference descriptors (build-map's options; ``map.make.plan_map`` applies
-    ``DEFAULT_PCA_DIM`` where it fits the front end)."""
+    """How to fit an encoder on reference descriptors: build-map's options, whose defaults these are (the
+    library's ``build_map`` and the CLI make the same map)."""
 
     n_components: int = DEFAULT_COMPONENTS   # GMM components (fv, ifv) or visual words / centres (bow, vlad)
-    pca_dim: int | None = None    # PCA before the codebook (None: descriptors as they are)
+    pca_dim: int | None | str = PCA_AUTO     # PCA before the codebook (None: descriptors as they are; PCA_AUTO:
+                                             # ``for_descriptors`` decides)
     whiten: bool = True
     alpha: float = 0.5            # signed power normalisation exponent (ifv, vlad); 1 = off
     max_descriptors: int = 30_000
     iterations: int = 20          # EM / k-means iterations at most (docs/results.md, "Fitting the codebook")
     seed: int = 0
     tfidf: bool = False           # bow: weight words by inverse document frequency over the references
+
+    def for_descriptors(self, dim: int, binary: bool) -> "FitSettings":
+        """These settings for descriptors of ``dim`` dims (``binary``: ±1 bits, which PCA would not
+        keep): ``PCA_AUTO`` becomes ``DEFAULT_PCA_DIM`` where the descriptors have more dims, else None."""
+        if self.pca_dim != PCA_AUTO:
+            return self
+        return replace(self, pca_dim=DEFAULT_PCA_DIM if not binary and dim > DEFAULT_PCA_DIM else None)
 
 
 @dataclass(frozen=True)

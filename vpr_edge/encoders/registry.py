@@ -14,6 +14,7 @@ from vpr_edge.files import read_npz
 
 ENCODERS: dict[str, type[Encoder]] = {c.name: c for c in (Flatten, BagOfWords, Vlad, FisherVector,
                                                           ImprovedFisherVector)}
+DEFAULT_ENCODING = ImprovedFisherVector.name   # the thesis's Improved Fisher Vector
 
 
 def encoder_class(name: str) -> type[Encoder]:
@@ -25,13 +26,15 @@ def encoder_class(name: str) -> type[Encoder]:
 
 
 def fit_encoder(name: str, local: np.ndarray, mask: np.ndarray | None, settings: FitSettings,
-                n_local: int | None) -> Encoder:
+                n_local: int | None, binary: bool = False) -> Encoder:
     """Fit encoder ``name`` on reference descriptors ``local`` (R, N, K) (``mask`` (R, N) or None);
-    ``n_local``: the front end's fixed N (None when it varies)."""
+    ``n_local``: the front end's fixed N (None when it varies); ``binary``: the descriptors are ±1 bits
+    (``FitSettings.for_descriptors``)."""
     from vpr_edge.encoders.fit import sample_descriptors
 
     cls = encoder_class(name)
     k = local.shape[-1]
+    settings = settings.for_descriptors(k, binary)
     x = sample_descriptors(local, mask, settings.max_descriptors, settings.seed) if cls.needs_fit else \
         np.zeros((0, k))
     return cls.fit(x, settings, k, local=local, mask=mask, n_local=n_local)

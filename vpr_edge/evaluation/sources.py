@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError
+from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.images import Frame, list_images, load_image, open_stream
 from vpr_edge.index.encodings import Encodings
 from vpr_edge.positions import Positions
@@ -95,7 +96,7 @@ def from_pixels(refs: str | os.PathLike[str], queries: str | os.PathLike[str], n
 
 def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], n_truth: int, truth_src: str,
              on_skip: OnSkip, model: Path | None = None, batch_size: int = 8, threads: int = 0,
-             svm: bool = False, topic: str | None = None, precision: str = "auto") -> Similarities:
+             svm: bool = False, topic: str | None = None, precision: str = DEFAULT_PRECISION) -> Similarities:
     """The query frames encoded as the map's references were (``api.Localizer``), their cosine similarities
     to the map's references, with ``svm`` the map's per-place SVM decision values, and each decoded frame's
     query encodings (from which each matcher's motion cue is computed, as ``localize`` computes it)."""

@@ -20,6 +20,9 @@ FRONT_ENDS: dict[str, str] = {
 }
 
 
+DEFAULT_FRONT_END = "cnn"   # a CNN tap (the bundled model that suits the camera, features.choice)
+
+
 def make_front_end(name: str, model: Path | None = None, threads: int = 0, spec: dict | None = None) -> FrontEnd:
     """The front end ``name`` with default parameters, or as ``spec`` (a map's ``describe()``) records it.
     ``model``/``threads`` apply to ``cnn`` only. ValueError for an unknown name."""

@@ -50,7 +50,7 @@ def hamming(signs: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 class CoarseSearch:
-    """Whole-route similarity rows of single queries against ``stored`` (``compact.Encodings``, R x D):
+    """Whole-route similarity rows of single queries against ``stored`` (``index.encodings.Encodings``, R x D):
     exact for the ``keep`` best by sign agreement and for ``calib`` fixed random references, sign agreement
     scaled to the sample's exact mean and spread elsewhere. Signs are packed on the first call (one pass
     over the stored encodings, whose pages a memory-mapped map then releases)."""

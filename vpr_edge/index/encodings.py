@@ -16,6 +16,7 @@ from vpr_edge.index.rows import RowReader, release_pages
 
 DTYPES = {"int8": np.int8, "float16": np.float16, "float32": np.float32}  # storage name -> stored dtype
 STORAGES = tuple(DTYPES)
+DEFAULT_STORAGE = "int8"   # a quarter of float32's bytes at nearly its accuracy (docs/results.md, "Map size")
 BLOCK_BYTES = 2 << 20   # float32 scratch per block of references in ``similarity``: cache-sized blocks ran
                         # faster than large ones (tools/bench_map.py)
 

@@ -10,10 +10,11 @@ import numpy as np
 
 from vpr_edge import __version__
 from vpr_edge.encoders import Encoder, FitSettings, fit_encoder
+from vpr_edge.encoders.registry import DEFAULT_ENCODING
 from vpr_edge.errors import VprError
 from vpr_edge.features import FrontEnd
 from vpr_edge.images import load_image
-from vpr_edge.index.encodings import EncodingWriter, Encodings
+from vpr_edge.index.encodings import DEFAULT_STORAGE, EncodingWriter, Encodings
 from vpr_edge.map.front import front_end_meta
 from vpr_edge.map.model import PlaceMap, Svm
 
@@ -94,7 +95,7 @@ def _fit(front: FrontEnd, local: np.ndarray, mask: np.ndarray | None, encoding: 
         front = front.fit(local, settings.seed)
         local = front.select(local)
     if encoder is None:
-        encoder = fit_encoder(encoding, local, mask, settings, front.n_local)
+        encoder = fit_encoder(encoding, local, mask, settings, front.n_local, front.binary)
     check_fits(encoder, front)
     return front, encoder, local
 
@@ -121,11 +122,11 @@ def _meta(front: FrontEnd, encoder: Encoder, fitted: bool, settings: FitSettings
     }
 
 
-def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = "ifv", encoder: Encoder | None = None,
-              settings: FitSettings = FitSettings(), batch_size: int = 8, svm: bool = False,
-              storage: str = "int8", progress: Progress | None = None) -> PlaceMap:
+def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = DEFAULT_ENCODING,
+              encoder: Encoder | None = None, settings: FitSettings = FitSettings(), batch_size: int = 8,
+              svm: bool = False, storage: str = DEFAULT_STORAGE, progress: Progress | None = None) -> PlaceMap:
     """Describe every reference image in ``files`` (in that order; see ``list_images``) with ``front`` and
-    make the map, encodings kept as ``storage`` (``compact.STORAGES``). Each image is described once: unless
+    make the map, encodings kept as ``storage`` (``index.encodings.STORAGES``). Each image is described once: unless
     ``encoder`` is given, the codebook is first fitted on a random subset of the references (``_fit_pool``;
     all of them on small routes), then every other reference is encoded as it is extracted, so that memory
     and disk hold only the stored encodings, whatever the route's length (with ``svm`` also their float32
@@ -161,7 +162,7 @@ def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = "ifv", enc
 
 
 def map_from_local(local: np.ndarray, mask: np.ndarray | None, front: FrontEnd, names: list[str], refs_folder: str,
-                   encoding: str = "ifv", encoder: Encoder | None = None, settings: FitSettings = FitSettings(),
+                   encoding: str = DEFAULT_ENCODING, encoder: Encoder | None = None, settings: FitSettings = FitSettings(),
                    svm: bool = False) -> PlaceMap:
     """The map of references described by ``front`` as ``local`` (R, N, K) (``mask`` (R, N) or None): fit the
     front end (LDB's bit selection, recorded in the map's ``features``) and the ``encoding`` codebook on them

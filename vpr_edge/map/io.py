@@ -9,7 +9,7 @@ import numpy as np
 from vpr_edge.encoders import encoder_from_arrays
 from vpr_edge.errors import VprError
 from vpr_edge.files import read_npz, write_npz
-from vpr_edge.index.encodings import Encodings
+from vpr_edge.index.encodings import DEFAULT_STORAGE, Encodings
 from vpr_edge.map.model import PlaceMap, Svm
 from vpr_edge.positions import Positions
 
@@ -17,9 +17,9 @@ MAP_SCHEMA = 3          # 3: front end ("features") and encoder ("encoding", arr
 READS_SCHEMAS = (1, 2, 3)  # 2: IFV only, int8/float16/float32 encodings; 1: IFV, float32
 
 
-def save_map(place_map: PlaceMap, path: str | os.PathLike[str], storage: str = "int8") -> None:
+def save_map(place_map: PlaceMap, path: str | os.PathLike[str], storage: str = DEFAULT_STORAGE) -> None:
     """Write the map atomically to ``path`` (a ``.npz`` file), encodings (and SVM weights) stored as
-    ``storage`` (``compact.STORAGES``: int8 with a per-row scale, float16, float32)."""
+    ``storage`` (``index.encodings.STORAGES``: int8 with a per-row scale, float16, float32)."""
     m = place_map.repacked(storage)
     arrays = m.stored.to_arrays() | {"encoder_" + k: v for k, v in place_map.encoder.to_arrays().items()}
     meta = place_map.meta | {"kind": "map", "schema": MAP_SCHEMA, "names": place_map.names, "storage": storage,

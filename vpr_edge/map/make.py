@@ -12,12 +12,14 @@ import numpy as np
 
 from vpr_edge.bags import bag_positions, extract_images, is_bag
 from vpr_edge.encoders import ENCODERS, Encoder, FitSettings, load_codebook
-from vpr_edge.encoders.base import DEFAULT_PCA_DIM
+from vpr_edge.encoders.registry import DEFAULT_ENCODING
 from vpr_edge.errors import VprError, warn
 from vpr_edge.features import FrontEnd, make_front_end
 from vpr_edge.features.choice import bundled_for_sha256, model_for_frame
+from vpr_edge.features.registry import DEFAULT_FRONT_END
 from vpr_edge.files import check_not_input, check_writable, writer_lock
 from vpr_edge.images import list_images, load_image, read_stamps
+from vpr_edge.index.encodings import DEFAULT_STORAGE
 from vpr_edge.map.build import Progress, build_map, check_fits
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map, save_map
@@ -26,9 +28,6 @@ from vpr_edge.positions import Positions, from_exif, from_gpx, require_gpxpy
 from vpr_edge.positions import read_csv as read_positions
 from vpr_edge.threads import use_threads
 
-DEFAULT_FRONT_END = "cnn"
-DEFAULT_ENCODING = "ifv"       # the thesis's Improved Fisher Vector
-DEFAULT_STORAGE = "int8"       # a quarter of float32's bytes (docs/results.md, "Map size")
 
 
 @dataclass(frozen=True)
@@ -195,9 +194,7 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
         if o.alpha is not None:
             given = given.with_alpha(o.alpha)
     d = FitSettings()
-    pca_dim = None if o.pca_dim == 0 else o.pca_dim
-    if o.pca_dim is None and not front.binary and front.dim > DEFAULT_PCA_DIM:
-        pca_dim = DEFAULT_PCA_DIM
+    pca_dim = d.pca_dim if o.pca_dim is None else None if o.pca_dim == 0 else o.pca_dim
     settings = FitSettings(o.components or d.n_components, pca_dim, d.whiten if o.whiten is None else o.whiten,
                            d.alpha if o.alpha is None else o.alpha, o.max_descriptors or d.max_descriptors,
                            o.fit_iterations or d.iterations, o.seed, bool(o.tfidf))

@@ -18,7 +18,7 @@ CNN = {"name": "cnn", "params": {}}
 @dataclass(frozen=True)
 class Svm:
     """One linear classifier per reference place: decision value of encoding q for place r is
-    ``weights[r] . q + bias[r]``. ``weights`` stored like the encodings (``compact.Encodings``)."""
+    ``weights[r] . q + bias[r]``. ``weights`` stored like the encodings (``index.encodings.Encodings``)."""
 
     weights: Encodings
     bias: np.ndarray          # (R,) float32
@@ -31,7 +31,7 @@ class Svm:
 
 @dataclass(frozen=True)
 class PlaceMap:
-    """Reference encodings as stored (``compact.Encodings``: unit rows, R x D), their image names, the
+    """Reference encodings as stored (``index.encodings.Encodings``: unit rows, R x D), their image names, the
     encoder (``vpr_edge.encoders``), metadata (``features``: the front end's record; ``model_*`` for cnn;
     how the codebook was made), when built with ``--svm`` the per-place classifiers, and when built with
     ``--positions`` where each reference place is (``positions.Positions``)."""

@@ -57,7 +57,7 @@ def test_pack_round_trip_keeps_cosines(storage: str) -> None:
 
 
 def test_similarity_in_blocks_from_a_memory_map(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import vpr_edge.index.encodings as compact
+    import vpr_edge.index.encodings as encodings
 
     rng = np.random.default_rng(2)
     x = rng.normal(size=(1000, 64)).astype(np.float32)
@@ -67,7 +67,7 @@ def test_similarity_in_blocks_from_a_memory_map(tmp_path: Path, monkeypatch: pyt
     write_npz(tmp_path / "e.npz", Encodings.pack(x, "int8").to_arrays(), {"kind": "enc", "schema": 1})
     arrays, _ = read_npz(tmp_path / "e.npz", "enc", 1, mmap=True)
     assert isinstance(arrays["encodings"], np.memmap)
-    monkeypatch.setattr(compact, "BLOCK_BYTES", 64 * 4 * 7)       # blocks of 7 references: 143 of them
+    monkeypatch.setattr(encodings, "BLOCK_BYTES", 64 * 4 * 7)       # blocks of 7 references: 143 of them
     mapped = Encodings.from_arrays(arrays, "int8")
     np.testing.assert_allclose(mapped.similarity(q), q @ mapped.dense().T, atol=1e-5)
     np.testing.assert_allclose(mapped.similarity(q), q @ x.T, atol=6e-3)      # int8 at 64 dims
