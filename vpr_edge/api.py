@@ -12,7 +12,6 @@
 """
 from __future__ import annotations
 
-import math
 import os
 import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -27,7 +26,7 @@ from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.images import MIN_SIDE, Frame
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.map import PlaceMap, load_map, map_front_end
-from vpr_edge.matchers import Matcher, get_matcher, step
+from vpr_edge.matchers import Matcher, get_matcher, is_lost, step
 from vpr_edge.threads import use_threads
 
 
@@ -120,11 +119,8 @@ class Localizer:
         self.matcher = self.matcher.on_route(self.map.stored.in_order())   # where the map's drive stood
         ort_threads = 0 if threads is None else use_threads(threads)
         self.front = map_front_end(self.map, map_path, Path(model) if model else None, ort_threads, precision)
-        if self.matcher.scores == "svm" and self.map.svm is None:
-            raise VprError(f"{map_path}: mode svm needs a map built with build-map --svm")
-        if min_confidence is not None and not math.isfinite(min_confidence):
-            raise VprError(f"--min-confidence {min_confidence}: the lost threshold must be a finite number")
-        self.threshold = self.matcher.min_confidence if min_confidence is None else min_confidence
+        self.map.check_scores(self.matcher.scores, map_path)
+        self.threshold = self.matcher.lost_line(min_confidence)
         self._calibration = None
         if calibration is not None:
             from vpr_edge.calibration import load
@@ -181,7 +177,7 @@ class Localizer:
               where: float | None = None) -> Match:
         """The output line of a frame answered ``ref`` (at fractional reference ``where`` if the matcher
         resolves finer) with ``score``."""
-        lost = self.threshold is not None and score < self.threshold
+        lost = bool(is_lost(score, self.threshold))
         if lost:
             return Match(index, name, None, None, score, True, stamp)
         confidence = None if self._calibration is None else self._calibration(score)

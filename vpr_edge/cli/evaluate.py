@@ -103,8 +103,6 @@ def evaluate_cmd(
             matchers = default_matchers(source)
         else:
             matchers = {name: get_matcher(name) for name in (m.strip() for m in modes.split(",")) if name}
-        if not matchers:
-            raise VprError("--modes names no matcher")
         if window is not None:
             if not any("window" in m.params for m in matchers.values()):
                 warn(f"--window does not apply to modes {','.join(matchers)}; ignored")

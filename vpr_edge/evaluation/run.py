@@ -2,7 +2,6 @@
 per matcher. ``vpr-edge evaluate`` parses options and prints what this returns; the tools call it too."""
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,7 +13,7 @@ from vpr_edge.errors import VprError
 from vpr_edge.evaluation import sources
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
 from vpr_edge.features.choice import DEFAULT_PRECISION
-from vpr_edge.matchers import MATCHERS, Matcher, get_matcher
+from vpr_edge.matchers import MATCHERS, Matcher, check_lost_line, get_matcher
 from vpr_edge.positions import Positions
 
 PathLike = str | os.PathLike[str]
@@ -134,8 +133,7 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     modes with a curve in ``calibration`` (mode -> score-to-probability) also get its calibration error.
     VprError, before the work where it can be, for a bad source, ground truth or combination."""
     source.check()
-    if min_confidence is not None and not math.isfinite(min_confidence):
-        raise VprError(f"--min-confidence {min_confidence}: the lost threshold must be a finite number")
+    check_lost_line(min_confidence)
     chosen = default_matchers(source) if matchers is None else matchers
     if not chosen:
         raise VprError("--modes names no matcher")

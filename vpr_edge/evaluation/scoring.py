@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from vpr_edge.calibration import Curve
-from vpr_edge.matchers import Matcher, Result
+from vpr_edge.matchers import Matcher, Result, is_lost
 from vpr_edge.evaluation import metrics
 from vpr_edge.positions import Positions
 
@@ -74,7 +74,7 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     t0 = time.perf_counter()
     result = matcher.run(sim, k=max(RECALL_KS), still=still)
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)
-    threshold = matcher.min_confidence if min_confidence is None else min_confidence
+    threshold = matcher.lost_line(min_confidence)
     report = replace(score_result(result, truth, tolerance, threshold, ms, positions),
                      settings=matcher.params | {"min_confidence": threshold})
     if calibration is not None:
@@ -91,7 +91,7 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
     correct = metrics.correct_candidates(result.ranked, truth, tolerance)
     curve = metrics.pr_curve(result.scores, correct[:, 0], int(mapped.sum()))
     err = metrics.localisation_error(result.refs, truth)
-    lost = result.scores < threshold if threshold is not None else np.zeros(len(result.refs), bool)
+    lost = is_lost(result.scores, threshold)
 
     def share(mask: np.ndarray) -> float:
         return float(lost[mask].mean()) if threshold is not None and mask.any() else float("nan")

@@ -104,8 +104,8 @@ def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], 
 
     frames = _count_checked(queries, n_truth, truth_src, topic)
     loc = Localizer(map_path, model=model, mode="single", threads=threads, precision=precision)
-    if svm and loc.map.svm is None:
-        raise VprError(f"{map_path}: mode svm needs a map built with build-map --svm")
+    if svm:
+        loc.map.check_scores("svm", map_path)
     t0 = time.perf_counter()
     kept, enc = [], []
     for frame, e in encode_frames(frames, loc.map, loc.front, batch_size, on_skip):

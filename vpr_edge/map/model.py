@@ -3,6 +3,7 @@ comparable, metadata, and for ``--mode svm`` one classifier per place. File I/O 
 a map's queries go through is ``map.front``, building one from images is ``map.build``."""
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,6 +61,12 @@ class PlaceMap:
             raise VprError(f"query encodings have {queries.shape[-1]} dims but the map's "
                            f"{self.features['name']} + {self.encoder.name} encodings have {self.stored.shape[1]}")
         return self.stored.similarity(queries, rows)
+
+    def check_scores(self, kind: str, source: str | os.PathLike[str]) -> None:
+        """VprError naming the map file ``source`` unless this map can give ``kind`` scores (``svm``: a map
+        built with build-map --svm); checked before the work by every caller that scores a map."""
+        if kind == "svm" and self.svm is None:
+            raise VprError(f"{source}: mode svm needs a map built with build-map --svm")
 
     def scores(self, queries: np.ndarray, kind: str = "cosine", rows: np.ndarray | None = None) -> np.ndarray:
         """(B, R): ``cosine`` similarities, or ``svm`` decision values (VprError if the map has no SVM); of

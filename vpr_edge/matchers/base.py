@@ -32,6 +32,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from vpr_edge.errors import VprError
 from vpr_edge.matchers.motion import MEMORY, MotionCue, cue_at, route_stands, stillness
 from vpr_edge.matchers.params import Param
 
@@ -163,6 +164,12 @@ class Matcher:
             raise ValueError(f"matcher {self.name!r}: parameters {sorted(self.params)} do not match their "
                              f"definitions {sorted(self.definitions)}")
 
+    def lost_line(self, min_confidence: float | None = None) -> float | None:
+        """The score below which this matcher's answers are lost: ``min_confidence`` if given (checked:
+        ``check_lost_line``), else its own ``min_confidence`` (None: no lost state)."""
+        given = check_lost_line(min_confidence)
+        return self.min_confidence if given is None else float(given)
+
     def params_help(self) -> str:
         """One line per parameter: name, value and meaning (``localize --list-params``)."""
         return "\n".join(f"  {k} = {v!r}: {self.definitions[k].meaning}" for k, v in self.params.items())
@@ -247,6 +254,21 @@ class Matcher:
         if self.align is not None:
             return self.align(sim, k, **self.params)
         return run_online(self.stream(sim.shape[1]), sim, k, still)
+
+
+def check_lost_line(min_confidence: float | None) -> float | None:
+    """A lost threshold given by the user (``--min-confidence``), checked: VprError unless it is a finite
+    number (None: not given)."""
+    if min_confidence is not None and not math.isfinite(min_confidence):
+        raise VprError(f"--min-confidence {min_confidence}: the lost threshold must be a finite number")
+    return min_confidence
+
+
+def is_lost(scores: np.ndarray | float, line: float | None) -> np.ndarray:
+    """Scores (any shape) -> whether each answer is lost: below the lost threshold ``line`` (None: a matcher
+    without a lost state, nothing is lost)."""
+    scores = np.asarray(scores)
+    return np.zeros(scores.shape, bool) if line is None else scores < line
 
 
 def param_key(item: str) -> str:
