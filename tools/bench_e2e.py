@@ -30,11 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from vpr_edge.resources import LARGE_MODEL_FILE, bundled_model  # noqa: E402
-from vpr_edge.evaluation.streams import KINDS  # noqa: E402
+from vpr_edge.resources import LARGE_MODEL_FILE, bundled_model
+from vpr_edge.evaluation.streams import KINDS
 
 
 def yardstick_ms(runs: int = 40) -> float:

@@ -12,22 +12,19 @@ core), for comparison; run the two in separate processes, since the limit is pro
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from vpr_edge.features.cnn import FeatureExtractor, default_model_path  # noqa: E402
-from vpr_edge.images import list_images, load_image  # noqa: E402
-from vpr_edge.map import build_map, load_map, map_front_end  # noqa: E402
-from vpr_edge.map.front import map_model_path  # noqa: E402
-from vpr_edge.matchers import get_matcher  # noqa: E402
-from vpr_edge.resources import sample_folder  # noqa: E402
-from vpr_edge.threads import use_threads  # noqa: E402
+from vpr_edge.features.cnn import FeatureExtractor, default_model_path
+from vpr_edge.images import list_images, load_image
+from vpr_edge.map import build_map, load_map, map_front_end
+from vpr_edge.map.front import map_model_path
+from vpr_edge.matchers import get_matcher
+from vpr_edge.resources import sample_folder
+from vpr_edge.threads import use_threads
 
 
 def main() -> int:

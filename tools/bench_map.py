@@ -22,16 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from vpr_edge.index.encodings import DTYPES, Encodings  # noqa: E402
-from vpr_edge.map import PlaceMap, load_map, save_map  # noqa: E402
+from vpr_edge.index.encodings import DTYPES, Encodings
+from vpr_edge.map import PlaceMap, load_map, save_map
 
 PROBE = r"""
 import json, resource, sys, time
 import numpy as np
-sys.path.insert(0, sys.argv[3])
 from vpr_edge.map import load_map
 def rss():
     for line in open("/proc/self/status"):
@@ -91,7 +88,7 @@ def main() -> int:
             synthetic_map(real, refs, a.storage, path, Path(tmp))
             made = time.perf_counter() - t0
             for how in ("mmap", "ram"):
-                proc = subprocess.run([sys.executable, "-c", PROBE, str(path), how, str(ROOT)], capture_output=True,
+                proc = subprocess.run([sys.executable, "-c", PROBE, str(path), how], capture_output=True,
                                       text=True, check=True)
                 r = json.loads(proc.stdout)
                 print(f"{refs:8d} {path.stat().st_size / 1e6:9.1f} {how:>5s} {r['open_s']:8.3f} "

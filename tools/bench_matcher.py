@@ -29,12 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from vpr_edge.index.coarse import CoarseSearch  # noqa: E402
-from vpr_edge.index.encodings import Encodings, STORAGES  # noqa: E402
-from vpr_edge.matchers import get_matcher, step  # noqa: E402
-from vpr_edge.files import read_npz, write_npz  # noqa: E402
+from vpr_edge.index.coarse import CoarseSearch
+from vpr_edge.index.encodings import Encodings, STORAGES
+from vpr_edge.matchers import get_matcher, step
+from vpr_edge.files import read_npz, write_npz
 
 
 def rss_mb(field: str = "VmRSS") -> float:

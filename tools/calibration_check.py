@@ -14,19 +14,16 @@ calibration as DIR/DS.json (for ``localize --calibration`` / ``evaluate --calibr
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from vpr_edge import calibration  # noqa: E402
-from vpr_edge.evaluation import metrics  # noqa: E402
-from vpr_edge.evaluation import Source, Truth, evaluate  # noqa: E402
-from vpr_edge.matchers import get_matcher  # noqa: E402
-from vpr_edge.evaluation.streams import KINDS  # noqa: E402
+from vpr_edge import calibration
+from vpr_edge.evaluation import metrics
+from vpr_edge.evaluation import Source, Truth, evaluate
+from vpr_edge.matchers import get_matcher
+from vpr_edge.evaluation.streams import KINDS
 
 
 def main() -> int:

@@ -15,20 +15,18 @@ the share of whole-route frames, per stream.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from vpr_edge.evaluation import truth as groundtruth  # noqa: E402
-from vpr_edge.api import Localizer  # noqa: E402
-from vpr_edge.index.coarse import CoarseSearch  # noqa: E402
-from vpr_edge.evaluation.scoring import score_result  # noqa: E402
-from vpr_edge.images import list_images, load_image  # noqa: E402
-from vpr_edge.matchers import run_online, run_rows  # noqa: E402
-from vpr_edge.evaluation.streams import KINDS  # noqa: E402
+from vpr_edge.evaluation import truth as groundtruth
+from vpr_edge.api import Localizer
+from vpr_edge.index.coarse import CoarseSearch
+from vpr_edge.evaluation.scoring import score_result
+from vpr_edge.images import list_images, load_image
+from vpr_edge.matchers import run_online, run_rows
+from vpr_edge.evaluation.streams import KINDS
 
 
 def main() -> int:

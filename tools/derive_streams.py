@@ -17,16 +17,14 @@ vibration: ``streams.CAMERA``); with --repeat-noise S every other kind's repeats
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from vpr_edge.errors import VprError, one_line_errors  # noqa: E402
-from vpr_edge.images import list_images  # noqa: E402
-from vpr_edge.evaluation.streams import CAMERA, KINDS, derive_stream, write_stream  # noqa: E402
+from vpr_edge.errors import VprError, one_line_errors
+from vpr_edge.images import list_images
+from vpr_edge.evaluation.streams import CAMERA, KINDS, derive_stream, write_stream
 
 
 def main() -> int:

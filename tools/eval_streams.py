@@ -18,10 +18,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from vpr_edge.evaluation.report import delays_text  # noqa: E402
-from vpr_edge.evaluation.streams import KINDS  # noqa: E402
+from vpr_edge.evaluation.report import delays_text
+from vpr_edge.evaluation.streams import KINDS
 
 
 def main() -> int:

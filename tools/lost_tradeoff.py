@@ -20,19 +20,16 @@ exit code 2, before any work.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-from vpr_edge.errors import VprError, one_line_errors  # noqa: E402
-from vpr_edge.evaluation import Source, Truth, evaluate  # noqa: E402
-from vpr_edge.evaluation.streams import KINDS  # noqa: E402
-from vpr_edge.matchers import get_matcher  # noqa: E402
-from vpr_edge.matchers.params import STREAM  # noqa: E402
+from vpr_edge.errors import VprError, one_line_errors
+from vpr_edge.evaluation import Source, Truth, evaluate
+from vpr_edge.evaluation.streams import KINDS
+from vpr_edge.matchers import get_matcher
+from vpr_edge.matchers.params import STREAM
 
 
 def _frames(v: tuple[float, ...]) -> str:

@@ -21,25 +21,23 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from vpr_edge.evaluation import truth as groundtruth  # noqa: E402
-from vpr_edge.index.encodings import Encodings  # noqa: E402
-from vpr_edge.encoders import FitSettings  # noqa: E402
-from vpr_edge.evaluation.scoring import evaluate_mode  # noqa: E402
-from vpr_edge.resources import bundled_model  # noqa: E402
+from vpr_edge.evaluation import truth as groundtruth
+from vpr_edge.index.encodings import Encodings
+from vpr_edge.encoders import FitSettings
+from vpr_edge.evaluation.scoring import evaluate_mode
+from vpr_edge.resources import bundled_model
 
 BUNDLED_MODEL = bundled_model()
-from vpr_edge.features import make_front_end  # noqa: E402
-from vpr_edge.images import list_images  # noqa: E402
-from vpr_edge.map.build import extract_all  # noqa: E402
-from vpr_edge.map import map_from_local  # noqa: E402
-from vpr_edge.matchers import get_matcher  # noqa: E402
-from vpr_edge.threads import use_threads  # noqa: E402
-from vpr_edge.evaluation.streams import KINDS  # noqa: E402
+from vpr_edge.features import make_front_end
+from vpr_edge.images import list_images
+from vpr_edge.map.build import extract_all
+from vpr_edge.map import map_from_local
+from vpr_edge.matchers import get_matcher
+from vpr_edge.threads import use_threads
+from vpr_edge.evaluation.streams import KINDS
 
 
 def cached_local(files: list[Path], front, folder: Path) -> np.ndarray:

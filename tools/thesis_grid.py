@@ -33,24 +33,23 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from vpr_edge.evaluation import truth as groundtruth  # noqa: E402
+from vpr_edge.evaluation import truth as groundtruth
 
-from vpr_edge.evaluation import report  # noqa: E402
-from vpr_edge.encoders import ENCODERS, FitSettings  # noqa: E402
-from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode  # noqa: E402
-from vpr_edge.resources import bundled_model  # noqa: E402
+from vpr_edge.evaluation import report
+from vpr_edge.encoders import ENCODERS, FitSettings
+from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
+from vpr_edge.resources import bundled_model
 
 BUNDLED_MODEL = bundled_model()
-from vpr_edge.features import make_front_end  # noqa: E402
-from vpr_edge.images import list_images  # noqa: E402
-from vpr_edge.map.build import extract_all  # noqa: E402
-from vpr_edge.map import map_from_local  # noqa: E402
-from vpr_edge.matchers import get_matcher  # noqa: E402
-from vpr_edge.threads import use_threads  # noqa: E402
+from vpr_edge.features import make_front_end
+from vpr_edge.images import list_images
+from vpr_edge.map.build import extract_all
+from vpr_edge.map import map_from_local
+from vpr_edge.matchers import get_matcher
+from vpr_edge.threads import use_threads
 
 HANDCRAFTED = [("hog", "none"), ("sift", "none"), ("sift-kp", "ifv"), ("ldb", "none"), ("pixels", "none")]
 LITE0_TAPS = ("stage3", "stage4", "stage5", "stage6", "stage7", "head")
