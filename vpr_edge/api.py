@@ -140,10 +140,7 @@ class Localizer:
     def front_description(self) -> dict:
         """The front end run: its name, and for cnn the model file and its form with the reason
         (``features.choice``), e.g. {"name": "cnn", "model": "X.int8.onnx", "form": "int8: AVX512-VNNI"}."""
-        described = {"name": self.front.name}
-        if self.front.name == "cnn":
-            described |= {"model": self.front.path.name, "form": self.front.form}
-        return described
+        return self.front.runs()
 
     @property
     def names(self) -> list[str]:

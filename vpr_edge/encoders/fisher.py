@@ -70,6 +70,7 @@ class FisherVector(Encoder):
     pca: Pca | None
     input_dim: int
     alpha: float = 1.0
+    powers: ClassVar[bool] = False   # takes the fit's power normalisation (FitSettings.alpha)
 
     @property
     def dim(self) -> int:
@@ -104,7 +105,7 @@ class FisherVector(Encoder):
         from vpr_edge.encoders.fit import fit_gmm, fit_pca
 
         pca, y = fit_pca(x, s)
-        return cls(Gmm(*fit_gmm(y, s)), pca, input_dim, **({"alpha": s.alpha} if cls.name == "ifv" else {}))
+        return cls(Gmm(*fit_gmm(y, s)), pca, input_dim, s.alpha if cls.powers else cls.alpha)
 
     def transform(self, x: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         self.check(x)
@@ -118,6 +119,7 @@ class ImprovedFisherVector(FisherVector):
     name: ClassVar[str] = "ifv"
     summary: ClassVar[str] = "Improved Fisher vector: fv + signed power normalisation + L2 (the thesis's)"
     alpha: float = 0.5
+    powers: ClassVar[bool] = True
 
     def with_alpha(self, alpha: float) -> "ImprovedFisherVector":
         return replace(self, alpha=alpha)

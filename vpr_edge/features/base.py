@@ -4,7 +4,8 @@ A front end has ``name``, ``dim`` (K), ``n_local`` (N, or None when the number v
 marks the real ones), ``binary`` (descriptors are +-1 bits), ``local(images) -> (x, mask)``, ``describe()``
 (JSON recorded in a map so that queries are described the same way), ``identity()`` (what else a map records:
 the model's identity for ``cnn``), ``fingerprint`` (what a map checks), and a fitted part (``needs_fit``,
-``fit``, ``select``: LDB's bit selection; the others fit nothing). ``Handcrafted`` gives the defaults.
+``fit``, ``select``: LDB's bit selection; the others fit nothing) and ``runs()`` (what runs, for the user:
+for cnn the model file and its numeric form). ``Handcrafted`` gives the defaults.
 """
 from __future__ import annotations
 
@@ -50,6 +51,10 @@ class FrontEnd(Protocol):
     def identity(self) -> dict:
         """What a map records beside ``describe()`` to refuse another front end ({} for handcrafted ones)."""
 
+    def runs(self) -> dict:
+        """What runs, for the user: {"name": ...}, and for cnn the model file and its numeric form with the
+        reason (e.g. {"name": "cnn", "model": "X.int8.onnx", "form": "int8: AVX512-VNNI"})."""
+
     def fit(self, local: np.ndarray, seed: int = 0) -> "FrontEnd":
         """This front end fitted on the references' descriptors ``local`` (R, N, K) (itself if nothing to fit)."""
 
@@ -73,6 +78,9 @@ class Handcrafted:
 
     def identity(self) -> dict:
         return {}
+
+    def runs(self) -> dict:
+        return {"name": self.name}
 
     def fit(self, local: np.ndarray, seed: int = 0) -> "Handcrafted":
         return self

@@ -1,6 +1,7 @@
 """Local deep features from an ONNX layer tap: preprocessing, batched inference, (N, K) descriptor sets."""
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -115,13 +116,24 @@ class FeatureExtractor:
         self._std = np.asarray(info["std"], np.float32)
         self._input = self.session.get_inputs()[0].name
         self.resize = str(resize or info.get("resize") or "stretch")
-        # the numeric form run and why (map.front.map_front_end says why it chose it)
+        # the numeric form run and why (``as_run``: map.front.map_front_end says why it chose it)
         self.form = "int8" if info.get("quantization") else "fp32"
         if self.resize not in RESIZE:
             raise VprError(f"{self.path}: unknown resize policy {self.resize!r}; choose from {', '.join(RESIZE)}")
         self._scale = (1.0 / (255.0 * self._std)).astype(np.float32)   # (x / 255 - mean) / std, per channel
         self._offset = (self._mean / self._std).astype(np.float32)
         self._fill = np.clip(np.rint(self._mean * 255.0), 0, 255).astype(np.uint8)
+
+    def as_run(self, form: str) -> "CnnExtractor":
+        """This extractor (the same session) described as running in ``form``: its numeric form and why it
+        was chosen (e.g. "int8: AVX512-VNNI"), what ``runs()`` reports."""
+        chosen = copy.copy(self)
+        chosen.form = form
+        return chosen
+
+    def runs(self) -> dict:
+        """{"name": "cnn", "model": the file run, "form": its numeric form and why}."""
+        return {"name": self.name, "model": self.path.name, "form": self.form}
 
     @property
     def source_fingerprint(self) -> str | None:

@@ -47,22 +47,17 @@ def map_front_end(place_map: PlaceMap, map_path: str | os.PathLike[str], model: 
         if chosen != path:
             fast = make_front_end("cnn", chosen, threads, spec=place_map.features)
             if fast.source_fingerprint == recorded:
-                fast.form = why
-                return fast
+                return fast.as_run(why)
             if precision == "int8":
                 raise VprError(f"{chosen}: not quantised from {path.name} (its metadata names another "
                                f"source); --precision int8 cannot be met")
             why = f"fp32: {chosen.name} was quantised from another model"
-        front = make_front_end("cnn", path, threads, spec=place_map.features)
-        front.form = why
-        return front
+        return make_front_end("cnn", path, threads, spec=place_map.features).as_run(why)
     front = make_front_end("cnn", path, threads, spec=place_map.features)
     if front.fingerprint == recorded and front.source_fingerprint is None:
-        front.form = choose_form(front.path, precision)[1]    # fp32 (VprError: int8 asked, no int8 form)
-        return front
+        return front.as_run(choose_form(path, precision)[1])    # fp32 (VprError: int8 asked, no int8 form)
     if front.source_fingerprint is not None and front.source_fingerprint == recorded:
-        front.form = "int8: given"      # an int8 form of the map's model, named by --model
-        return front
+        return front.as_run("int8: given")      # an int8 form of the map's model, named by --model
     if front.fingerprint != recorded:
         m, given = place_map.meta.get("model", {}), front.identity()
         info = given.get("model", {})

@@ -274,7 +274,7 @@ def summary(path: Path) -> dict:
     if pm.features.get("name") == "cnn":
         try:
             front = map_front_end(pm, path, precision="auto")
-            here = {"precision_auto_here": {"model": front.path.name, "form": front.form}}
+            here = {"precision_auto_here": {k: v for k, v in front.runs().items() if k != "name"}}
         except VprError as e:
             here = {"precision_auto_here": {"error": str(e)}}
     return {"references": len(pm.names), "first": pm.names[0], "last": pm.names[-1],
