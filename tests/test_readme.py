@@ -98,3 +98,12 @@ def test_matcher_parameter_table_is_the_registrys() -> None:
     text = (ROOT / "docs" / "matchers.md").read_text()
     table = text.split("<!-- params table: generated -->\n")[1].split("\n<!-- end of params table -->")[0]
     assert table == params_table(), "regenerate with: python -m vpr_edge.matchers"
+
+
+def test_formats_names_the_header_localize_writes() -> None:
+    """docs/formats.md and the README show the CSV header ``localize`` writes (``api.FIELDS``)."""
+    from vpr_edge.api import FIELDS
+
+    header = ",".join(FIELDS)
+    assert f"`{header}`" in (ROOT / "docs" / "formats.md").read_text()
+    assert f"\n{header}\n" in (ROOT / "README.md").read_text()

@@ -99,8 +99,8 @@ def localize_cmd(
                                          "firm lock read per frame, on routes over 4x this (default %d; 0 = "
                                          "every reference every frame)." % MATCHERS["stream"].params["window"]),
     min_confidence: Optional[float] = typer.Option(
-        None, help="Frames scoring below this are reported lost (ref_index -1). Default: the mode's own "
-                   "(stream: %.1f; other modes: never lost)." % MATCHERS["stream"].min_confidence),
+        None, help="Frames scoring below this are reported lost (reference and position fields empty). "
+                   "Default: the mode's own (stream: %.1f; other modes: never lost)." % MATCHERS["stream"].min_confidence),
     param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE", help=PARAM_HELP),
     calibration: Optional[Path] = typer.Option(None, help="A calibration (evaluate --save-calibration on a "
                                                "labelled drive of this route): each line's confidence is then "
