@@ -70,8 +70,10 @@ def test_sensor_noise_matches_its_sigma_and_stays_in_range() -> None:
     noisy = sensor_noise(image, 3.0, rng)
     assert noisy.dtype == np.uint8 and noisy.shape == image.shape
     assert abs(float((noisy.astype(float) - 128).std()) - 3.0) < 0.1
-    edges = sensor_noise(np.array([[0, 255]], np.uint8), 50.0, rng)
-    assert edges.min() >= 0 and edges.max() <= 255                       # clipped, not wrapped
+    edges = sensor_noise(np.tile(np.array([[0, 255]], np.uint8), (500, 1)), 50.0, rng).astype(int)
+    dark, bright = edges[:, 0], edges[:, 1]
+    assert 0.4 < np.mean(dark == 0) < 0.6 and 0.4 < np.mean(bright == 255) < 0.6   # clipped at the ends ...
+    assert dark.max() < 200 and bright.min() > 55                                   # ... not wrapped around
 
 
 def test_write_stream_repeats_are_noisy_copies(tmp_path, small_queries) -> None:

@@ -72,7 +72,8 @@ def test_bench_map_reports_each_size(tmp_path: Path, small_refs: Path) -> None:
     out = tool("bench_map.py", "--map", str(m), "--refs", "50,300")
     rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
     assert [(r[0], r[2]) for r in rows] == [("50", "mmap"), ("50", "ram"), ("300", "mmap"), ("300", "ram")]
-    assert all(float(r[3]) >= 0 and float(r[6]) >= 0 and float(r[1]) >= 0 for r in rows)   # columns filled
+    for r in rows:   # columns filled: a timed cold query and the memory it left
+        assert float(r[5]) > 0 and float(r[7]) > 0
 
 
 @pytest.mark.slow
