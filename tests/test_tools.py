@@ -103,7 +103,8 @@ def test_bench_frame_reports_each_stage(tmp_path: Path, small_refs: Path, small_
     assert build.returncode == 0, build.stderr
     out = tool("bench_frame.py", "--map", str(m), "--frames", str(small_queries), "--threads", "1", "--repeat", "1")
     row = out.splitlines()[-1].split()
-    assert row[0] == "1" and len(row) == 7 and all(float(v) > 0 for v in row[1:])
+    assert row[0] == "1" and len(row) == 6 and all(float(v) > 0 for v in row[1:])
+    assert abs(sum(float(v) for v in row[1:5]) - float(row[5])) < 0.02   # the stages add up to the total
 
 
 @pytest.mark.slow

@@ -4,7 +4,8 @@
     python tools/coarse_check.py --map out/nordland-dev/map.npz --streams out/nordland-dev --keep 16 --calib 64
 
 Each derived stream (STREAMS/KIND with STREAMS/KIND.csv) is encoded once through the map's front end
-(``Localizer.encode``) and matched by the ``stream`` matcher twice, frame by frame through ``matchers.step``:
+(``map.MapQuery``, the chain ``Localizer`` runs) and matched by the ``stream`` matcher twice (with each frame's
+motion cue and the map's stops), frame by frame through ``matchers.step``:
 every similarity exact (what ``evaluate`` measures), and with the frames that search the whole route served by
 ``coarse.CoarseSearch`` (signs, then exact values for the ``--keep`` best candidates and ``--calib`` random
 references), as ``Localizer`` does on maps of 20,000+ references. The local-search frames are exact in both.
@@ -21,11 +22,12 @@ import numpy as np
 
 
 from vpr_edge.evaluation import truth as groundtruth
-from vpr_edge.api import Localizer
 from vpr_edge.index.coarse import CoarseSearch
 from vpr_edge.evaluation.scoring import score_result
 from vpr_edge.images import list_images, load_image
-from vpr_edge.matchers import run_online, run_rows
+from vpr_edge.map import MapQuery
+from vpr_edge.matchers import get_matcher, run_online, run_rows
+from vpr_edge.threads import use_threads
 from vpr_edge.evaluation.streams import KINDS
 
 
@@ -39,8 +41,9 @@ def main() -> int:
     p.add_argument("--tolerance", type=int, default=1)
     p.add_argument("--threads", type=int, default=0)
     a = p.parse_args()
-    loc = Localizer(a.map, threads=a.threads)
-    place_map = loc.map
+    query = MapQuery(a.map, ort_threads=use_threads(a.threads))   # the map and its front end, as localize opens them
+    place_map = query.map
+    matcher = get_matcher("stream").on_route(query.references())
     r = len(place_map.names)
     print(f"map {a.map}: {r} references x {place_map.stored.shape[1]} dims {place_map.stored.storage}; "
           f"keep {a.keep}, calib {a.calib}, tolerance {a.tolerance}")
@@ -50,7 +53,8 @@ def main() -> int:
     for kind in a.kinds.split(","):
         files = list_images(a.streams / kind)
         truth = groundtruth.load_csv(a.streams / f"{kind}.csv")
-        enc = np.concatenate([loc.encode([load_image(f) for f in files[i:i + 16]]) for i in range(0, len(files), 16)])
+        enc = np.concatenate([query.encode([load_image(f) for f in files[i:i + 16]]) for i in range(0, len(files), 16)])
+        cue = matcher.cue(enc)   # each frame's motion cue, as localize computes it
         exact = place_map.similarity(enc)
         coarse = CoarseSearch(place_map.stored, keep=a.keep, calib=a.calib)
         whole = [0]
@@ -61,9 +65,8 @@ def main() -> int:
             whole[0] += 1
             return coarse.similarity(enc[i])
 
-        matcher = loc.matcher
-        base = run_online(matcher.stream(r), exact)
-        approx = run_rows(matcher.stream(r), rows, len(enc), r)
+        base = run_online(matcher.stream(r), exact, still=cue)
+        approx = run_rows(matcher.stream(r), rows, len(enc), r, still=cue)
         s0 = score_result(base, truth, a.tolerance, matcher.min_confidence)
         s1 = score_result(approx, truth, a.tolerance, matcher.min_confidence)
         print(f"| {kind} | {s0.recall[1]:.3f} / {s0.auc:.3f} | {s1.recall[1]:.3f} / {s1.auc:.3f} | "

@@ -25,7 +25,7 @@ from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.images import MIN_SIDE, Frame
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
-from vpr_edge.map import PlaceMap, load_map, map_front_end
+from vpr_edge.map import MapQuery, PlaceMap
 from vpr_edge.matchers import Matcher, get_matcher, is_lost, step
 from vpr_edge.threads import use_threads
 
@@ -67,32 +67,6 @@ FIELDS = ("frame_index", "frame", "stamp", "ref_index", "ref", "x", "y", "lat", 
           "score", "confidence", "lost")
 
 
-def encode_images(images: Sequence[np.ndarray], place_map: PlaceMap, front: FrontEnd) -> np.ndarray:
-    """RGB uint8 images (H, W, 3) -> encodings (B, D) float32 comparable with the map's (one model run)."""
-    return place_map.encode(*front.local(images))
-
-
-def encode_frames(frames: Iterable[Frame], place_map: PlaceMap, front: FrontEnd, batch_size: int,
-                  on_skip: Callable[[Frame], None]) -> Iterator[tuple[Frame, np.ndarray]]:
-    """Yield (frame, encoding (D,)) for each decodable frame, ``batch_size`` frames per model run;
-    undecodable frames go to ``on_skip``."""
-    pending: list[Frame] = []
-
-    def flush() -> Iterator[tuple[Frame, np.ndarray]]:
-        yield from zip(pending, encode_images([f.image for f in pending], place_map, front))
-        pending.clear()
-
-    for frame in frames:
-        if frame.image is None:
-            on_skip(frame)
-            continue
-        pending.append(frame)
-        if len(pending) >= batch_size:
-            yield from flush()
-    if pending:
-        yield from flush()
-
-
 class Localizer:
     """A map, its model and a matcher, ready for frames.
 
@@ -115,11 +89,10 @@ class Localizer:
                  threads: int | None = None, coarse: bool | None = None,
                  calibration: str | os.PathLike[str] | None = None, precision: str = DEFAULT_PRECISION) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
-        self.map = load_map(map_path, mmap=True)
-        self.matcher = self.matcher.on_route(self.map.stored.in_order())   # where the map's drive stood
         ort_threads = 0 if threads is None else use_threads(threads)
-        self.front = map_front_end(self.map, map_path, Path(model) if model else None, ort_threads, precision)
+        self.query = MapQuery(map_path, model, ort_threads, precision)   # the map and its front end, once
         self.map.check_scores(self.matcher.scores, map_path)
+        self.matcher = self.matcher.on_route(self.query.references())   # where the map's drive stood
         self.threshold = self.matcher.lost_line(min_confidence)
         self._calibration = None
         if calibration is not None:
@@ -137,25 +110,39 @@ class Localizer:
         self._cue = self.matcher.motion_cue()   # each frame's likeness to the last that moved
 
     @property
+    def map(self) -> PlaceMap:
+        """The map (``MapQuery.map``)."""
+        return self.query.map
+
+    @map.setter
+    def map(self, place_map: PlaceMap) -> None:
+        self.query.map = place_map
+
+    @property
+    def front(self) -> FrontEnd:
+        """The front end its frames go through (``MapQuery.front``)."""
+        return self.query.front
+
+    @property
     def front_description(self) -> dict:
         """The front end run: its name, and for cnn the model file and its form with the reason
         (``features.choice``), e.g. {"name": "cnn", "model": "X.int8.onnx", "form": "int8: AVX512-VNNI"}."""
-        return self.front.runs()
+        return self.query.runs()
 
     @property
     def names(self) -> list[str]:
         """Reference image names, in map order (index = ``ref_index``)."""
-        return self.map.names
+        return self.query.names
 
     def encode(self, images: Sequence[np.ndarray]) -> np.ndarray:
         """RGB uint8 images (H, W, 3) -> encodings (B, D) float32, comparable with the map's by dot product."""
-        return encode_images(images, self.map, self.front)
+        return self.query.encode(images)
 
     def similarity(self, encodings: np.ndarray, refs: np.ndarray | None = None) -> np.ndarray:
         """Encodings (B, D) -> what the matcher compares, (B, R): cosine similarities to every reference, or
         for mode svm the places' decision values; to the references ``refs`` (int array) only, if
         given."""
-        return self.map.scores(encodings, self.matcher.scores, refs)
+        return self.query.scores(encodings, self.matcher.scores, refs)
 
     def _step(self, enc: np.ndarray) -> tuple[int, float, float | None]:
         """Match one encoding (D,), with its motion cue (its likeness to the encoding of the last frame that
@@ -195,9 +182,15 @@ class Localizer:
         if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8 or min(image.shape[:2]) < MIN_SIDE:
             raise VprError(f"frame must be RGB uint8 (H, W, 3) of at least {MIN_SIDE}x{MIN_SIDE} pixels, got "
                            f"{image.dtype} {image.shape}")
-        enc = self.encode([image])[0]
+        return self.push_encoding(self.encode([image])[0], name, stamp)
+
+    def push_encoding(self, encoding: np.ndarray, name: str = "", stamp: float | None = None) -> Match:
+        """``push`` for a frame already encoded (``encode``; (D,) float): its motion cue, the similarities the
+        matcher asks for, the matcher's update and the output line; online modes only."""
+        if self._online is None:
+            raise ValueError(f"mode {self.matcher.name} is offline (it needs the whole sequence): use run()")
         with self._lock:
-            ref, score, where = self._step(enc)
+            ref, score, where = self._step(np.asarray(encoding, np.float32))
             self._count += 1
             return self._line(self._count - 1, name, ref, score, stamp, where)
 
@@ -206,7 +199,7 @@ class Localizer:
         """Localise a stream of frames (``images.open_stream``): online modes yield a match per frame as it
         is encoded (``batch_size`` frames per model run); offline modes after the last frame. Undecodable
         frames go to ``on_skip``."""
-        encoded = encode_frames(frames, self.map, self.front, batch_size, on_skip)
+        encoded = self.query.encode_frames(frames, batch_size, on_skip)
         if self._online is not None:
             for frame, enc in encoded:
                 with self._lock:

@@ -14,7 +14,9 @@ from vpr_edge.evaluation import sources
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.matchers import MATCHERS, Matcher, check_lost_line, get_matcher
+from vpr_edge.map import MapQuery, PlaceMap, load_map
 from vpr_edge.positions import Positions
+from vpr_edge.threads import use_threads
 
 PathLike = str | os.PathLike[str]
 
@@ -102,14 +104,14 @@ class Evaluation:
     front: dict | None = None                 # the model file run and its form, with a map
 
 
-def default_matchers(source: Source) -> dict[str, Matcher]:
+def default_matchers(source: Source, place_map: PlaceMap | None = None) -> dict[str, Matcher]:
     """What ``evaluate`` runs without ``--modes``: every matcher over cosine similarities, and ``svm`` when
-    the source is a map built with ``--svm``."""
+    the source is a map built with ``--svm`` (``place_map``: that map, if already open)."""
     chosen = {n: m for n, m in MATCHERS.items() if m.scores == "cosine"}
     if source.map is not None:
-        from vpr_edge.map import load_map
-
-        if load_map(source.map, mmap=True).svm is not None:
+        if place_map is None:
+            place_map = load_map(source.map, mmap=True)
+        if place_map.svm is not None:
             chosen["svm"] = get_matcher("svm")
     return chosen
 
@@ -134,25 +136,23 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     VprError, before the work where it can be, for a bad source, ground truth or combination."""
     source.check()
     check_lost_line(min_confidence)
-    chosen = default_matchers(source) if matchers is None else matchers
+    query = None   # the map and its front end, opened once: the chain Localizer runs
+    if source.map is not None:
+        query = MapQuery(source.map, source.model, use_threads(source.threads), source.precision)
+    chosen = default_matchers(source, query and query.map) if matchers is None else matchers
     if not chosen:
         raise VprError("--modes names no matcher")
     with_svm = any(m.scores == "svm" for m in chosen.values())
-    if with_svm and source.map is None:
+    if with_svm and query is None:
         raise VprError("mode svm needs --map (a map built with build-map --svm)")
-    map_positions = None
-    if source.map is not None and truth.positions is not None:
-        from vpr_edge.map import load_map
-
-        map_positions = load_map(source.map, mmap=True).positions
-    rows, gt_shape = truth.load(map_positions)
+    rows, gt_shape = truth.load(query.map.positions if query is not None else None)
     if source.similarity is not None:
         sims = sources.from_file(source.similarity)
     elif source.pixels:
         sims = sources.from_pixels(source.refs, source.queries, len(rows), truth.name, on_skip, source.topic)
     else:
-        sims = sources.from_map(source.map, source.queries, len(rows), truth.name, on_skip, source.model,
-                                source.batch_size, source.threads, with_svm, source.topic, source.precision)
+        sims = sources.from_map(query, source.queries, len(rows), truth.name, on_skip, source.batch_size, with_svm,
+                                source.topic)
     if sims.kept is not None:
         if sims.kept.max() >= len(rows):
             raise VprError(f"{source.queries}: {sims.kept.max() + 1} frames but the ground truth {truth.name} has "

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError
-from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.images import Frame, list_images, load_image, open_stream
 from vpr_edge.index.encodings import Encodings
+from vpr_edge.map.query import MapQuery
 from vpr_edge.positions import Positions
 
 OnSkip = Callable[[Frame], None]
@@ -94,27 +94,24 @@ def from_pixels(refs: str | os.PathLike[str], queries: str | os.PathLike[str], n
     return _finish(queries, kept, t0, sim)
 
 
-def from_map(map_path: str | os.PathLike[str], queries: str | os.PathLike[str], n_truth: int, truth_src: str,
-             on_skip: OnSkip, model: Path | None = None, batch_size: int = 8, threads: int = 0,
-             svm: bool = False, topic: str | None = None, precision: str = DEFAULT_PRECISION) -> Similarities:
-    """The query frames encoded as the map's references were (``api.Localizer``), their cosine similarities
-    to the map's references, with ``svm`` the map's per-place SVM decision values, and each decoded frame's
-    query encodings (from which each matcher's motion cue is computed, as ``localize`` computes it)."""
-    from vpr_edge.api import Localizer, encode_frames
-
+def from_map(query: MapQuery, queries: str | os.PathLike[str], n_truth: int, truth_src: str, on_skip: OnSkip,
+             batch_size: int = 8, svm: bool = False, topic: str | None = None) -> Similarities:
+    """The query frames encoded as the map's references were (``query``: the map opened with its front end,
+    the chain ``Localizer`` runs), their cosine similarities to the map's references, with ``svm`` the map's
+    per-place SVM decision values, and each decoded frame's query encodings (from which each matcher's motion
+    cue is computed, as ``localize`` computes it)."""
     frames = _count_checked(queries, n_truth, truth_src, topic)
-    loc = Localizer(map_path, model=model, mode="single", threads=threads, precision=precision)
     if svm:
-        loc.map.check_scores("svm", map_path)
+        query.map.check_scores("svm", query.path)
     t0 = time.perf_counter()
     kept, enc = [], []
-    for frame, e in encode_frames(frames, loc.map, loc.front, batch_size, on_skip):
+    for frame, e in query.encode_frames(frames, batch_size, on_skip):
         kept.append(frame.index)
         enc.append(e)
     if not enc:
         return _finish(queries, kept, t0, np.zeros((0, 0)))
     stacked = np.stack(enc)
-    cosine = loc.similarity(stacked).astype(np.float64)
-    scores = loc.map.scores(stacked, "svm").astype(np.float64) if svm else None
-    return replace(_finish(queries, kept, t0, cosine, scores, loc.map.positions), front=loc.front_description,
-                   encodings=stacked, references=loc.map.stored)
+    cosine = query.scores(stacked).astype(np.float64)
+    scores = query.scores(stacked, "svm").astype(np.float64) if svm else None
+    return replace(_finish(queries, kept, t0, cosine, scores, query.map.positions), front=query.runs(),
+                   encodings=stacked, references=query.map.stored)
