@@ -146,3 +146,18 @@ def test_row_reader_against_the_array(tmp_path: Path, cache_rows: int) -> None:
         np.testing.assert_array_equal(reader.take(np.array([-1, -500])), x[[-1, -500]])
         with pytest.raises(IndexError):
             reader.take(np.array([500]))
+
+
+def test_agreement_and_bytes_against_loops() -> None:
+    """Sign agreement against a loop over dimensions (zero counts as negative, as ``pack_signs`` sets bits),
+    and the bytes a place each storage keeps."""
+    from vpr_edge.index.coarse import agreement, sign_bytes
+    from vpr_edge.index.encodings import Encodings, bytes_per_place
+
+    rng = np.random.default_rng(3)
+    refs, queries = rng.normal(size=(7, 70)), rng.normal(size=(3, 70))
+    refs[0, :5] = 0.0
+    want = [[np.mean([1.0 if (q[d] > 0) == (r[d] > 0) else -1.0 for d in range(70)]) for r in refs] for q in queries]
+    np.testing.assert_allclose(agreement(refs, queries), want, atol=1e-6)
+    assert sign_bytes(70) == 9 and [bytes_per_place(70, s) for s in ("float32", "float16", "int8")] == [280, 140, 74]
+    assert Encodings.pack(refs.astype(np.float32), "int8").bytes_per_place == 74

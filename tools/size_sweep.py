@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.evaluation import truth as groundtruth
-from vpr_edge.index.encodings import Encodings
+from vpr_edge.index.coarse import agreement, sign_bytes
+from vpr_edge.index.encodings import Encodings, bytes_per_place
 from vpr_edge.encoders import FitSettings
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.resources import bundled_model
@@ -55,14 +56,16 @@ def cached_local(files: list[Path], front, folder: Path) -> np.ndarray:
 
 
 def stored_similarity(refs: np.ndarray, queries: np.ndarray, storage: str) -> np.ndarray:
-    """Cosine-like similarities (Q, R) of float queries against references kept as ``storage``."""
-    if storage == "bits":   # signs of both sides: 1 - 2 * Hamming / D
-        return (np.sign(queries) @ np.sign(refs).T) / refs.shape[1]
+    """Cosine-like similarities (Q, R) of float queries against references kept as ``storage`` ("bits":
+    the coarse search's sign agreement, ``index.coarse.agreement``)."""
+    if storage == "bits":
+        return agreement(refs, queries).astype(np.float64)
     return Encodings.pack(refs, storage).similarity(queries).astype(np.float64)
 
 
-def bytes_per_place(dim: int, storage: str) -> int:
-    return {"float32": 4 * dim, "float16": 2 * dim, "int8": dim + 4, "bits": (dim + 7) // 8}[storage]
+def place_bytes(dim: int, storage: str) -> int:
+    """Bytes a place: ``index.encodings.bytes_per_place``, or the packed signs for "bits"."""
+    return sign_bytes(dim) if storage == "bits" else bytes_per_place(dim, storage)
 
 
 def main() -> int:
@@ -116,7 +119,7 @@ def main() -> int:
             for storage in a.storages.split(","):
                 row = {"encoding": a.encoding, "alpha": a.alpha, "whiten": not a.no_whiten, "pca": pca, "components": comps, "fit": fit, "seed": seed, "storage": storage,
                        "dim": pm.encoder.dim,
-                       "bytes": bytes_per_place(pm.encoder.dim, storage), "fit_s": round(fit_s, 1)}
+                       "bytes": place_bytes(pm.encoder.dim, storage), "fit_s": round(fit_s, 1)}
                 for k, (_, truth) in queries.items():
                     sim = stored_similarity(ref_enc, q_enc[k], storage)
                     for mode in modes:

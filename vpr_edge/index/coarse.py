@@ -35,6 +35,18 @@ def pack_signs(x: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(bits).view(np.uint64)
 
 
+def sign_bytes(dim: int) -> int:
+    """Bytes of one reference's signs, one bit a dimension (``pack_signs`` pads each row to 64 bits in RAM)."""
+    return (dim + 7) // 8
+
+
+def agreement(refs: np.ndarray, queries: np.ndarray) -> np.ndarray:
+    """Sign agreement (Q, R) of queries (Q, D) with references (R, D): 1 - 2 * Hamming / D over the signs as
+    ``pack_signs`` sets them (what ``CoarseSearch`` ranks references by)."""
+    signs, d = pack_signs(refs), np.shape(refs)[1]
+    return np.stack([1.0 - 2.0 * hamming(signs, q) / d for q in pack_signs(queries)]).astype(np.float32)
+
+
 def hamming(signs: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Packed signs (R, W) uint64 and one query's (W,) -> differing bits per reference (R,) int32, a block of
     SIGN_BLOCK references at a time."""

@@ -21,6 +21,14 @@ BLOCK_BYTES = 2 << 20   # float32 scratch per block of references in ``similarit
                         # faster than large ones (tools/bench_map.py)
 
 
+def bytes_per_place(dim: int, storage: str) -> int:
+    """Bytes a map keeps per reference for ``dim``-dim encodings stored as ``storage`` (int8: one scale of 4
+    bytes per row besides the values)."""
+    if storage not in STORAGES:
+        raise ValueError(f"unknown storage {storage!r}; choose from {', '.join(STORAGES)}")
+    return dim * np.dtype(DTYPES[storage]).itemsize + (4 if storage == "int8" else 0)
+
+
 def quantise_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(R, D) float -> (int8 (R, D), scale float32 (R,)) with x ~= q * scale[:, None]: symmetric, max-abs
     over the row, then the scale adjusted so that each dequantised row keeps the original row's L2 norm
@@ -91,6 +99,11 @@ class Encodings:
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Arrays for the map file."""
         return {"encodings": self.values} | ({"encodings_scale": self.scale} if self.scale is not None else {})
+
+    @property
+    def bytes_per_place(self) -> int:
+        """Bytes kept per reference (``bytes_per_place``)."""
+        return bytes_per_place(self.shape[1], self.storage)
 
     @property
     def shape(self) -> tuple[int, int]:

@@ -278,6 +278,5 @@ def summary(path: Path) -> dict:
         except VprError as e:
             here = {"precision_auto_here": {"error": str(e)}}
     return {"references": len(pm.names), "first": pm.names[0], "last": pm.names[-1],
-            "encoding_dims": int(pm.stored.shape[1]), "bytes_per_place": int(pm.stored.values.itemsize * pm.stored.shape[1]
-                                                          + (4 if pm.stored.scale is not None else 0)),
+            "encoding_dims": int(pm.stored.shape[1]), "bytes_per_place": pm.stored.bytes_per_place,
             "size_mb": round(path.stat().st_size / 1e6, 2)} | meta | route | here
