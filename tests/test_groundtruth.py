@@ -42,7 +42,7 @@ def test_positions_metric_and_geographic(tmp_path) -> None:
     (tmp_path / "qg.csv").write_text("lat,lon\n52.00005,13.0\n")
     np.testing.assert_array_equal(groundtruth.from_positions(tmp_path / "rg.csv", tmp_path / "qg.csv", 6),
                                   [[0, 1]])
-    with pytest.raises(VprError, match="same columns"):
+    with pytest.raises(VprError, match="same columns needed"):
         groundtruth.from_positions(tmp_path / "r.csv", tmp_path / "qg.csv", 5)
 
 

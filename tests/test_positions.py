@@ -300,7 +300,7 @@ def test_gt_positions_from_the_map(positioned: Path, small_queries: Path, tmp_pa
     assert ra["recall_at_1"] == rb["recall_at_1"] and ra["auc"] == rb["auc"]
     (tmp_path / "g.csv").write_text("lat,lon\n" + "1,1\n" * 24)
     bad = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt-positions", "map", tmp_path / "g.csv")
-    assert bad.returncode == 2 and "map's frame" in bad.stderr
+    assert bad.returncode == 2 and "map's frame" in bad.stderr and "two frames" in bad.stderr
 
 
 GPX = """<?xml version="1.0" encoding="UTF-8"?>

@@ -68,11 +68,16 @@ class Positions:
         along = self._along
         return coords, heading, float((1 - t) * along[i] + t * along[j])
 
+    def check_frame(self, other: "Positions", where: str, whose: str = "the map's") -> None:
+        """VprError naming ``where`` unless ``other`` is in this frame (x,y metres or lat,lon degrees): the
+        one rule for positions given against a map's, a ground truth's or appended references'."""
+        if other.frame != self.frame:
+            raise VprError(f"{where}: positions in two frames: {whose} are {self.frame} "
+                           f"({','.join(FRAMES[self.frame])}), these {other.frame} ({','.join(FRAMES[other.frame])})")
+
     def concat(self, more: "Positions") -> "Positions":
         """These references' positions, then ``more``'s (VprError if they are in another frame)."""
-        if more.frame != self.frame:
-            raise VprError(f"positions in two frames: the map's are {self.frame} "
-                           f"({','.join(FRAMES[self.frame])}), the appended {more.frame}")
+        self.check_frame(more, "appended references")
         return Positions(np.concatenate([self.coords, more.coords]), self.frame,
                          np.concatenate([self.heading, more.heading]), np.concatenate([self.altitude, more.altitude]),
                          self.interpolated + more.interpolated)

@@ -74,9 +74,7 @@ class Truth:
                 raise VprError("--gt-positions map ...: the references' positions come from --map, which must be "
                                "built with --positions")
             queries = truth.read_positions(self.positions[1])
-            if queries.frame != map_positions.frame:
-                raise VprError(f"{self.positions[1]}: positions must be in the map's frame ({map_positions.frame}: "
-                               f"{' and '.join(('lat', 'lon') if map_positions.geo else ('x', 'y'))})")
+            map_positions.check_frame(queries, str(self.positions[1]), "the map's frame's")
             return truth.within(queries, map_positions, self.radius), None
         if self.positions is not None:
             return truth.from_positions(self.positions[0], self.positions[1], self.radius), None

@@ -67,8 +67,7 @@ def from_positions(refs_csv: str | os.PathLike[str], queries_csv: str | os.PathL
                    radius_m: float, chunk: int = 512) -> np.ndarray:
     """References within ``radius_m`` metres of each query -> (Q, T) padded truth."""
     refs, queries = read_positions(refs_csv), read_positions(queries_csv)
-    if refs.frame != queries.frame:
-        raise VprError(f"{queries_csv}: positions must use the same columns as {refs_csv} (x,y or lat,lon)")
+    refs.check_frame(queries, str(queries_csv), f"{refs_csv}'s (the same columns needed)")
     return within(queries, refs, radius_m, chunk)
 
 

@@ -108,6 +108,19 @@ def check_fits(encoder: Encoder, front: FrontEnd, source: str = "") -> None:
                        f"but the {front.name} front end gives {front.dim}")
 
 
+def check_codebook_fits(encoder: Encoder, meta: dict, front: FrontEnd, source: str) -> None:
+    """VprError naming the codebook file ``source`` unless the codebook (``encoder`` and its file's ``meta``)
+    was fitted on this front end's descriptors (the same model or handcrafted parameters; an int8 model may
+    reuse the codebook of the fp32 model it was quantised from) and takes their dimension."""
+    recorded = meta.get("features_fingerprint") or meta.get("model_sha256")
+    described = (meta.get("features") or {}).get("name", "cnn")
+    if described != front.name or recorded not in (None, front.fingerprint, front.source_fingerprint):
+        raise VprError(f"{source}: codebook was fitted on {described} descriptors ({str(recorded)[:12]}), not "
+                       f"on this {front.name} front end's ({front.fingerprint[:12]})"
+                       f"{'; another model' if front.name == 'cnn' else ''}")
+    check_fits(encoder, front, source)
+
+
 def _meta(front: FrontEnd, encoder: Encoder, fitted: bool, settings: FitSettings, n_real: int,
           refs_folder: str) -> dict:
     """A new map's metadata: the front end, how the codebook was made, where the references came from."""

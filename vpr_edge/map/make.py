@@ -20,7 +20,7 @@ from vpr_edge.features.registry import DEFAULT_FRONT_END
 from vpr_edge.files import check_not_input, check_writable, writer_lock
 from vpr_edge.images import list_images, load_image, read_stamps
 from vpr_edge.index.encodings import DEFAULT_STORAGE
-from vpr_edge.map.build import Progress, build_map, check_fits
+from vpr_edge.map.build import Progress, build_map, check_codebook_fits
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map, save_map
 from vpr_edge.map.model import PlaceMap
@@ -87,10 +87,8 @@ def _fit_options(o: BuildOptions) -> dict:
             "--max-descriptors": o.max_descriptors, "--fit-iterations": o.fit_iterations, "--tfidf": o.tfidf}
 
 
-def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
-    """Every check that can be made before the work (VprError, one line), and every default decided."""
-    from vpr_edge.encoders.fit import require_sklearn
-
+def _check_options(refs: Path, out: Path, o: BuildOptions, bag: bool, gpx: bool) -> None:
+    """Options that contradict each other, or the kind of ``refs`` (a folder or a bag)."""
     fit_options = _fit_options(o)
     fixed = f"--codebook {o.codebook}" if o.codebook else \
         f"--append (the map {out} has its codebook)" if o.append else None
@@ -104,24 +102,12 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     if fixed and any(v is not None for v in fit_options.values()):
         given_opts = ", ".join(k for k, v in fit_options.items() if v is not None)
         raise VprError(f"{given_opts}: options for fitting a codebook, but {fixed} is given")
-    for target in (out, o.save_codebook):
-        if target:
-            check_writable(target)
-    # (the map --append reads is also the one it replaces: its own input, by design)
-    check_not_input({"--out": out, "--save-codebook": o.save_codebook},
-                    [refs, o.codebook, o.model, None if o.positions in (None, "exif") else o.positions,
-                     o.timestamps])
-    bag = is_bag(refs)
     if not bag and (o.topic or o.positions_topic):
         raise VprError(f"{refs}: --topic and --positions-topic apply to a ROS bag or MCAP file")
     if o.positions and o.positions_topic:
         raise VprError(f"--positions {o.positions} and --positions-topic {o.positions_topic}: give one")
     if bag and o.positions == "exif":
         raise VprError(f"{refs}: --positions exif reads image files; a bag's positions come from --positions-topic")
-    files = [] if bag else list_images(refs)
-    gpx = o.positions is not None and o.positions.lower().endswith(".gpx")
-    if gpx:
-        require_gpxpy(o.positions)
     if gpx and not bag and o.timestamps is None:
         raise VprError(f"{o.positions}: a GPX track is matched to the frames by time: give --timestamps "
                        f"FILE (frame,stamp in Unix seconds) for the folder {refs}")
@@ -129,36 +115,83 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
         raise VprError(f"{o.timestamps}: a bag's images carry their own stamps; drop --timestamps")
     if o.timestamps is not None and not gpx:
         raise VprError(f"{o.timestamps}: --timestamps serves --positions TRACK.gpx; nothing else uses it here")
-    base = load_map(out, mmap=True) if o.append else None
-    positions = None
+
+
+def _check_outputs(refs: Path, out: Path, o: BuildOptions) -> None:
+    """The outputs can be written and are none of the inputs."""
+    for target in (out, o.save_codebook):
+        if target:
+            check_writable(target)
+    # (the map --append reads is also the one it replaces: its own input, by design)
+    check_not_input({"--out": out, "--save-codebook": o.save_codebook},
+                    [refs, o.codebook, o.model, None if o.positions in (None, "exif") else o.positions,
+                     o.timestamps])
+
+
+def _folder_positions(files: list[Path], o: BuildOptions, gpx: bool) -> Positions | None:
+    """A folder's references' positions from --positions (a CSV, a GPX track with --timestamps, or exif)."""
     if o.positions == "exif":
-        positions = from_exif(files)
-    elif gpx and not bag:
-        positions = from_gpx(o.positions, np.asarray(read_stamps(o.timestamps, [f.name for f in files])))
-    elif o.positions is not None and not bag:
-        positions = read_positions(o.positions, [f.name for f in files])
-    has_positions = positions is not None or bool(o.positions or o.positions_topic)
-    if base is not None and (base.positions is None) == has_positions:
+        return from_exif(files)
+    if gpx:
+        return from_gpx(o.positions, np.asarray(read_stamps(o.timestamps, [f.name for f in files])))
+    if o.positions is not None:
+        return read_positions(o.positions, [f.name for f in files])
+    return None
+
+
+def _check_appended_positions(base: PlaceMap, positions: Positions | None, given: bool, out: Path,
+                              where: str) -> None:
+    """Appended references have positions exactly when the map has, in its frame."""
+    if (base.positions is None) == given:
         raise VprError(f"{out}: the map has positions: give --positions for the appended references"
                        if base.positions is not None else
                        f"{out}: the map has no positions; --positions cannot be given to --append")
-    if base is not None and positions is not None and positions.frame != base.positions.frame:
-        raise VprError(f"{o.positions}: positions in two frames: the map's are {base.positions.frame}, "
-                       f"these {positions.frame}")
-    given, cb_meta = None, {}
-    if o.codebook:
-        given, cb_meta = load_codebook(o.codebook)
-        if o.encoding is not None and o.encoding != given.name:
-            raise VprError(f"{o.codebook}: codebook is for encoding {given.name}, not --encoding {o.encoding}")
-    enc_name = base.encoder.name if base else given.name if given else o.encoding or DEFAULT_ENCODING
+    if positions is not None:
+        base.positions.check_frame(positions, where)
+
+
+def _warn_inapplicable(enc_name: str, o: BuildOptions) -> None:
+    """Options given that the encoding does not use: a warning each, then ignored."""
     if not ENCODERS[enc_name].needs_fit:
-        for k, v in fit_options.items():
+        for k, v in _fit_options(o).items():
             if v is not None:
                 warn(f"{k} does not apply to encoding {enc_name}; ignored")
     if o.tfidf is not None and enc_name != "bow" and ENCODERS[enc_name].needs_fit:
         warn("--tfidf/--no-tfidf applies to encoding bow only; ignored")
     if o.alpha is not None and enc_name not in ("ifv", "vlad"):
         warn(f"--alpha does not apply to encoding {enc_name}; ignored")
+
+
+def _fit_settings(o: BuildOptions) -> FitSettings:
+    """The codebook fit: build-map's options over ``FitSettings``' defaults (--pca-dim 0: no PCA)."""
+    d = FitSettings()
+    pca_dim = d.pca_dim if o.pca_dim is None else None if o.pca_dim == 0 else o.pca_dim
+    return FitSettings(o.components or d.n_components, pca_dim, d.whiten if o.whiten is None else o.whiten,
+                       d.alpha if o.alpha is None else o.alpha, o.max_descriptors or d.max_descriptors,
+                       o.fit_iterations or d.iterations, o.seed, bool(o.tfidf))
+
+
+def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
+    """Every check that can be made before the work (VprError, one line), and every default decided."""
+    from vpr_edge.encoders.fit import require_sklearn
+
+    bag = is_bag(refs)
+    gpx = o.positions is not None and o.positions.lower().endswith(".gpx")
+    _check_options(refs, out, o, bag, gpx)
+    _check_outputs(refs, out, o)
+    files = [] if bag else list_images(refs)
+    if gpx:
+        require_gpxpy(o.positions)
+    base = load_map(out, mmap=True) if o.append else None
+    positions = None if bag else _folder_positions(files, o, gpx)
+    if base is not None:
+        _check_appended_positions(base, positions, positions is not None or bool(o.positions or o.positions_topic),
+                                  out, str(o.positions))
+    given, cb_meta = load_codebook(o.codebook) if o.codebook else (None, {})
+    if given is not None and o.encoding is not None and o.encoding != given.name:
+        raise VprError(f"{o.codebook}: codebook is for encoding {given.name}, not --encoding {o.encoding}")
+    enc_name = base.encoder.name if base else given.name if given else o.encoding or DEFAULT_ENCODING
+    _warn_inapplicable(enc_name, o)
     if (given is None and base is None and ENCODERS[enc_name].needs_fit) or o.svm:
         require_sklearn()
     ort_threads = use_threads(o.threads)
@@ -182,22 +215,9 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     if base is not None:
         given = base.encoder
     elif given is not None:
-        recorded = cb_meta.get("features_fingerprint") or cb_meta.get("model_sha256")
-        described = (cb_meta.get("features") or {}).get("name", "cnn")
-        # an int8 model may reuse the codebook of the fp32 model it was quantised from
-        fits = (None, front.fingerprint, front.source_fingerprint)
-        if described != front.name or recorded not in fits:
-            raise VprError(f"{o.codebook}: codebook was fitted on {described} descriptors "
-                           f"({str(recorded)[:12]}), not on this {front.name} front end's "
-                           f"({front.fingerprint[:12]}){'; another model' if front.name == 'cnn' else ''}")
-        check_fits(given, front, str(o.codebook))
+        check_codebook_fits(given, cb_meta, front, str(o.codebook))
         if o.alpha is not None:
             given = given.with_alpha(o.alpha)
-    d = FitSettings()
-    pca_dim = d.pca_dim if o.pca_dim is None else None if o.pca_dim == 0 else o.pca_dim
-    settings = FitSettings(o.components or d.n_components, pca_dim, d.whiten if o.whiten is None else o.whiten,
-                           d.alpha if o.alpha is None else o.alpha, o.max_descriptors or d.max_descriptors,
-                           o.fit_iterations or d.iterations, o.seed, bool(o.tfidf))
     storage = o.storage or (base.stored.storage if base else DEFAULT_STORAGE)
     names = scratch = None
     if bag:   # the work starts here: the bag's images are decoded once, into a scratch folder
@@ -212,11 +232,10 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
             positions = from_gpx(o.positions, stamps)
         elif o.positions:
             positions = read_positions(o.positions, names)
-        if base is not None and positions is not None and positions.frame != base.positions.frame:
-            raise VprError(f"{refs}: positions in two frames: the map's are {base.positions.frame}, these "
-                           f"{positions.frame}")
-    return MapPlan(refs, out, files, front, enc_name, given, settings, storage, o, base, cb_meta, positions,
-                   names, scratch, choice)
+        if base is not None and positions is not None:
+            base.positions.check_frame(positions, str(refs))
+    return MapPlan(refs, out, files, front, enc_name, given, _fit_settings(o), storage, o, base, cb_meta,
+                   positions, names, scratch, choice)
 
 
 def _camera_model(first: Path) -> tuple[Path, str]:
