@@ -12,7 +12,7 @@ import pytest
 
 from vpr_edge import Localizer
 from vpr_edge.errors import VprError
-from vpr_edge.images import load_image, open_stream
+from vpr_edge.frames.images import load_image, open_stream
 from vpr_edge.matchers import get_matcher, stillness
 
 

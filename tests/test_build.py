@@ -12,7 +12,7 @@ import vpr_edge.map.build as mapfile
 from vpr_edge.index.encodings import EncodingWriter, Encodings, STORAGES
 from vpr_edge.encoders import FitSettings
 from vpr_edge.features import make_front_end
-from vpr_edge.images import list_images, load_image
+from vpr_edge.frames.images import list_images, load_image
 from vpr_edge.map import build_map, map_from_local
 from vpr_edge.map.build import extract_all
 

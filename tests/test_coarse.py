@@ -53,7 +53,7 @@ def test_localizer_whole_route_frames_go_through_it(api_map_small: Path, small_q
     """Forced on the 24-place map (keep >= R: every value exact), the answers are those without it, and
     every frame went through the coarse search (the local search does not engage on 24 places)."""
     from vpr_edge import Localizer
-    from vpr_edge.images import load_image
+    from vpr_edge.frames.images import load_image
 
     files = sorted(small_queries.iterdir())
     plain = Localizer(api_map_small, threads=1)

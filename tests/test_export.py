@@ -174,7 +174,7 @@ def test_deep_taps_build() -> None:
 def test_quantize_keeps_features_and_marks_the_model(tmp_path: Path, model_path: Path, small_refs: Path,
                                                      small_queries: Path) -> None:
     pytest.importorskip("onnx")
-    from vpr_edge.images import load_image
+    from vpr_edge.frames.images import load_image
     from vpr_edge_export.quantize import main as quantize_main
 
     out = tmp_path / "int8.onnx"
@@ -195,7 +195,7 @@ def test_quantize_keeps_features_and_marks_the_model(tmp_path: Path, model_path:
 def test_quantize_qoperator_writes_qlinear_operators(tmp_path: Path, model_path: Path, small_refs: Path,
                                                      small_queries: Path) -> None:
     onnx = pytest.importorskip("onnx")
-    from vpr_edge.images import load_image
+    from vpr_edge.frames.images import load_image
     from vpr_edge_export.quantize import main as quantize_main
 
     out = tmp_path / "int8.onnx"

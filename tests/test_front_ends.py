@@ -21,7 +21,7 @@ from vpr_edge.features.hog import Hog
 from vpr_edge.features.ldb import Ldb, all_bits, select_bits
 from vpr_edge.features.patches import Patches
 from vpr_edge.features.sift import DenseSift, KeypointSift
-from vpr_edge.images import load_image
+from vpr_edge.frames.images import load_image
 from vpr_edge.map import PlaceMap, load_map, map_front_end, save_map
 from vpr_edge.matchers import MATCHERS
 from vpr_edge.features.patches import pixel_descriptor

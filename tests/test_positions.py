@@ -147,7 +147,7 @@ def test_video_frames_carry_their_time(positioned: Path, small_queries: Path, tm
 
 
 def test_timestamps_file_refused(tmp_path: Path) -> None:
-    from vpr_edge.images import read_stamps
+    from vpr_edge.frames.images import read_stamps
 
     f = tmp_path / "t.csv"
     for text, problem in (("frame,stamp\na.jpg,1\n", "no stamp for 1 frame"), ("a,b\n", "frame,stamp"),

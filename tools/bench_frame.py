@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge import Localizer
-from vpr_edge.images import list_images, load_image
+from vpr_edge.frames.images import list_images, load_image
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
 from vpr_edge.resources import sample_folder
 

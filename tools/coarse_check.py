@@ -24,7 +24,7 @@ import numpy as np
 from vpr_edge.evaluation import truth as groundtruth
 from vpr_edge.index.coarse import CoarseSearch
 from vpr_edge.evaluation.scoring import score_result
-from vpr_edge.images import list_images, load_image
+from vpr_edge.frames.images import list_images, load_image
 from vpr_edge.map import MapQuery
 from vpr_edge.matchers import get_matcher, run_online, run_rows
 from vpr_edge.threads import use_threads

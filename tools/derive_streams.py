@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError, one_line_errors
-from vpr_edge.images import list_images
+from vpr_edge.frames.images import list_images
 from vpr_edge.evaluation.streams import CAMERA, KINDS, derive_stream, write_stream
 
 

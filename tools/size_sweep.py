@@ -33,7 +33,7 @@ from vpr_edge.resources import bundled_model
 
 BUNDLED_MODEL = bundled_model()
 from vpr_edge.features import make_front_end
-from vpr_edge.images import list_images
+from vpr_edge.frames.images import list_images
 from vpr_edge.map.build import extract_all
 from vpr_edge.map import map_from_local
 from vpr_edge.matchers import get_matcher

@@ -23,7 +23,7 @@ import numpy as np
 from vpr_edge.errors import VprError
 from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
-from vpr_edge.images import MIN_SIDE, Frame
+from vpr_edge.frames.images import MIN_SIDE, Frame
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.map import MapQuery, PlaceMap
 from vpr_edge.matchers import Matcher, get_matcher, is_lost, step

@@ -115,7 +115,7 @@ def export_onnx(backbone: str, tap: str, weights: Path, width: int, height: int,
 def compare_with_torch(model: torch.nn.Module, onnx_path: Path, image_dir: Path, limit: int = 8) -> float:
     """Max abs difference between torch and onnxruntime feature maps on up to ``limit`` real images."""
     from vpr_edge.features.cnn import FeatureExtractor
-    from vpr_edge.images import list_images, load_image
+    from vpr_edge.frames.images import list_images, load_image
 
     extractor = FeatureExtractor(onnx_path)
     files = list_images(image_dir)[:limit]
@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, inputs checked first: tap, input size, weights file, output path, image folder."""
-    from vpr_edge.images import list_images
+    from vpr_edge.frames.images import list_images
 
     tap = a.tap or BACKBONES[a.backbone].default_tap
     if tap not in BACKBONES[a.backbone].taps:

@@ -26,7 +26,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError, one_line_errors
 from vpr_edge.features.cnn import FeatureExtractor
-from vpr_edge.images import list_images, load_image
+from vpr_edge.frames.images import list_images, load_image
 from vpr_edge.files import atomic_output, check_writable, file_sha256
 
 

@@ -14,7 +14,7 @@ from vpr_edge.evaluation import Source, Truth, evaluate
 from vpr_edge.evaluation.run import default_matchers
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
-from vpr_edge.images import Frame
+from vpr_edge.frames.images import Frame
 from vpr_edge.map import load_map
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.threads import use_threads

@@ -18,7 +18,7 @@ from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, PRECISION_H
 from vpr_edge.errors import VprError
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
-from vpr_edge.images import Frame, open_stream
+from vpr_edge.frames.images import Frame, open_stream
 from vpr_edge.matchers import MATCHERS, get_matcher
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError
-from vpr_edge.images import Frame, list_images, load_image, open_stream
+from vpr_edge.frames.images import Frame, list_images, load_image, open_stream
 from vpr_edge.index.encodings import Encodings
 from vpr_edge.map.query import MapQuery
 from vpr_edge.positions import Positions

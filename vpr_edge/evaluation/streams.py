@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vpr_edge.errors import VprError
-from vpr_edge.images import load_image
+from vpr_edge.frames.images import load_image
 from vpr_edge.files import atomic_output
 
 KINDS: tuple[str, ...] = ("aligned", "speed2", "speed3", "stop-and-go", "camera-stops", "variable", "partial",

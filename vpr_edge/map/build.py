@@ -13,7 +13,7 @@ from vpr_edge.encoders import Encoder, FitSettings, fit_encoder
 from vpr_edge.encoders.registry import DEFAULT_ENCODING
 from vpr_edge.errors import VprError
 from vpr_edge.features import FrontEnd
-from vpr_edge.images import load_image
+from vpr_edge.frames.images import load_image
 from vpr_edge.index.encodings import DEFAULT_STORAGE, EncodingWriter, Encodings
 from vpr_edge.map.front import front_end_meta
 from vpr_edge.map.model import PlaceMap, Svm

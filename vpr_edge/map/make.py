@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.bags import bag_positions, extract_images, is_bag
+from vpr_edge.frames.bags import bag_positions, extract_images, is_bag
 from vpr_edge.encoders import ENCODERS, Encoder, FitSettings, load_codebook
 from vpr_edge.encoders.registry import DEFAULT_ENCODING
 from vpr_edge.errors import VprError, warn
@@ -18,7 +18,7 @@ from vpr_edge.features import FrontEnd, make_front_end
 from vpr_edge.features.choice import bundled_for_sha256, model_for_frame
 from vpr_edge.features.registry import DEFAULT_FRONT_END
 from vpr_edge.files import check_not_input, check_writable, writer_lock
-from vpr_edge.images import list_images, load_image, read_stamps
+from vpr_edge.frames.images import list_images, load_image, read_stamps
 from vpr_edge.index.encodings import DEFAULT_STORAGE
 from vpr_edge.map.build import Progress, build_map, check_codebook_fits
 from vpr_edge.map.front import map_front_end

@@ -11,7 +11,7 @@ import numpy as np
 
 from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
-from vpr_edge.images import Frame
+from vpr_edge.frames.images import Frame
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map
 from vpr_edge.map.model import PlaceMap

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError, warn
-from vpr_edge.frame import MIN_SIDE, Frame
+from vpr_edge.frames.frame import MIN_SIDE, Frame
 from vpr_edge.positions import Positions, at_times
 
 IMAGE_TYPES = ("sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/Image")

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from vpr_edge.errors import VprError, warn
-from vpr_edge.frame import MIN_SIDE, Frame
+from vpr_edge.frames.frame import MIN_SIDE, Frame
 
 IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm"})
 VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg"})
@@ -144,7 +144,7 @@ def open_stream(source: str | os.PathLike[str], stamps: str | os.PathLike[str] |
     report and skip them; a missing or empty source raises VprError at once.
     """
     text = str(source)
-    from vpr_edge.bags import is_bag, open_bag
+    from vpr_edge.frames.bags import is_bag, open_bag
 
     if is_bag(text):
         if stamps:
