@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from vpr_edge.index.encodings import Encodings, STORAGES, quantise_rows
-from vpr_edge.map import MAP_SCHEMA, PlaceMap, load_map
+from vpr_edge.map import MAP_SCHEMA, load_map
 from vpr_edge.files import read_npz, write_npz
 
 

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 
 from vpr_edge.cli import app
 from vpr_edge.encoders import ENCODERS
-from vpr_edge.features import FRONT_ENDS, grey, make_front_end
+from vpr_edge.features import FRONT_ENDS, grey
 from vpr_edge.features.hog import Hog
 from vpr_edge.features.ldb import Ldb, all_bits, select_bits
 from vpr_edge.features.patches import Patches

@@ -427,8 +427,8 @@ def test_motion_cue_sets_its_threshold_from_the_stream() -> None:
     reads every stop as standing and every moving frame as moving on both."""
     rng = np.random.default_rng(3)
 
-    def camera(step: float, stop: float) -> tuple[np.ndarray, np.ndarray]:
-        """A random walk on the sphere with angle ``step`` between moving frames, stopped for 10 frames every
+    def camera(angle: float, stop: float) -> tuple[np.ndarray, np.ndarray]:
+        """A random walk on the sphere with ``angle`` between moving frames, stopped for 10 frames every
         30 with new exposures at angle ``stop`` from the stop's view."""
         frames, standing, view = [], [], rng.normal(size=64)
         for t in range(200):
@@ -440,16 +440,16 @@ def test_motion_cue_sets_its_threshold_from_the_stream() -> None:
                 continue
             turn = rng.normal(size=64)
             turn -= (turn @ view) / (view @ view) * view
-            view = np.cos(step) * view / np.linalg.norm(view) + np.sin(step) * turn / np.linalg.norm(turn)
+            view = np.cos(angle) * view / np.linalg.norm(view) + np.sin(angle) * turn / np.linalg.norm(turn)
             frames.append(view)
             standing.append(False)
         return np.array(frames), np.array(standing)
 
-    for step, stop in ((np.arccos(0.5), np.arccos(0.85)), (np.arccos(0.98), np.arccos(0.997))):
-        enc, standing = camera(step, stop)
+    for angle, stop in ((np.arccos(0.5), np.arccos(0.85)), (np.arccos(0.98), np.arccos(0.997))):
+        enc, standing = camera(angle, stop)
         cue = stillness(enc, 0.5)
         settled = np.arange(len(enc)) >= 30            # after the first moving frames set the typical step
-        assert (cue[standing & settled] >= 0.5).all() and (cue[~standing & settled] < 0.5).all(), step
+        assert (cue[standing & settled] >= 0.5).all() and (cue[~standing & settled] < 0.5).all(), angle
     raw = np.array([np.cos(np.arccos(0.85)), 0.98])    # the first camera's stop, the second camera's motion
     assert raw[0] < raw[1]                             # a fixed cosine threshold gets one of them wrong
 

@@ -1,7 +1,8 @@
 """Evaluation, apart from the matchers: ground truth (``truth``), metrics over matcher results (``metrics``),
 one matcher scored (``scoring``), the similarity sources and the whole ``evaluate`` (``sources``, ``run``),
 reports (``report``) and test streams derived from aligned datasets (``streams``)."""
-from vpr_edge.evaluation.run import Evaluation, Source, Truth, evaluate
+from vpr_edge.evaluation.run import Evaluation, Source, evaluate
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode, score_result
+from vpr_edge.evaluation.truth import Truth
 
 __all__ = ["Evaluation", "ModeReport", "Source", "Truth", "evaluate", "evaluate_mode", "score_result"]

@@ -12,6 +12,7 @@ from vpr_edge.calibration import Curve
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation import sources
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
+from vpr_edge.evaluation.truth import Truth
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.matchers import MATCHERS, Matcher, check_lost_line, get_matcher
 from vpr_edge.map import MapQuery, PlaceMap, load_map
@@ -51,40 +52,6 @@ class Source:
     @property
     def name(self) -> str:
         return str(self.queries or self.similarity)
-
-
-@dataclass(frozen=True)
-class Truth:
-    """Ground truth: ``gt`` (the project's CSV, or a boolean (Q, R) .npy matrix) or ``positions`` (reference
-    and query CSVs of x,y or lat,lon; references within ``radius`` metres are correct)."""
-
-    gt: PathLike | None = None
-    positions: tuple[PathLike, PathLike] | None = None
-    radius: float = 25.0
-
-    def load(self, map_positions: Positions | None = None) -> tuple[np.ndarray, tuple[int, ...] | None]:
-        """(Q, T) padded correct references, and the (Q, R) shape of a matrix file (else None). With
-        ``positions`` ("map", QUERIES.csv) the references' positions are ``map_positions`` (the map's own)."""
-        from vpr_edge.evaluation import truth
-
-        if (self.gt is None) == (self.positions is None):
-            raise VprError("give ground truth: --gt FILE (.csv or .npy) or --gt-positions REFS.csv QUERIES.csv")
-        if self.positions is not None and str(self.positions[0]) == "map":
-            if map_positions is None:
-                raise VprError("--gt-positions map ...: the references' positions come from --map, which must be "
-                               "built with --positions")
-            queries = truth.read_positions(self.positions[1])
-            map_positions.check_frame(queries, str(self.positions[1]), "the map's frame's")
-            return truth.within(queries, map_positions, self.radius), None
-        if self.positions is not None:
-            return truth.from_positions(self.positions[0], self.positions[1], self.radius), None
-        if Path(self.gt).suffix.lower() == ".npy":
-            return truth.load_matrix(self.gt), np.load(self.gt, mmap_mode="r").shape
-        return truth.load_csv(self.gt), None
-
-    @property
-    def name(self) -> str:
-        return str(self.gt if self.gt is not None else self.positions[0])
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -19,7 +21,6 @@ from vpr_edge.errors import VprError
 from vpr_edge.files import read_csv_rows
 from vpr_edge.positions import Positions, distances
 from vpr_edge.positions import read_csv as read_positions
-
 
 
 def pad(sets: Sequence[Sequence[int]]) -> np.ndarray:
@@ -79,3 +80,36 @@ def within(queries: Positions, refs: Positions, radius_m: float, chunk: int = 51
         near = distances(qp[i:i + chunk], rp, refs.geo) <= radius_m
         sets.extend(np.flatnonzero(row) for row in near)
     return pad(sets)
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Where an evaluation's ground truth comes from, read by this module's loaders (``load``): ``gt`` (the
+    project's CSV, or a boolean (Q, R) .npy matrix) or ``positions`` (reference and query CSVs of x,y or
+    lat,lon; references within ``radius`` metres are correct)."""
+
+    gt: str | os.PathLike[str] | None = None
+    positions: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None
+    radius: float = 25.0
+
+    def load(self, map_positions: Positions | None = None) -> tuple[np.ndarray, tuple[int, ...] | None]:
+        """(Q, T) padded correct references, and the (Q, R) shape of a matrix file (else None). With
+        ``positions`` ("map", QUERIES.csv) the references' positions are ``map_positions`` (the map's own)."""
+        if (self.gt is None) == (self.positions is None):
+            raise VprError("give ground truth: --gt FILE (.csv or .npy) or --gt-positions REFS.csv QUERIES.csv")
+        if self.positions is not None and str(self.positions[0]) == "map":
+            if map_positions is None:
+                raise VprError("--gt-positions map ...: the references' positions come from --map, which must be "
+                               "built with --positions")
+            queries = read_positions(self.positions[1])
+            map_positions.check_frame(queries, str(self.positions[1]), "the map's frame's")
+            return within(queries, map_positions, self.radius), None
+        if self.positions is not None:
+            return from_positions(self.positions[0], self.positions[1], self.radius), None
+        if Path(self.gt).suffix.lower() == ".npy":
+            return load_matrix(self.gt), np.load(self.gt, mmap_mode="r").shape
+        return load_csv(self.gt), None
+
+    @property
+    def name(self) -> str:
+        return str(self.gt if self.gt is not None else self.positions[0])

@@ -124,7 +124,7 @@ class FeatureExtractor:
         self._offset = (self._mean / self._std).astype(np.float32)
         self._fill = np.clip(np.rint(self._mean * 255.0), 0, 255).astype(np.uint8)
 
-    def as_run(self, form: str) -> "CnnExtractor":
+    def as_run(self, form: str) -> "FeatureExtractor":
         """This extractor (the same session) described as running in ``form``: its numeric form and why it
         was chosen (e.g. "int8: AVX512-VNNI"), what ``runs()`` reports."""
         chosen = copy.copy(self)

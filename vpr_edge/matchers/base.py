@@ -34,7 +34,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError
 from vpr_edge.matchers.motion import MEMORY, MotionCue, cue_at, route_stands, stillness
-from vpr_edge.matchers.params import Param
+from vpr_edge.matchers.params import Param, read_items
 
 
 class OnlineMatcher(Protocol):
@@ -190,14 +190,7 @@ class Matcher:
         """``["key=value", ...]`` (the CLI's ``--param``) -> overrides of this matcher's parameters, each value
         read as its default's type (bool: true/false/1/0). ValueError naming the item for an unknown key, a
         value that does not read, or one the matcher refuses (checked by a run on a small random matrix)."""
-        out: dict[str, Any] = {}
-        for item in items:
-            key, sep, text = item.partition("=")
-            key = param_key(item)
-            if not sep or key not in self.params:
-                raise ValueError(f"--param {item!r}: {self.name} takes KEY=VALUE with KEY one of "
-                                 f"{', '.join(self.params) or '(none)'}")
-            out[key] = _read_value(text.strip(), self.params[key], item)
+        out = read_items(items, self.params, self.name)
         if out:
             try:
                 self.with_params(**out).run(np.random.default_rng(0).random((3, 3)), 1)
@@ -269,28 +262,3 @@ def is_lost(scores: np.ndarray | float, line: float | None) -> np.ndarray:
     without a lost state, nothing is lost)."""
     scores = np.asarray(scores)
     return np.zeros(scores.shape, bool) if line is None else scores < line
-
-
-def param_key(item: str) -> str:
-    """The parameter name of a ``--param`` item ``"key=value"`` (dashes read as underscores)."""
-    return item.partition("=")[0].strip().replace("-", "_")
-
-
-def _read_value(text: str, default: Any, item: str) -> Any:
-    """``text`` read as the type of ``default`` (bool, int, float or str); ValueError naming ``item``."""
-    try:
-        if isinstance(default, bool):
-            if text.lower() not in ("true", "false", "1", "0"):
-                raise ValueError
-            return text.lower() in ("true", "1")
-        if isinstance(default, int):
-            return int(text)
-        if isinstance(default, float):
-            value = float(text)
-            if not math.isfinite(value):
-                raise ValueError
-            return value
-        return text
-    except ValueError:
-        kind = {"bool": "a bool (true/false)", "int": "an int", "float": "a number"}.get(type(default).__name__, "text")
-        raise ValueError(f"--param {item!r}: {text!r} is not {kind}") from None

@@ -1,9 +1,12 @@
 """Every matcher parameter, defined once: its default and what it means. The registry builds each matcher's
 presets from these tables, ``localize --list-params`` prints them, and ``docs/matchers.md`` is written from
 them (``python -m vpr_edge.matchers`` prints that table). Values given on the command line
-(``--param KEY=VALUE``) are read as the default's type and checked by the matcher itself."""
+(``--param KEY=VALUE``) are read here (``read_items``) as the default's type and checked by the matcher
+itself (``Matcher.parse_params``)."""
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -80,3 +83,44 @@ def defaults(table: dict[str, Param], **overrides: Any) -> dict[str, Any]:
     for k in overrides:
         table[k]   # noqa: B018 - a preset must name a defined parameter
     return {k: p.default for k, p in table.items()} | overrides
+
+
+def read_items(items: Sequence[str], current: dict[str, Any], owner: str) -> dict[str, Any]:
+    """``["key=value", ...]`` (the CLI's ``--param``) -> overrides of the parameters ``current`` (name ->
+    value) of the matcher ``owner``, each value read as its current value's type (bool: true/false/1/0).
+    ValueError naming the item for an unknown key or a value that does not read. (Whether the matcher takes
+    the value is ``Matcher.parse_params``'s check.)"""
+    out: dict[str, Any] = {}
+    for item in items:
+        _, sep, text = item.partition("=")
+        key = param_key(item)
+        if not sep or key not in current:
+            raise ValueError(f"--param {item!r}: {owner} takes KEY=VALUE with KEY one of "
+                             f"{', '.join(current) or '(none)'}")
+        out[key] = _read_value(text.strip(), current[key], item)
+    return out
+
+
+def param_key(item: str) -> str:
+    """The parameter name of a ``--param`` item ``"key=value"`` (dashes read as underscores)."""
+    return item.partition("=")[0].strip().replace("-", "_")
+
+
+def _read_value(text: str, default: Any, item: str) -> Any:
+    """``text`` read as the type of ``default`` (bool, int, float or str); ValueError naming ``item``."""
+    try:
+        if isinstance(default, bool):
+            if text.lower() not in ("true", "false", "1", "0"):
+                raise ValueError
+            return text.lower() in ("true", "1")
+        if isinstance(default, int):
+            return int(text)
+        if isinstance(default, float):
+            value = float(text)
+            if not math.isfinite(value):
+                raise ValueError
+            return value
+        return text
+    except ValueError:
+        kind = {"bool": "a bool (true/false)", "int": "an int", "float": "a number"}.get(type(default).__name__, "text")
+        raise ValueError(f"--param {item!r}: {text!r} is not {kind}") from None
