@@ -714,3 +714,83 @@ def test_road_matcher_reports_leaving_the_map_within_three_frames() -> None:
         exits_off.append(np.argmax(off.run(sim).scores[gone] < m.min_confidence))
     assert max(exits) <= 4 and np.mean(exits) <= 2.5 and np.mean(shares) >= 0.8, (exits, shares)
     assert min(exits_off) >= 5 and np.mean(exits_off) >= 7, exits_off
+
+
+def naive_road_local(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, window, probe, check, span,
+                     hold, stop_gain, stop_decay, evidence, evidence_decay, **_):
+    """RoadMatcher's local search as plain loops, from its docstring (no motion cue): while firmly locked
+    (H >= hold * lock, nothing beyond the window half as strong) the next frame reads only the references
+    within ``window`` of the answer and the ``probe`` sample (which gives the frame's mean and spread), state
+    outside the window held at 0; ``span`` frames in every ``check`` firmly locked ones, and every frame not
+    firmly locked, read the whole route. Running means count time, not updates. -> [(ref, score, local)]."""
+    n_refs = sim.shape[1]
+    n_speeds, n_pos = int(round(vmax * grid)) + 1, n_refs * grid
+    w = window if window and n_refs > 4 * window else 0
+    probe_refs = np.sort(np.random.default_rng(0).choice(n_refs, min(n_refs, probe), replace=False))
+    h = np.zeros((n_speeds, n_pos))
+    mean, weight, seen = np.zeros(n_refs), np.full(n_refs, float(memory)), np.zeros(n_refs, int)
+    t, stopped, win, held_for, recent, out = 0, False, None, 0, None, []
+    for s in sim:
+        lo, hi = win if win is not None else (0, n_refs)
+        sample = s[probe_refs] if win is not None else s
+        mu, sd = sample.mean(), max(sample.std(), 1e-12)
+        zr = {}
+        if not stopped:
+            t += 1
+        for r in range(lo, hi):
+            z = (s[r] - mu) / sd
+            zr[r] = z - mean[r]
+            if not stopped:
+                weight[r] = weight[r] * (1 - 1 / memory) ** (t - seen[r]) + 1
+                seen[r] = t
+                mean[r] += (z - mean[r]) / weight[r]
+        new = h.copy()
+        for v in range(n_speeds):
+            for p in range(lo * grid, hi * grid):
+                prev = max(h[u, p - v] - turn * abs(v - u) for u in range(n_speeds)) if p >= v else 0.0
+                e = zr[p // grid] - bias
+                if v == 0:
+                    new[v, p] = max(0.0, max(0.0, stop_decay * prev) + (stop_gain * e if e > 0 else e))
+                else:
+                    new[v, p] = max(0.0, max(0.0, decay * prev) + e)
+        h = new
+        part = h[:, lo * grid:hi * grid]
+        v_best, p_best = np.unravel_index(np.argmax(part), part.shape)
+        stopped, ref, best = v_best == 0, lo + p_best // grid, part[v_best, p_best]
+        per_ref = {r: h[:, r * grid:(r + 1) * grid].max() for r in range(lo, hi)}
+        rival = max([x for r, x in per_ref.items() if abs(r - ref) > rival_window], default=0.0)
+        here = max((s[r] - mu) / sd for r in range(max(lo, ref - 1), min(hi, ref + 2)))
+        recent = here if recent is None else evidence_decay * recent + (1 - evidence_decay) * here
+        out.append((ref, float(best >= lock and recent >= evidence) + 1 - (rival + 1) / (best + 1), win is not None))
+        far = max([x for r, x in per_ref.items() if abs(r - ref) > w], default=0.0)
+        held = bool(w) and best >= hold * lock and far < 0.5 * best
+        held_for = held_for + 1 if held else 0
+        if not held_for or held_for % check >= check - span:
+            win = None
+            continue
+        nlo, nhi = max(0, ref - w), min(n_refs, ref + w + 1)
+        keep = np.zeros(n_pos, bool)
+        keep[nlo * grid:nhi * grid] = True
+        if win is not None:   # what the previous window held and the new one does not is dropped
+            keep[:win[0] * grid] = keep[win[1] * grid:] = True
+            keep[nlo * grid:nhi * grid] = True
+        h[:, ~keep] = 0.0
+        win = (nlo, nhi)
+    return out
+
+
+def test_road_matcher_local_search_against_plain_loops() -> None:
+    """A 60-place route long enough for the local search (window 5): the vectorised matcher, fed only the
+    similarities it asks for (``step``), answers as the loops do, frame by frame, with most frames local and
+    some whole-route checks among them."""
+    rng = np.random.default_rng(7)
+    places = route([(1.0, 20), (0.0, 6), (2.0, 8), (1.0, 20)], start=3)
+    sim = planted(rng, 60, places, noise=0.3)
+    params = MATCHERS["stream"].params | {"vmax": 2.0, "grid": 2, "window": 5, "probe": 16, "check": 8, "span": 2,
+                                          "hold": 1.0, "memory": 6.0, "lock": 3.0, "rival_window": 2}
+    got = MATCHERS["stream"].with_params(**params).run(sim, k=1)
+    want = naive_road_local(sim, **params)
+    assert list(got.refs) == [r for r, _, _ in want]
+    np.testing.assert_allclose(got.scores, [c for _, c, _ in want], atol=1e-5)
+    local = np.array([x for _, _, x in want])
+    assert local.mean() > 0.5 and (~local[20:]).any()          # mostly local, with whole-route checks
