@@ -107,3 +107,37 @@ def test_no_import_cycles() -> None:
     assert packages and graph
     cycles = sorted(f"{a} <-> {b}" for a in graph for b in graph[a] if reaches(b, a))
     assert not cycles, cycles
+
+
+def test_docstrings_name_only_what_exists() -> None:
+    """Every ``module.name`` a docstring or comment of the package or the tools cites, whose first part is a
+    module of the package, resolves (a renamed or removed module leaves no stale pointer)."""
+    import importlib
+    import pkgutil
+    import re
+
+    import vpr_edge
+
+    root = Path(vpr_edge.__file__).parent
+    modules = {m.name.rsplit(".", 1)[-1]: m.name for m in pkgutil.walk_packages(vpr_edge.__path__, "vpr_edge.")}
+    modules["vpr_edge"] = "vpr_edge"
+
+    def resolves(ref: str) -> bool:
+        head, *rest = ref.split(".")
+        obj = importlib.import_module(modules[head])
+        for part in rest:
+            if hasattr(obj, part):
+                obj = getattr(obj, part)
+                continue
+            try:
+                obj = importlib.import_module(f"{obj.__name__}.{part}")
+            except (ImportError, AttributeError):
+                return False
+        return True
+
+    files = [*root.rglob("*.py"), *(root.parent / "tools").glob("*.py")]
+    cited = {ref for f in files for ref in re.findall(r"``([A-Za-z_][\w]*(?:\.[A-Za-z_]\w*)+)``", f.read_text())}
+    files_named = {"csv", "json", "npz", "npy", "onnx", "jpg", "png", "gpx", "bag", "mcap", "h5", "yaml"}
+    stale = sorted(ref for ref in cited if ref.split(".")[0] in modules and ref.rsplit(".", 1)[-1] not in files_named
+                   and not resolves(ref))
+    assert not stale, stale

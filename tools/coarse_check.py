@@ -9,7 +9,7 @@ motion cue and the map's stops), frame by frame through ``matchers.step``:
 every similarity exact (what ``evaluate`` measures), and with the frames that search the whole route served by
 ``coarse.CoarseSearch`` (signs, then exact values for the ``--keep`` best candidates and ``--calib`` random
 references), as ``Localizer`` does on maps of 20,000+ references. The local-search frames are exact in both.
-Prints R@1 / AUC and the lost shares of unmapped / mapped frames (``evaluate.score_result``, the figures of
+Prints R@1 / AUC and the lost shares of unmapped / mapped frames (``evaluation.scoring.score_result``, the figures of
 ``vpr-edge evaluate``; nan where a stream has no unmapped frames), the share of frames whose answers agree and
 the share of whole-route frames, per stream.
 """

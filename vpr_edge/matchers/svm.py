@@ -6,7 +6,7 @@ without a second pass over the images); negatives are all the others. Classes ar
 three or so positives count as much as the negatives. The SVMs are fitted in the span of the references
 (X = U S V^T, features X V, weights mapped back by V): exact for a linear SVM, whose weights lie in that
 span, and R-dimensional instead of D-dimensional. At run time a frame is scored by one matrix product
-(``mapfile.Svm``); the ``svm`` matcher takes the place with the highest decision value.
+(``map.model.Svm``); the ``svm`` matcher takes the place with the highest decision value.
 """
 from __future__ import annotations
 
