@@ -112,3 +112,21 @@ def test_camera_stops_are_stop_and_go_with_new_exposures(tmp_path, small_queries
     base = cv2.imread(str(sources[1])).astype(float)
     a, b = (cv2.imread(str(tmp_path / "s" / n)).astype(float) for n in names[2:4])
     assert a.shape == base.shape and 1.0 < np.abs(a - base).mean() < 8.0 and not np.array_equal(a, b)
+
+
+def test_ground_truth_as_spreadsheets_write_it(tmp_path) -> None:
+    """Excel / LibreOffice: a byte-order mark, CRLF line ends, blank lines and rows of empty cells read as the
+    plain file does; a query's second row is refused naming its line (and whether it contradicts the first)."""
+    plain = tmp_path / "plain.csv"
+    plain.write_text("query,references\n0,0 1\n1,\n2,2\n")
+    sheet = tmp_path / "sheet.csv"
+    sheet.write_bytes(b"\xef\xbb\xbfquery,references\r\n0,0 1\r\n\r\n1,\r\n,\r\n2,2\r\n,\r\n\r\n")
+    np.testing.assert_array_equal(groundtruth.load_csv(sheet), groundtruth.load_csv(plain))
+    twice = tmp_path / "twice.csv"
+    twice.write_text("query,references\n0,0\n1,1\n0,0\n")
+    with pytest.raises(VprError, match=r"twice.csv: line 4: query 0 has a row already \(line 2\)$"):
+        groundtruth.load_csv(twice)
+    clash = tmp_path / "clash.csv"
+    clash.write_text("query,references\n0,0\n1,1\n1,5\n")
+    with pytest.raises(VprError, match="line 4: query 1 has a row already .line 3., with other references"):
+        groundtruth.load_csv(clash)

@@ -131,6 +131,39 @@ def test_model_metadata_mutations(edits: dict, drop: bool) -> None:
     assert all(math.isfinite(v) for v in checked["mean"] + checked["std"]) and min(checked["std"]) > 0
 
 
+@st.composite
+def spreadsheet_csv(draw: st.DrawFn) -> bytes:
+    """A ground-truth CSV as a spreadsheet may save it: a byte-order mark or not, CRLF or LF, blank lines and
+    rows of empty cells, quoted cells, duplicated and out-of-order rows, stray text."""
+    cell = st.one_of(st.integers(-2, 30).map(str), st.text(alphabet=" 0123456789x\"", max_size=6),
+                     st.just(""), st.lists(st.integers(0, 30), max_size=3).map(lambda v: " ".join(map(str, v))))
+    rows = draw(st.lists(st.tuples(cell, cell).map(lambda r: f'"{r[0]}",{r[1]}' if draw(st.booleans()) else
+                                                   f"{r[0]},{r[1]}") | st.sampled_from(["", ",", ",,"]),
+                         max_size=8))
+    end = draw(st.sampled_from(["\n", "\r\n"]))
+    text = end.join([draw(st.sampled_from(["query,references", "Query,References", "query;references"]))] + rows)
+    return (b"\xef\xbb\xbf" if draw(st.booleans()) else b"") + text.encode()
+
+
+@FUZZ
+@given(data=st.one_of(st.binary(max_size=120), st.text(max_size=80).map(lambda t: t.encode("utf-8", "surrogatepass")),
+                      spreadsheet_csv()))
+def test_csv_readers_take_any_bytes(tmp_path: Path, data: bytes) -> None:
+    """Every CSV reader (ground truth, positions, timestamps), through the same functions the CLI calls, on
+    any bytes, any Unicode text and spreadsheet-style files: a valid result or one VprError line naming the
+    file, never another exception."""
+    from vpr_edge.frames.images import read_stamps
+    from vpr_edge.positions import read_csv as read_positions
+
+    path = tmp_path / "f.csv"
+    path.write_bytes(data)
+    for read in (truth.load_csv, lambda p: read_positions(p, None), lambda p: read_stamps(p, ["a.png"])):
+        try:
+            read(path)
+        except VprError as e:
+            assert str(path) in str(e) and "\n" not in str(e)
+
+
 @FUZZ
 @given(text=st.text(alphabet="0123456789 ,-\nqueryreferencs.x\"", max_size=80))
 def test_ground_truth_csv(tmp_path: Path, text: str) -> None:

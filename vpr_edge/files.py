@@ -316,14 +316,17 @@ def _describe(head: bytes, path: Path) -> str:
     return "unknown binary format"
 
 
-def read_csv_rows(path: str | os.PathLike[str], what: str) -> list[list[str]]:
-    """Every row of a CSV file (the header first); VprError ``path: cannot read WHAT (reason)`` for a missing,
-    unreadable or non-text file."""
+def read_csv_rows(path: str | os.PathLike[str], what: str) -> list[tuple[int, list[str]]]:
+    """Every row of a CSV file (the header first) with its line number, as spreadsheets write them: UTF-8
+    with or without a byte-order mark, LF or CRLF line ends, blank lines skipped (a row of empty cells,
+    ``,,``, is kept: the reader says what it means). VprError ``path: cannot read WHAT (reason)`` for a
+    missing, unreadable or non-text file."""
     import csv
 
     try:
-        with open(path, newline="") as f:
-            return list(csv.reader(f))
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            reader = csv.reader(f)
+            return [(reader.line_num, row) for row in reader if row]
     except (OSError, UnicodeDecodeError, csv.Error) as e:
         raise VprError(f"{path}: cannot read {what} ({getattr(e, 'strerror', None) or e})") from None
 

@@ -158,7 +158,7 @@ def read_csv(path: str | os.PathLike[str], names: Sequence[str] | None = None) -
     the fixes either side (with a warning); one before the first fix or after the last is an error."""
     path = Path(path)
     rows = read_csv_rows(path, "positions")
-    head = [c.strip().lower() for c in rows[0]] if rows else []
+    head = [c.strip().lower() for c in rows[0][1]] if rows else []
     found = [frame for frame, cols in FRAMES.items() if all(c in head for c in cols)]
     if len(found) != 1:
         raise VprError(f"{path}: positions need columns x,y (metres) or lat,lon (degrees) in the header"
@@ -168,7 +168,7 @@ def read_csv(path: str | os.PathLike[str], names: Sequence[str] | None = None) -
     extra = {"heading": next((head.index(c) for c in ("heading", "yaw") if c in head), None),
              "altitude": next((head.index(c) for c in _ALTITUDE if c in head), None)}
     name_col = next((head.index(c) for c in _NAME_COLUMNS if c in head), None)
-    body = [(n + 2, row) for n, row in enumerate(rows[1:]) if row]   # "," is a row without a fix
+    body = rows[1:]   # "," is a row without a fix
     if not body:
         raise VprError(f"{path}: no positions")
     count = len(names) if names is not None else len(body)

@@ -35,14 +35,21 @@ def pad(sets: Sequence[Sequence[int]]) -> np.ndarray:
 def load_csv(path: str | os.PathLike[str]) -> np.ndarray:
     """The project's ground-truth CSV -> (Q, T) padded truth."""
     rows = read_csv_rows(path, "ground truth")
-    if not rows or [c.strip() for c in rows[0][:2]] != ["query", "references"]:
+    rows = [(n, row) for n, row in rows if any(c.strip() for c in row)]   # a spreadsheet's empty rows
+    if not rows or [c.strip().lower() for c in rows[0][1][:2]] != ["query", "references"]:
         raise VprError(f"{path}: not a ground-truth CSV (expected the header 'query,references')")
     out: dict[int, list[int]] = {}
-    for n, row in enumerate(rows[1:], start=2):
+    line_of: dict[int, int] = {}
+    for n, row in rows[1:]:
         try:
-            out[int(row[0])] = [int(v) for v in (row[1].split() if len(row) > 1 else [])]
+            q = int(row[0])
+            refs = [int(v) for v in (row[1].split() if len(row) > 1 else [])]
         except ValueError:
             raise VprError(f"{path}: line {n}: expected 'query,ref ref ...'") from None
+        if q in out:
+            raise VprError(f"{path}: line {n}: query {q} has a row already (line {line_of[q]})"
+                           + ("" if sorted(out[q]) == sorted(refs) else ", with other references"))
+        out[q], line_of[q] = refs, n
     if sorted(out) != list(range(len(out))) or not out:
         raise VprError(f"{path}: query indices must run 0..Q-1 without gaps")
     if any(v < 0 for refs in out.values() for v in refs):

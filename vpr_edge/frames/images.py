@@ -67,13 +67,13 @@ def read_stamps(path: str | os.PathLike[str], names: list[str]) -> list[float]:
 
     path = Path(path)
     rows = read_csv_rows(path, "timestamps")
-    head = [c.strip().lower() for c in rows[0]] if rows else []
+    head = [c.strip().lower() for c in rows[0][1]] if rows else []
     key = next((c for c in ("frame", "name") if c in head), None)
     if key is None or "stamp" not in head:
         raise VprError(f"{path}: timestamps need the header frame,stamp (seconds)")
     k, s = head.index(key), head.index("stamp")
     found: dict[str, float] = {}
-    for line, row in enumerate(rows[1:], start=2):
+    for line, row in rows[1:]:
         if not any(cell.strip() for cell in row):
             continue
         try:
