@@ -156,6 +156,31 @@ def test_corrupt_frame_is_reported_and_skipped(tmp_path: Path, small_map: Path, 
 
 
 @pytest.mark.slow
+def test_links_that_lead_nowhere_are_frames_that_cannot_be_read(tmp_path: Path, small_map: Path,
+                                                                small_queries: Path, small_refs: Path) -> None:
+    """A dangling link and a link loop in a frame folder are frames that cannot be read, like a broken file:
+    localize skips each with a warning naming it and the frames after them keep their numbers; build-map
+    refuses such a reference naming it."""
+    frames = tmp_path / "frames"
+    shutil.copytree(small_queries, frames)
+    (frames / "0000004.jpg").unlink()
+    (frames / "0000004.jpg").symlink_to(tmp_path / "gone.jpg")            # target gone
+    (frames / "0000007.jpg").unlink()
+    (frames / "0000007.jpg").symlink_to(frames / "0000007.jpg")           # a loop
+    proc = run("localize", "-m", small_map, "-s", frames)
+    assert proc.returncode == 0, proc.stderr
+    assert "0000004.jpg" in proc.stderr and "0000007.jpg" in proc.stderr and proc.stderr.count("frame skipped") == 2
+    idx = [int(r["frame_index"]) for r in csv.DictReader(proc.stdout.splitlines())]
+    assert idx == [i for i in range(24) if i not in (4, 7)]
+    refs = tmp_path / "refs"
+    shutil.copytree(small_refs, refs)
+    (refs / "0000002.jpg").unlink()
+    (refs / "0000002.jpg").symlink_to(tmp_path / "gone.jpg")
+    assert_one_line_error(run("build-map", refs, "-o", tmp_path / "m.npz"), "0000002.jpg", "cannot read")
+    assert not (tmp_path / "m.npz").exists()
+
+
+@pytest.mark.slow
 def test_build_map_bad_input(tmp_path: Path, small_refs: Path) -> None:
     empty = tmp_path / "empty"
     empty.mkdir()
@@ -283,3 +308,19 @@ def test_append_grows_the_map_with_its_codebook(tmp_path: Path, small_refs: Path
     assert_one_line_error(run("build-map", second, "-o", grown, "--append", "--components", "8"), "--components")
     assert_one_line_error(run("build-map", second, "-o", tmp_path / "none.npz", "--append"), "none.npz",
                           "no such file")
+
+
+@pytest.mark.slow
+def test_a_service_account_sees_no_library_noise(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
+    """Run as a systemd DynamicUser service is (HOME not writable, the working folder /): stderr holds
+    nothing but the tool's own lines (no onnxruntime warnings, no colour codes)."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k not in ("HOME", "XDG_CACHE_HOME")} | {"HOME": "/nonexistent"}
+    out = tmp_path / "m.csv"
+    proc = subprocess.run([sys.executable, "-m", "vpr_edge", "localize", "-m", str(small_map), "-s",
+                           str(small_queries), "-o", str(out)], capture_output=True, text=True, timeout=600,
+                          cwd="/", env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert "\x1b[" not in proc.stderr and "onnxruntime" not in proc.stderr.lower(), proc.stderr
+    assert all(line.startswith("vpr-edge") for line in proc.stderr.splitlines()), proc.stderr

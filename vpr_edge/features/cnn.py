@@ -96,6 +96,7 @@ class FeatureExtractor:
         self.path = Path(model_path)
         if not self.path.is_file():
             raise VprError(f"{self.path}: model file not found (pass --model PATH)")
+        ort.set_default_logger_severity(3)   # errors only: no warnings of its own on the tool's stderr
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = max(0, int(threads))
         opts.log_severity_level = 3

@@ -17,12 +17,16 @@ VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".m
 
 
 def list_images(folder: str | os.PathLike[str]) -> list[Path]:
-    """Image files directly in ``folder``, sorted by name. Raises VprError if missing or empty."""
+    """Image files directly in ``folder``, sorted by name. Raises VprError if missing or empty. A link named
+    as an image is listed even when it leads nowhere (its target gone, or a loop): it holds a frame's place,
+    so the frames after it keep their numbers, and reading it fails as a broken file's does (a stream skips
+    it with a warning naming it; a map's references refuse it)."""
     folder = Path(folder)
     if not folder.is_dir():
         raise VprError(f"{folder}: not a folder")
     try:
-        entries = sorted(p for p in folder.iterdir() if not p.name.startswith(".") and p.is_file())
+        entries = sorted(p for p in folder.iterdir()
+                         if not p.name.startswith(".") and (p.is_symlink() or p.is_file()))
     except OSError as e:
         raise VprError(f"{folder}: cannot list ({e.strerror or e})") from None
     files = [p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES]
