@@ -184,3 +184,31 @@ def test_writer_lock_serialises_two_writers(tmp_path: Path) -> None:
     out, err = waiting.communicate(timeout=60)
     assert waiting.returncode == 0 and float(out.split()[1]) >= released, (out, err)
     assert "another vpr-edge is writing it; waiting" in err
+
+
+def test_outputs_at_the_name_limit_and_fifos(tmp_path: Path) -> None:
+    """A legal 250-byte output name (multi-byte characters included) is written: its temporary file's and
+    lock's names stay within 255 bytes; a dead writer's temporary file of that name is found and removed.
+    A FIFO given as an output is refused at once (opening it would wait for a reader)."""
+    import stat
+
+    from vpr_edge.errors import VprError
+    from vpr_edge.files import atomic_output, check_writable, remove_stale_temps, temp_stem, writer_lock
+
+    name = "é" * 120 + "x" * 6 + ".npz"                       # 240 + 6 + 4 = 250 bytes
+    assert len(name.encode()) == 250
+    target = tmp_path / name
+    seen = []
+    with writer_lock(target), atomic_output(target) as tmp:
+        seen = [p.name for p in tmp_path.iterdir()]
+        tmp.write_bytes(b"data")
+    assert target.read_bytes() == b"data" and all(len(os.fsencode(n)) <= 255 for n in seen)
+    dead = tmp_path / f".{temp_stem(target)}.999999999.abcdefgh.tmp"   # no such process
+    dead.write_bytes(b"left by kill -9")
+    assert remove_stale_temps(target) == [dead] and not dead.exists() and target.exists()
+    fifo = tmp_path / "out.fifo"
+    os.mkfifo(fifo)
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+    with pytest.raises(VprError, match="out.fifo: a FIFO, socket or device"):
+        check_writable(fifo)
+    check_writable("/dev/null")                               # still an output, written in place

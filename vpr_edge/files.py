@@ -43,11 +43,23 @@ def output_target(path: str | os.PathLike[str]) -> Path:
     return target
 
 
+def _own_stream(path: str | os.PathLike[str]) -> bool:
+    """True for this process's own standard streams and descriptors (``/dev/stdout``, ``/dev/stderr``,
+    ``/dev/fd/N``, ``/proc/self/fd/N``) and ``/dev/null``: the special files an output may name."""
+    text = os.path.abspath(os.fspath(path))
+    return text in ("/dev/stdout", "/dev/stderr", "/dev/null") or \
+        text.startswith(("/dev/fd/", "/proc/self/fd/", f"/proc/{os.getpid()}/fd/"))
+
+
 def check_writable(path: str | os.PathLike[str]) -> None:
     """Raise VprError unless ``path`` can be written as a file: its folder exists and is writable, and it
-    is not itself a folder (a symbolic link: its target's). Special files (``is_special``) are written in
-    place. Called before any work, so that bad output paths fail at once."""
+    is not itself a folder (a symbolic link: its target's). Of the special files (``is_special``) only this
+    process's own streams and ``/dev/null`` are outputs (written in place); another FIFO, socket or device
+    is refused at once (opening a FIFO nobody reads would wait for ever). Called before any work, so that
+    bad output paths fail at once."""
     if is_special(path):
+        if not _own_stream(path):
+            raise VprError(f"{path}: a FIFO, socket or device, not a file to write (name a file, or /dev/stdout)")
         if not os.access(path, os.W_OK):
             raise VprError(f"{path}: not writable")
         return
@@ -60,7 +72,7 @@ def check_writable(path: str | os.PathLike[str]) -> None:
     if path.exists() and not path.is_file():
         raise VprError(f"{path}: is not a regular file, expected a file name to write")
     try:  # os.access is not enough: root passes it on read-only and virtual file systems
-        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
+        fd, probe = tempfile.mkstemp(prefix=f".{temp_stem(path)}.", suffix=".probe", dir=folder)
         os.close(fd)
         os.unlink(probe)
     except OSError as e:
@@ -116,12 +128,27 @@ def _alive(pid: int) -> bool:
     return True
 
 
+NAME_MAX = 255   # bytes in one file name (ext4, xfs, btrfs, tmpfs)
+
+
+def temp_stem(target: Path) -> str:
+    """The part of ``target``'s name its temporary files carry (``.STEM.PID.XXXXXXXX.tmp``): the name,
+    cut by whole characters so that the temporary name stays within ``NAME_MAX``
+    whatever the target's length."""
+    room = NAME_MAX - len(f"...{2**32}.xxxxxxxx{TEMP_SUFFIX}")   # dots, the widest PID, mkstemp's 8 characters
+    stem = target.name
+    while len(os.fsencode(stem)) > room:   # whole characters only
+        stem = stem[:-1]
+    return stem
+
+
 def remove_stale_temps(target: Path) -> list[Path]:
     """Remove the temporary files that writers of ``target`` which have died (killed, power lost) left beside
-    it: ``.NAME.PID.*.tmp`` whose PID is no longer running. Returns what was removed."""
+    it: ``.STEM.PID.*.tmp`` (``temp_stem``) whose PID is no longer running. Returns what was removed."""
     removed = []
-    for tmp in target.parent.glob(f".{glob_escape(target.name)}.*{TEMP_SUFFIX}"):
-        pid = tmp.name[len(target.name) + 2:].split(".", 1)[0]
+    stem = temp_stem(target)
+    for tmp in target.parent.glob(f".{glob_escape(stem)}.*{TEMP_SUFFIX}"):
+        pid = tmp.name[len(stem) + 2:].split(".", 1)[0]
         if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
             tmp.unlink(missing_ok=True)
             removed.append(tmp)
@@ -147,7 +174,8 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
     check_writable(path)
     target = output_target(path)
     remove_stale_temps(target)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.{os.getpid()}.", suffix=TEMP_SUFFIX, dir=target.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{temp_stem(target)}.{os.getpid()}.", suffix=TEMP_SUFFIX,
+                               dir=target.parent)
     os.close(fd)
     try:
         yield Path(tmp)
@@ -177,7 +205,7 @@ def writer_lock(path: str | os.PathLike[str]) -> Iterator[None]:
     from vpr_edge.errors import warn
 
     target = output_target(path)
-    lock = target.parent / f".{target.name}.lock"
+    lock = target.parent / f".{temp_stem(target)}.lock"
     try:
         fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
     except OSError as e:
