@@ -212,3 +212,29 @@ def test_outputs_at_the_name_limit_and_fifos(tmp_path: Path) -> None:
     with pytest.raises(VprError, match="out.fifo: a FIFO, socket or device"):
         check_writable(fifo)
     check_writable("/dev/null")                               # still an output, written in place
+
+
+@pytest.mark.slow
+def test_file_names_that_are_not_utf8(tmp_path: Path, small_queries: Path, small_refs: Path) -> None:
+    """Frames and references named in another encoding (the bytes ``caf\\xe9``): read, matched, written to CSV
+    and JSON lines and named in messages with such bytes as ``\\xNN``, never a failure of the error path."""
+    import csv
+    import json
+
+    refs, frames = Path(os.fsdecode(bytes(tmp_path) + b"/r\xe9fs")), tmp_path / "frames"
+    shutil.copytree(small_refs, refs)
+    shutil.copytree(small_queries, frames)
+    os.rename(os.fsencode(refs / "0000003.jpg"), os.fsencode(refs) + b"/caf\xe9.jpg")
+    os.rename(os.fsencode(frames / "0000005.jpg"), os.fsencode(frames) + b"/0000005 caf\xe9.jpg")
+    (frames / os.fsdecode(b"0000009 z\xe9.jpg")).write_bytes(b"not an image")
+    m = tmp_path / "m.npz"
+    assert _run("build-map", refs, "-o", m, "--components", "2").returncode == 0
+    proc = _run("localize", "-m", m, "-s", frames, "-o", tmp_path / "out.csv")
+    assert proc.returncode == 0, proc.stderr
+    assert "0000009 z\\xe9.jpg: cannot decode" in proc.stderr and "Traceback" not in proc.stderr
+    rows = list(csv.DictReader((tmp_path / "out.csv").open(encoding="utf-8")))
+    assert "0000005 caf\\xe9.jpg" in [r["frame"] for r in rows] and len(rows) == 24   # the bad one skipped
+    js = _run("localize", "-m", m, "-s", frames, "--format", "jsonl")
+    assert js.returncode == 0 and len([json.loads(line) for line in js.stdout.splitlines()]) == 24
+    bad = _run("build-map", frames, "-o", tmp_path / "n.npz", "--components", "2")
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "z\\xe9.jpg: cannot decode" in bad.stderr

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import VprError, printable
 from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.frames.images import MIN_SIDE, Frame
@@ -58,8 +58,13 @@ class Match:
     along_m: float | None = None
 
     def fields(self) -> dict:
-        """The line as a dict in the schema's order (JSON lines; CSV writes None as an empty cell)."""
-        return {k: getattr(self, k) for k in FIELDS}
+        """The line as a dict in the schema's order (JSON lines; CSV writes None as an empty cell); a file
+        name whose bytes are not UTF-8 with those bytes as ``\\xNN`` (``errors.printable``)."""
+        line = {k: getattr(self, k) for k in FIELDS}
+        for k in ("frame", "ref"):
+            if line[k] is not None:
+                line[k] = printable(line[k])
+        return line
 
 
 FIELDS = ("frame_index", "frame", "stamp", "ref_index", "ref", "x", "y", "lat", "lon", "heading", "along_m",

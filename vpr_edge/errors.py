@@ -29,11 +29,18 @@ def terminate_cleanly() -> None:
     signal.signal(signal.SIGTERM, handler)
 
 
+def printable(text: str) -> str:
+    """``text`` with the bytes of a file name that is not UTF-8 (held as lone surrogates, Python's
+    ``surrogateescape``) written ``\\xNN``, as Git quotes such names: every message and output line can be
+    written, and says which bytes the name has."""
+    return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
 def warn(message: str) -> None:
     """Print ``vpr-edge: warning: message`` on stderr, once per distinct message in this process."""
     if message not in _said:
         _said.add(message)
-        print(f"vpr-edge: warning: {message}", file=sys.stderr, flush=True)
+        print(f"vpr-edge: warning: {printable(message)}", file=sys.stderr, flush=True)
 
 
 def os_error_line(e: OSError) -> str:
@@ -55,7 +62,7 @@ def one_line_errors(prog: str, main: Callable[[], int]) -> int:
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
     except VprError as e:
-        print(f"{prog}: error: {e}", file=sys.stderr)
+        print(f"{prog}: error: {printable(str(e))}", file=sys.stderr)
     except OSError as e:
-        print(f"{prog}: error: {os_error_line(e)}", file=sys.stderr)
+        print(f"{prog}: error: {printable(os_error_line(e))}", file=sys.stderr)
     return 2

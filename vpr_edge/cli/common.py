@@ -12,7 +12,7 @@ import typer
 
 from vpr_edge import __version__
 from vpr_edge.encoders import ENCODERS
-from vpr_edge.errors import Terminated, VprError, os_error_line, warn
+from vpr_edge.errors import Terminated, VprError, os_error_line, printable, warn
 from vpr_edge.features import FRONT_ENDS
 from vpr_edge.features.choice import PRECISIONS
 from vpr_edge.features.resize import RESIZE
@@ -52,13 +52,13 @@ def user_errors() -> Iterator[None]:
     try:
         yield
     except (VprError, ValueError) as e:
-        typer.echo(f"vpr-edge: error: {e}", err=True)
+        typer.echo(f"vpr-edge: error: {printable(str(e))}", err=True)
         raise typer.Exit(2) from None
     except BrokenPipeError:  # the reader went away (``| head``): stop quietly, as Unix tools do
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         raise typer.Exit(1) from None
     except OSError as e:  # disk full, permission lost mid-run: name the file and the reason
-        typer.echo(f"vpr-edge: error: {os_error_line(e)}", err=True)
+        typer.echo(f"vpr-edge: error: {printable(os_error_line(e))}", err=True)
         raise typer.Exit(2) from None
     except KeyboardInterrupt:
         typer.echo("vpr-edge: interrupted", err=True)

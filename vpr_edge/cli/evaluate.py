@@ -9,7 +9,7 @@ import typer
 
 from vpr_edge.cli.common import (LIST_PARAMS, PARAM_HELP, PRECISION_HELP, THREADS_HELP, PrecisionOpt, app,
                                  param_options_for_all, user_errors)
-from vpr_edge.errors import VprError, warn
+from vpr_edge.errors import VprError, printable, warn
 from vpr_edge.evaluation import Source, Truth, evaluate
 from vpr_edge.evaluation.run import default_matchers
 from vpr_edge.features.choice import DEFAULT_PRECISION
@@ -134,7 +134,8 @@ def evaluate_cmd(
         use_threads(threads)
 
         def skip(frame: Frame) -> None:
-            typer.echo(f"vpr-edge: warning: {frame.error}; frame skipped (and its ground-truth row)", err=True)
+            typer.echo(f"vpr-edge: warning: {printable(frame.error)}; frame skipped (and its ground-truth row)",
+                       err=True)
 
         result = evaluate(source, truth, matchers, tolerance, min_confidence, skip, curves)
         sim = result.similarity

@@ -15,7 +15,7 @@ import typer
 from vpr_edge.api import FIELDS, Localizer, Match
 from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, PRECISION_HELP, THREADS_HELP, ModeOpt,
                                  PrecisionOpt, app, params_for, user_errors, with_param_options)
-from vpr_edge.errors import VprError
+from vpr_edge.errors import VprError, printable
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
 from vpr_edge.frames.images import Frame, open_stream
@@ -151,7 +151,7 @@ def localize_cmd(
         def skip(frame: Frame) -> None:
             nonlocal skipped
             skipped += 1
-            typer.echo(f"\nvpr-edge: warning: {frame.error}; frame skipped", err=True)  # \n: off the bar
+            typer.echo(f"\nvpr-edge: warning: {printable(frame.error)}; frame skipped", err=True)  # \n: off the bar
 
         with contextlib.ExitStack() as stack:
             if out:
