@@ -163,3 +163,33 @@ def test_evaluate_runs_the_stream_matcher_as_localize_does(api_map: Path, small_
                                                            if not lost]
     blind = get_matcher("stream").run(loc.similarity(loc.encode([load_image(f) for f in sorted(stream.iterdir())])))
     assert not np.allclose(blind.scores, report.scores, atol=1e-5)       # the cue made a difference here
+
+
+def test_a_map_rewritten_in_place_stops_cleanly(tmp_path: Path, api_map: Path, small_queries: Path,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """``cp new.npz route.npz`` while a memory-mapped map is in use (the same file truncated and rewritten):
+    the next frame stops with MapChanged naming the map, before any of its pages is read (reading a
+    truncated mapping would kill the process with SIGBUS). A map below ``MMAP_MIN_BYTES`` is read into memory
+    and a rewrite cannot touch it."""
+    import shutil
+
+    import vpr_edge.map.query as query
+    from vpr_edge.errors import MapChanged
+
+    route = tmp_path / "route.npz"
+    shutil.copy(api_map, route)
+    images = [load_image(f) for f in sorted(small_queries.iterdir())[:4]]
+    small = Localizer(route, threads=1)
+    assert not small.query.mapped
+    monkeypatch.setattr(query, "MMAP_MIN_BYTES", 0)
+    loc = Localizer(route, threads=1)
+    assert loc.query.mapped
+    loc.push(images[0])
+    with open(route, "r+b") as f:   # what cp does to an existing file: truncate, write
+        data = f.read()
+        f.seek(0)
+        f.truncate()
+        f.write(data[: len(data) // 2])
+    with pytest.raises(MapChanged, match=f"{route}: the map file changed while in use"):
+        loc.push(images[1])
+    assert small.push(images[1]).frame_index == 0           # the in-memory map goes on

@@ -153,6 +153,8 @@ class Localizer:
         moved, ``matchers.MotionCue``): only the similarities the matcher asks for are computed (a local search
         around a locked position reads a window of the map, not all of it; with ``coarse``, a whole-route
         frame reads the signs and the best candidates)."""
+        self.query.check_unchanged()   # a memory-mapped map rewritten under us: stop before reading it
+
         def similarity(refs: np.ndarray | None) -> np.ndarray:
             if refs is None and self._coarse is not None:
                 return self._coarse.similarity(enc)

@@ -11,6 +11,11 @@ class VprError(Exception):
     """A user-facing error: bad input file, mismatched map, missing dependency. Message is one line."""
 
 
+class MapChanged(VprError):
+    """The map file a running command reads was rewritten in place (``cp new.npz route.npz``): its
+    memory-mapped rows are no longer the map that was opened. The command stops, keeping what it wrote."""
+
+
 class Terminated(BaseException):
     """SIGTERM (how systemd and container runtimes stop a service), raised where the process is, so that
     every ``finally`` and ``except BaseException`` runs: temporary files are removed, nothing is half

@@ -15,7 +15,7 @@ import typer
 from vpr_edge.api import FIELDS, Localizer, Match
 from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, PRECISION_HELP, THREADS_HELP, ModeOpt,
                                  PrecisionOpt, app, params_for, user_errors, with_param_options)
-from vpr_edge.errors import VprError, printable
+from vpr_edge.errors import MapChanged, VprError, printable
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
 from vpr_edge.frames.images import Frame, open_stream
@@ -153,6 +153,7 @@ def localize_cmd(
             skipped += 1
             typer.echo(f"\nvpr-edge: warning: {printable(frame.error)}; frame skipped", err=True)  # \n: off the bar
 
+        changed: MapChanged | None = None
         with contextlib.ExitStack() as stack:
             if out:
                 sink = stack.enter_context(open(stack.enter_context(atomic_output(out)), "w", newline=""))
@@ -162,11 +163,16 @@ def localize_cmd(
             written = 0
             with typer.progressbar(length=count or 0, label="localizing", file=sys.stderr,
                                    hidden=count is None or not sys.stderr.isatty()) as bar:
-                for match in localizer.run(frames, batch_size, skip):
-                    write(match)
-                    written += 1
-                    bar.update(1)
-            if written == 0:
+                try:
+                    for match in localizer.run(frames, batch_size, skip):
+                        write(match)
+                        written += 1
+                        bar.update(1)
+                except MapChanged as e:   # stop here; what was written is kept (the output is renamed)
+                    changed = e
+            if written == 0 and changed is None:
                 raise VprError(f"{stream}: none of its frames could be decoded")
+        if changed is not None:
+            raise changed
         if skipped:
             typer.echo(f"vpr-edge: {skipped} undecodable frame(s) skipped", err=True)

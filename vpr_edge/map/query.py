@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vpr_edge.errors import MapChanged
 from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.frames.images import Frame
@@ -17,17 +18,40 @@ from vpr_edge.map.io import load_map
 from vpr_edge.map.model import PlaceMap
 
 
+MMAP_MIN_BYTES = 64 << 20   # smaller maps are read into memory: no later rewrite of the file can pull them away
+
+
 class MapQuery:
-    """``path``'s map (memory-mapped) and its front end (``map_front_end``: ``model`` if given, else the
-    map's own; ``precision`` its numeric form; ``ort_threads`` onnxruntime's threads, 0 = its default).
-    VprError for a bad map or a model that does not fit it."""
+    """``path``'s map and its front end (``map_front_end``: ``model`` if given, else the map's own;
+    ``precision`` its numeric form; ``ort_threads`` onnxruntime's threads, 0 = its default). A map of
+    ``MMAP_MIN_BYTES`` or more stays memory-mapped (``mapped``), and ``check_unchanged`` tells whether its file
+    was rewritten since; a smaller one is read into memory. VprError for a bad map or a model that does not
+    fit it."""
 
     def __init__(self, path: str | os.PathLike[str], model: str | os.PathLike[str] | None = None,
                  ort_threads: int = 0, precision: str = DEFAULT_PRECISION) -> None:
         self.path = Path(path)
-        self.map: PlaceMap = load_map(path, mmap=True)
+        self._opened = self._identity()
+        self.mapped = self._opened is not None and self._opened[0] >= MMAP_MIN_BYTES
+        self.map: PlaceMap = load_map(path, mmap=self.mapped)
         self.front: FrontEnd = map_front_end(self.map, path, Path(model) if model else None, ort_threads,
                                              precision)
+
+    def _identity(self) -> tuple[int, int, int] | None:
+        """(size, modification time ns, inode) of the map file (None: it cannot be read; load_map says why)."""
+        try:
+            st = os.stat(self.path)
+        except OSError:
+            return None
+        return st.st_size, st.st_mtime_ns, st.st_ino
+
+    def check_unchanged(self) -> None:
+        """``MapChanged`` naming the map if a memory-mapped map's file was rewritten or replaced since it was
+        opened (reading its pages then would be reading another map, or crash the process on a truncated
+        one); nothing for a map in memory. One ``stat`` a call."""
+        if self.mapped and self._identity() != self._opened:
+            raise MapChanged(f"{self.path}: the map file changed while in use (rewritten in place?); stopped, "
+                             f"the results so far kept: run again with the new map")
 
     @property
     def names(self) -> list[str]:
