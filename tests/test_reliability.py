@@ -238,3 +238,33 @@ def test_file_names_that_are_not_utf8(tmp_path: Path, small_queries: Path, small
     assert js.returncode == 0 and len([json.loads(line) for line in js.stdout.splitlines()]) == 24
     bad = _run("build-map", frames, "-o", tmp_path / "n.npz", "--components", "2")
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "z\\xe9.jpg: cannot decode" in bad.stderr
+
+
+def test_a_replaced_output_keeps_its_mode_and_dead_writers_temps_go(tmp_path: Path, capsys) -> None:
+    """Writing over a file keeps its mode (0444 stays 0444, 0640 stays 0640) where the user may write it,
+    and one the user may not write is refused as cp refuses it (root may: cp does too); a dead writer's
+    temporary file is removed and said."""
+    import stat
+
+    from vpr_edge.errors import VprError
+    from vpr_edge.files import atomic_output, temp_stem
+
+    for mode in (0o640, 0o444):
+        target = tmp_path / f"m{mode:o}.npz"
+        target.write_bytes(b"old")
+        os.chmod(target, mode)
+        if os.access(target, os.W_OK):
+            with atomic_output(target) as tmp:
+                tmp.write_bytes(b"new")
+            assert target.read_bytes() == b"new" and stat.S_IMODE(target.stat().st_mode) == mode
+        else:
+            with pytest.raises(VprError, match=f"m{mode:o}.npz: write-protected"):
+                with atomic_output(target) as tmp:
+                    tmp.write_bytes(b"new")
+            assert target.read_bytes() == b"old"
+    target = tmp_path / "route.npz"
+    dead = tmp_path / f".{temp_stem(target)}.999999999.abcdefgh.tmp"
+    dead.write_bytes(b"left by kill -9")
+    with atomic_output(target) as tmp:
+        tmp.write_bytes(b"map")
+    assert not dead.exists() and "removed 1 temporary file(s) left by writers that died" in capsys.readouterr().err

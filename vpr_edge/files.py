@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import VprError, warn
 
 META_KEY = "__meta__"
 
@@ -163,9 +163,10 @@ def glob_escape(name: str) -> str:
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside ``path`` (beside its target, for a symbolic link); when the block ends
-    without error, fsync it, give it the umask's mode and rename it over the target. On error, Ctrl-C or
+    without error, fsync it, give it the replaced file's mode and owner (a new file: the umask's mode) and
+    rename it over the target; a target this user may not write is refused first, as ``cp`` refuses it. On error, Ctrl-C or
     SIGTERM the temporary file is removed and the target is left as it was; the temporary files of writers
-    that died are removed first. A special file (``/dev/stdout``) is yielded as it is, written in place. An
+    that died are removed first (and said). A special file (``/dev/stdout``) is yielded as it is, written in place. An
     OSError without a file name (a full disk mid-write) is given ``path``'s name."""
     path = Path(path)
     if is_special(path):
@@ -173,7 +174,12 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
         return
     check_writable(path)
     target = output_target(path)
-    remove_stale_temps(target)
+    was = target.stat() if target.is_file() else None
+    if was is not None and not os.access(target, os.W_OK):
+        raise VprError(f"{path}: write-protected (mode {stat.S_IMODE(was.st_mode):04o}); not replaced")
+    stale = remove_stale_temps(target)
+    if stale:
+        warn(f"{target}: removed {len(stale)} temporary file(s) left by writers that died (e.g. {stale[0].name})")
     fd, tmp = tempfile.mkstemp(prefix=f".{temp_stem(target)}.{os.getpid()}.", suffix=TEMP_SUFFIX,
                                dir=target.parent)
     os.close(fd)
@@ -181,9 +187,14 @@ def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
         yield Path(tmp)
         with open(tmp, "rb+") as f:
             os.fsync(f.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
+        if was is not None:   # a file replaced keeps its mode and, where allowed, its owner
+            os.chmod(tmp, stat.S_IMODE(was.st_mode))
+            with contextlib.suppress(OSError):
+                os.chown(tmp, was.st_uid, was.st_gid)
+        else:
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, target)
     except OSError as e:
         Path(tmp).unlink(missing_ok=True)
