@@ -54,6 +54,7 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     np.savez(w / "pickled.npz", a=np.array([{"x": 1}], dtype=object))
     np.save(w / "sim.npy", np.random.default_rng(0).random((24, 24)))
     (w / "sim_bad.npy").write_bytes(b"\x93NUMPY garbage")
+    np.save(w / "sim_huge.npy", 1e200 * np.random.default_rng(0).random((24, 24)))
     write_ground_truth(w / "gt.csv", [[i] for i in range(24)])
     write_ground_truth(w / "gt_short.csv", [[i] for i in range(10)])
     (w / "gt_bad.csv").write_text("query,references\n0,zero\n")
@@ -258,6 +259,7 @@ CASES = [
     Case("ev-two-truths", EV + " --gt-positions {w}/notes.txt {w}/notes.txt", ("ground truth",)),
     Case("ev-sim-missing", "evaluate --similarity {w}/none.npy --gt {w}/gt.csv", ("none.npy",)),
     Case("ev-sim-corrupt", "evaluate --similarity {w}/sim_bad.npy --gt {w}/gt.csv", ("sim_bad.npy", "not a readable")),
+    Case("ev-sim-huge", "evaluate --similarity {w}/sim_huge.npy --gt {w}/gt.csv", ("sim_huge.npy", "overflow")),
     Case("ev-gt-missing", "evaluate --similarity {w}/sim.npy --gt {w}/nogt.csv", ("nogt.csv",)),
     Case("ev-gt-malformed", "evaluate --similarity {w}/sim.npy --gt {w}/gt_bad.csv", ("gt_bad.csv",)),
     Case("ev-gt-rows", "evaluate --similarity {w}/sim.npy --gt {w}/gt_short.csv", ("gt_short.csv", "rows")),

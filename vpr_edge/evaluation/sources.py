@@ -42,6 +42,9 @@ def sad_similarity(queries: np.ndarray, refs: np.ndarray, chunk: int = 16) -> np
     return out
 
 
+MAX_SIMILARITY = 1e100   # |value| a similarity file may hold: the matchers square and sum rows in float64
+
+
 def from_file(path: str | os.PathLike[str]) -> Similarities:
     """A (Q, R) numeric ``.npy`` matrix (rows = queries), read without pickle; VprError naming ``path``."""
     try:
@@ -54,6 +57,9 @@ def from_file(path: str | os.PathLike[str]) -> Similarities:
                        f"got shape {sim.shape} {sim.dtype}")
     if not np.isfinite(sim).all():
         raise VprError(f"{path}: similarity matrix holds NaN or infinite values")
+    if sim.size and float(np.abs(sim).max()) > MAX_SIMILARITY:
+        raise VprError(f"{path}: similarity values reach {float(np.abs(sim).max()):.3g}; beyond "
+                       f"{MAX_SIMILARITY:.0e} the matchers' sums of squares overflow: scale the matrix")
     return Similarities(sim.astype(np.float64))
 
 
