@@ -51,6 +51,9 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     (w / "truncated.npz").write_bytes(good[: len(good) // 2])
     arrays, meta = read_npz(w / "good.npz", "map", MAP_SCHEMA)
     write_npz(w / "schema0.npz", arrays, meta | {"schema": 0})
+    write_npz(w / "front_unknown.npz", arrays, meta | {"features": meta["features"] | {"name": "nosuch"}})
+    write_npz(w / "resize_unknown.npz", arrays,
+              meta | {"features": meta["features"] | {"params": {**meta["features"].get("params", {}), "resize": "x"}}})
     np.savez(w / "pickled.npz", a=np.array([{"x": 1}], dtype=object))
     np.save(w / "sim.npy", np.random.default_rng(0).random((24, 24)))
     (w / "sim_bad.npy").write_bytes(b"\x93NUMPY garbage")
@@ -107,6 +110,10 @@ LOC = "localize -m {w}/good.npz -s {w}/queries"
 EV = "evaluate --similarity {w}/sim.npy --gt {w}/gt.csv --modes single"
 
 CASES = [
+    Case("loc-map-unknown-front-end", "localize -m {w}/front_unknown.npz -s {w}/queries",
+         ("front_unknown.npz", "front end 'nosuch'")),
+    Case("loc-map-unknown-resize", "localize -m {w}/resize_unknown.npz -s {w}/queries",
+         ("resize_unknown.npz", "resize policy 'x'")),
     # build-map: inputs
     Case("bm-refs-missing", "build-map {w}/nope -o {w}/out.npz", ("nope", "not a folder")),
     Case("bm-refs-empty", "build-map {w}/empty -o {w}/out.npz", ("empty", "no images")),
