@@ -190,3 +190,38 @@ def test_similarity_files(tmp_path: Path, dtype: str, shape: list, fill: float) 
         assert str(path) in str(e) and "\n" not in str(e)
         return
     assert sims.cosine.ndim == 2 and np.isfinite(sims.cosine).all() and sims.cosine.dtype == np.float64
+
+
+@pytest.fixture(scope="module")
+def valid_codebook(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, dict]:
+    """A small valid IFV codebook file (fitted on random descriptors) as (arrays, metadata)."""
+    from vpr_edge.encoders import FitSettings, fit_encoder
+
+    local = np.random.default_rng(2).normal(size=(30, 6, 5)).astype(np.float32)
+    enc = fit_encoder("ifv", local, None, FitSettings(n_components=3, pca_dim=None), 6)
+    path = tmp_path_factory.mktemp("fuzz") / "cb.npz"
+    enc.save(path)
+    arrays, meta = read_npz(path, "codebook", (1, 2))
+    return {k: np.array(v) for k, v in arrays.items()}, meta
+
+
+@FUZZ
+@given(edits=st.dictionaries(st.sampled_from(["encoding", "input_dim", "schema", "features", "kind",
+                                              "model_sha256", "features_fingerprint", "other"]), json_values,
+                             min_size=1, max_size=3),
+       drop=st.sampled_from([None, "means", "variances", "weights", "pca_mean"]))
+def test_codebook_mutations(valid_codebook: tuple[dict, dict], tmp_path: Path, edits: dict, drop: str | None) -> None:
+    """A codebook file as build-map --codebook reads it (``load_codebook``): metadata mutated, an array
+    missing: a codebook that encodes, or one VprError line naming the file."""
+    from vpr_edge.encoders import load_codebook
+
+    arrays, meta = valid_codebook
+    path = tmp_path / "cb.npz"
+    write_npz(path, {k: v for k, v in arrays.items() if not (drop and k.endswith(drop))}, meta | edits)
+    try:
+        enc, _ = load_codebook(path)
+        x = np.random.default_rng(3).normal(size=(2, 6, enc.input_dim)).astype(np.float32)
+        out = enc.transform(x)
+        assert out.shape == (2, enc.dim) and np.isfinite(out).all()
+    except VprError as e:
+        assert str(path) in str(e) and "\n" not in str(e)

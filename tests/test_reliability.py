@@ -268,3 +268,26 @@ def test_a_replaced_output_keeps_its_mode_and_dead_writers_temps_go(tmp_path: Pa
     with atomic_output(target) as tmp:
         tmp.write_bytes(b"map")
     assert not dead.exists() and "removed 1 temporary file(s) left by writers that died" in capsys.readouterr().err
+
+
+def test_a_writer_killed_mid_write_leaves_a_temp_the_next_writer_removes(tmp_path: Path) -> None:
+    """A writer killed with SIGKILL while its output is half written (a real process, killed for real) leaves
+    its temporary file and the old map untouched; the next writer of that map removes the temporary file,
+    says so, and writes; nothing else in the folder is touched."""
+    target = tmp_path / "route.npz"
+    target.write_bytes(b"the old map")
+    (tmp_path / "other.tmp").write_bytes(b"not ours")
+    code = ("import sys, time\nfrom vpr_edge.files import atomic_output\n"
+            "with atomic_output(sys.argv[1]) as tmp:\n"
+            "    tmp.write_bytes(b'half a map')\n    print('writing', flush=True)\n    time.sleep(60)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(target)], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "writing"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    left = [p for p in tmp_path.iterdir() if p.name.startswith(".route.npz.")]
+    assert len(left) == 1 and target.read_bytes() == b"the old map"
+    again = subprocess.run([sys.executable, "-c", "import sys\nfrom vpr_edge.files import atomic_output\n"
+                            "with atomic_output(sys.argv[1]) as tmp:\n    tmp.write_bytes(b'new map')\n",
+                            str(target)], capture_output=True, text=True, timeout=60)
+    assert again.returncode == 0 and "removed 1 temporary file(s) left by writers that died" in again.stderr
+    assert not left[0].exists() and target.read_bytes() == b"new map" and (tmp_path / "other.tmp").exists()
