@@ -59,17 +59,29 @@ def default_model_path() -> Path:
     return resolve_model(None)
 
 
+MODEL_ENV = "VPR_EDGE_MODEL"   # the environment variable that names the model to run
+
+
+def model_from_env() -> Path | None:
+    """The model ``$VPR_EDGE_MODEL`` names (None: unset). Raises VprError when it names no file, rather than
+    falling through to another model. The one place the variable is read."""
+    env = os.environ.get(MODEL_ENV)
+    if not env:
+        return None
+    if not Path(env).is_file():
+        raise VprError(f"{env}: model file not found (named by the {MODEL_ENV} environment variable)")
+    return Path(env)
+
+
 def resolve_model(given: Path | None, recorded: Path | None = None) -> Path:
     """The model to run, by precedence: ``given`` (``--model``), then ``$VPR_EDGE_MODEL``, then ``recorded``
     (the file a map was built with) if it still exists, then the bundled model. Raises VprError when
     ``$VPR_EDGE_MODEL`` is set but names no file, rather than falling through to another model."""
     if given is not None:
         return Path(given)
-    env = os.environ.get("VPR_EDGE_MODEL")
-    if env:
-        if not Path(env).is_file():
-            raise VprError(f"{env}: model file not found (named by the VPR_EDGE_MODEL environment variable)")
-        return Path(env)
+    env = model_from_env()
+    if env is not None:
+        return env
     if recorded is not None and recorded.name and recorded.is_file():
         return recorded
     return bundled_model()

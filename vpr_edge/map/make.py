@@ -3,7 +3,6 @@ against the others, the references and the files before any work; ``write_map`` 
 and the tools call these two, so each default lives here once."""
 from __future__ import annotations
 
-import os
 import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -16,6 +15,7 @@ from vpr_edge.encoders.registry import DEFAULT_ENCODING
 from vpr_edge.errors import VprError, warn
 from vpr_edge.features import FrontEnd, make_front_end
 from vpr_edge.features.choice import bundled_for_sha256, model_for_frame
+from vpr_edge.features.cnn import model_from_env
 from vpr_edge.features.registry import DEFAULT_FRONT_END
 from vpr_edge.files import check_not_input, check_writable, writer_lock
 from vpr_edge.frames.images import list_images, load_image, read_stamps
@@ -199,7 +199,7 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     if o.resize is not None and front_name != "cnn":   # (with --append, --resize was refused above)
         raise VprError(f"--resize applies to the cnn front end, not {front_name}")
     model, choice = o.model, None
-    by_camera = front_name == "cnn" and base is None and model is None and not os.environ.get("VPR_EDGE_MODEL")
+    by_camera = front_name == "cnn" and base is None and model is None and model_from_env() is None
     if by_camera and given is not None:   # the bundled model the codebook was fitted with, if it is one
         model = bundled_for_sha256(cb_meta.get("features_fingerprint") or cb_meta.get("model_sha256"))
     elif by_camera and not bag:
