@@ -208,3 +208,25 @@ def test_bench_e2e_and_calibration_check(tmp_path: Path, small_refs: Path, small
     assert [r[1].strip() for r in rows] == ["5", "6"]
     for r in rows:   # no unmapped frames here: nothing to lose, nothing to exit
         assert r[2].strip() == "nan" and r[3].strip() == "-" and 0 <= float(r[6].split()[0]) <= 1
+
+
+@pytest.mark.slow
+def test_results_quick_measures_every_stream(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
+    """tools/results.py --quick on two tiny datasets (the sample's first 24 frames under both names): every
+    derived stream scored for both matchers at both tolerances, the speed ratio, the commit and the machine."""
+    import json
+    import shutil
+
+    for name in ("corridor", "nordland-dev"):
+        shutil.copytree(small_refs, tmp_path / "data" / name / "ref")
+        shutil.copytree(small_queries, tmp_path / "data" / name / "query")
+    out = tool("results.py", "--datasets", str(tmp_path / "data"), "--out", str(tmp_path / "out"), "--quick")
+    doc = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert set(doc["datasets"]) == {"corridor", "nordland-dev"} and doc["machine"]["cores"] >= 1
+    for data in doc["datasets"].values():
+        assert set(data["streams"]) == set(KINDS)
+        for modes in data["streams"].values():
+            assert set(modes) == {"stream", "seqslam-online"} and all(set(t) == {"2", "1"} for t in modes.values())
+            assert all(0 <= t["2"]["r1"] <= 1 and t["1"]["r1"] <= t["2"]["r1"] for t in modes.values())
+    assert all(doc["speed"][n]["x_yardstick"] > 0 for n in doc["datasets"])
+    assert "| aligned |" in out and "yardstick" in out

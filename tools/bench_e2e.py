@@ -31,33 +31,8 @@ from pathlib import Path
 import numpy as np
 
 
-from vpr_edge.resources import LARGE_MODEL_FILE, bundled_model
+from vpr_edge.evaluation.yardstick import yardstick_ms
 from vpr_edge.evaluation.streams import KINDS
-
-
-def yardstick_ms(runs: int = 40) -> float:
-    """Median ms of one fp32 inference of the bundled 320x240 model, batch 1, one onnxruntime thread (after
-    a warm-up), with NumPy's BLAS held to one thread as localize --threads 1 does."""
-    import onnxruntime as ort
-
-    from vpr_edge.threads import use_threads
-
-    use_threads(1)
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads = 1
-    opts.log_severity_level = 3
-    opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
-    sess = ort.InferenceSession(str(bundled_model(LARGE_MODEL_FILE)), opts, providers=["CPUExecutionProvider"])
-    inp = sess.get_inputs()[0]
-    x = np.random.default_rng(0).standard_normal([1, *inp.shape[1:]]).astype(np.float32)
-    for _ in range(3):
-        sess.run(None, {inp.name: x})
-    times = []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        sess.run(None, {inp.name: x})
-        times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times))
 
 
 def timed(cmd: list[str], env: dict) -> float:

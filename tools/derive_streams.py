@@ -19,12 +19,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
-import numpy as np
-
-from vpr_edge.errors import VprError, one_line_errors
-from vpr_edge.frames.images import list_images
-from vpr_edge.evaluation.streams import CAMERA, KINDS, derive_stream, write_stream
+from vpr_edge.errors import one_line_errors
+from vpr_edge.evaluation.streams import KINDS, derive_streams
 
 
 def main() -> int:
@@ -44,26 +40,12 @@ def main() -> int:
 
 
 def _run(a: argparse.Namespace) -> int:
-    """The work of ``main``, inputs checked first: the pair's folders, --map-places, --kinds, --repeat-noise."""
-    refs, queries = list_images(a.dataset / "ref"), list_images(a.dataset / "query")
-    if len(refs) != len(queries):
-        raise VprError(f"{a.dataset}: ref/ and query/ differ in length ({len(refs)} vs {len(queries)})")
-    n_mapped = a.map_places or (2 * len(refs)) // 3
-    if not 0 < n_mapped <= len(refs):
-        raise VprError(f"--map-places must be in 1..{len(refs)}")
-    kinds = a.kinds.split(",")
-    unknown = [k for k in kinds if k not in KINDS]
-    if unknown:
-        raise VprError(f"--kinds: unknown {', '.join(unknown)}; choose from {', '.join(KINDS)}")
-    if a.repeat_noise < 0:
-        raise VprError(f"--repeat-noise must be >= 0, got {a.repeat_noise}")
-    write_stream(a.out / "ref", refs, np.arange(n_mapped), n_mapped, with_truth=False)
-    for kind in kinds:
-        places = derive_stream(kind, n_mapped, len(refs), a.seed)
-        write_stream(a.out / kind, queries, places, n_mapped, repeat_noise=a.repeat_noise, seed=a.seed,
-                     exposure=CAMERA if kind == "camera-stops" else None)
-        print(f"{kind:12s} {len(places):6d} frames, {int((places >= n_mapped).sum()):5d} of unmapped places")
-    print(f"map places: {n_mapped} of {len(refs)} (folder {a.out / 'ref'})")
+    """The work of ``main`` (``evaluation.streams.derive_streams``: inputs checked first)."""
+    counts = derive_streams(a.dataset, a.out, a.kinds.split(","), a.map_places, a.seed, a.repeat_noise)
+    n_mapped = counts.pop("map places")
+    for kind, frames in counts.items():
+        print(f"{kind:12s} {frames:6d} frames")
+    print(f"map places: {n_mapped} (folder {a.out / 'ref'})")
     return 0
 
 

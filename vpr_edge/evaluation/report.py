@@ -173,3 +173,26 @@ def plot_route(path: str | os.PathLike[str], positions: Positions, truth: np.nda
         ax.axis("off")
     fig.suptitle(title, fontsize=9)
     _save(fig, path)
+
+
+STREAM_LABELS = {"aligned": "aligned", "speed2": "speed ×2", "speed3": "speed ×3", "stop-and-go": "stop-and-go",
+                 "camera-stops": "camera stops", "variable": "variable speed", "partial": "partial route",
+                 "detour": "detour"}
+
+
+def readme_table(doc: dict) -> str:
+    """The README's results table from ``tools/results.py``'s JSON: per derived stream, R@1 within ±2 / ±1
+    of the ``stream`` matcher and online SeqSLAM on each dataset."""
+    names = list(doc["datasets"])
+    head = ["stream"] + [f"{n.capitalize() if n == 'corridor' else n} {m}" for n in names
+                         for m in ("`stream`", "online SeqSLAM")]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    kinds = list(doc["datasets"][names[0]]["streams"])
+    for kind in kinds:
+        cells = [STREAM_LABELS.get(kind, kind)]
+        for n in names:
+            for mode in ("stream", "seqslam-online"):
+                f = doc["datasets"][n]["streams"][kind][mode]
+                cells.append(f"{f['2']['r1']:.3f} / {f['1']['r1']:.3f}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)

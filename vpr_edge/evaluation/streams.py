@@ -148,3 +148,33 @@ def write_stream(out: str | os.PathLike[str], sources: Sequence[Path], places: n
             shutil.copyfile(src, dst)
     if with_truth:
         write_ground_truth(out.with_suffix(".csv"), [[int(p)] if p < n_mapped else [] for p in places])
+
+
+def derive_streams(dataset: str | os.PathLike[str], out: str | os.PathLike[str], kinds: Sequence[str] = KINDS,
+                   map_places: int | None = None, seed: int = 0, repeat_noise: float = 0.0) -> dict[str, int]:
+    """The ``derive_streams`` command: from a frame-aligned pair (``dataset``/ref, ``dataset``/query) write
+    ``out``/ref (the map's first ``map_places`` places; default two thirds) and per kind ``out``/KIND with
+    ``out``/KIND.csv (``derive_stream``, ``write_stream``; camera-stops with ``CAMERA`` exposures). Inputs are
+    checked first (VprError). Returns frames per kind and, under "map places", the map's size."""
+    from vpr_edge.frames.images import list_images
+
+    dataset, out = Path(dataset), Path(out)
+    refs, queries = list_images(dataset / "ref"), list_images(dataset / "query")
+    if len(refs) != len(queries):
+        raise VprError(f"{dataset}: ref/ and query/ differ in length ({len(refs)} vs {len(queries)})")
+    n_mapped = map_places or (2 * len(refs)) // 3
+    if not 0 < n_mapped <= len(refs):
+        raise VprError(f"--map-places must be in 1..{len(refs)}")
+    unknown = [k for k in kinds if k not in KINDS]
+    if unknown:
+        raise VprError(f"--kinds: unknown {', '.join(unknown)}; choose from {', '.join(KINDS)}")
+    if repeat_noise < 0:
+        raise VprError(f"--repeat-noise must be >= 0, got {repeat_noise}")
+    write_stream(out / "ref", refs, np.arange(n_mapped), n_mapped, with_truth=False)
+    counts = {}
+    for kind in kinds:
+        places = derive_stream(kind, n_mapped, len(refs), seed)
+        write_stream(out / kind, queries, places, n_mapped, repeat_noise=repeat_noise, seed=seed,
+                     exposure=CAMERA if kind == "camera-stops" else None)
+        counts[kind] = len(places)
+    return counts | {"map places": n_mapped}
