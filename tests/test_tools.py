@@ -51,6 +51,10 @@ def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> 
     ("lost_tradeoff.py", ["--streams", "{tmp}", "--locks", "0,6"], "--locks '0,6': want positive numbers"),
     ("lost_tradeoff.py", ["--streams", "{tmp}", "--param", "nope=1"], "--param 'nope=1': stream takes KEY=VALUE"),
     ("lost_tradeoff.py", ["--streams", "{tmp}"], "not a derive_streams folder with its map"),
+    ("lost_tradeoff.py", ["--streams", "{tmp}", "--vary", "window"], "--vary 'window': not a numeric stream parameter"),
+    ("lost_tradeoff.py", ["--streams", "{tmp}", "--vary", "evidence_decay", "--values", "2"],
+     "evidence_decay must be in [0, 1)"),
+    ("results.py", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--quick"], "not a dataset folder with ref/"),
     ("bench_matcher.py", ["--stop-noise", "-1"], "--stop-noise must be >= 0"),
 ])
 def test_new_tools_refuse_bad_input_in_one_line(tmp_path: Path, name: str, args: list[str], needle: str) -> None:

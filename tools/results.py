@@ -90,9 +90,6 @@ def per_frame_ms(map_path: Path, stream: Path) -> float:
 
 def measure(datasets: Path, out: Path) -> dict:
     """Every figure of the quick run (module docstring) as JSON-ready data."""
-    missing = [str(datasets / d) for d in DATASETS if not (datasets / d / "ref").is_dir()]
-    if missing:
-        raise VprError(f"{missing[0]}: not a dataset folder with ref/ and query/ (--datasets names their parent)")
     doc: dict = {"tool": "tools/results.py --quick", "date": datetime.date.today().isoformat(), **commit(),
                  "machine": machine(), "datasets": {}, "speed": {}}
     matchers = {m: get_matcher(m) for m in MODES}
@@ -172,6 +169,9 @@ def main() -> int:
     a = p.parse_args()
 
     def run() -> int:
+        missing = [str(a.datasets / d) for d in DATASETS if not (a.datasets / d / "ref").is_dir()]
+        if missing:   # checked before any work
+            raise VprError(f"{missing[0]}: not a dataset folder with ref/ and query/ (--datasets names their parent)")
         a.out.mkdir(parents=True, exist_ok=True)
         doc = measure(a.datasets, a.out)
         (a.out / "results.json").write_text(json.dumps(doc, indent=1) + "\n")
