@@ -93,11 +93,11 @@ class Localizer:
                  threads: int | None = None, coarse: bool | None = None,
                  calibration: str | os.PathLike[str] | None = None, precision: str = DEFAULT_PRECISION) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
+        self.threshold = self.matcher.lost_line(min_confidence)          # checked before the map is opened
         ort_threads = 0 if threads is None else use_threads(threads)
         self.query = MapQuery(map_path, model, ort_threads, precision)   # the map and its front end, once
         self.map.check_scores(self.matcher.scores, map_path)
         self.matcher = self.matcher.on_route(self.query.references())   # where the map's drive stood
-        self.threshold = self.matcher.lost_line(min_confidence)
         self._calibration = None
         if calibration is not None:
             from vpr_edge.calibration import load
