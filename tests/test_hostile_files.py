@@ -149,9 +149,9 @@ def spreadsheet_csv(draw: st.DrawFn) -> bytes:
 @given(data=st.one_of(st.binary(max_size=120), st.text(max_size=80).map(lambda t: t.encode("utf-8", "surrogatepass")),
                       spreadsheet_csv()))
 def test_csv_readers_take_any_bytes(tmp_path: Path, data: bytes) -> None:
-    """Every CSV reader (ground truth, positions, timestamps), through the same functions the CLI calls, on
-    any bytes, any Unicode text and spreadsheet-style files: a valid result or one VprError line naming the
-    file, never another exception."""
+    """Every CSV reader (ground truth, positions, timestamps) and the descriptor readers (.npy, .h5), through
+    the same functions the CLI calls, on any bytes, any Unicode text and spreadsheet-style files: a valid
+    result or one VprError line naming the file, never another exception."""
     from vpr_edge.frames.images import read_stamps
     from vpr_edge.positions import read_csv as read_positions
 
@@ -162,6 +162,15 @@ def test_csv_readers_take_any_bytes(tmp_path: Path, data: bytes) -> None:
             read(path)
         except VprError as e:
             assert str(path) in str(e) and "\n" not in str(e)
+    from vpr_edge.frames.descriptors import read_descriptors
+
+    for name in ("d.npy", "d.h5"):   # the same bytes as a descriptor file
+        (tmp_path / name).write_bytes(data)
+        try:
+            values, names = read_descriptors(tmp_path / name)
+            assert values.ndim == 2 and len(names) == len(values)
+        except VprError as e:
+            assert name in str(e) and "\n" not in str(e)
 
 
 @FUZZ
@@ -225,3 +234,22 @@ def test_codebook_mutations(valid_codebook: tuple[dict, dict], tmp_path: Path, e
         assert out.shape == (2, enc.dim) and np.isfinite(out).all()
     except VprError as e:
         assert str(path) in str(e) and "\n" not in str(e)
+
+
+@FUZZ
+@given(dtype=st.sampled_from(["float16", "float32", "float64", "int8", "bool", "complex64", "U3", "O"]),
+       shape=st.lists(st.integers(0, 5), max_size=3), fill=st.sampled_from([0.5, np.nan, -np.inf, 3.0]))
+def test_descriptor_npy_files(tmp_path: Path, dtype: str, shape: list, fill: float) -> None:
+    """Descriptor .npy files of any dtype (objects included, saved with pickle), shape and fill: read as a
+    (N, D) float array of finite rows, or one VprError line naming the file; never unpickled."""
+    from vpr_edge.frames.descriptors import read_descriptors
+
+    path = tmp_path / "d.npy"
+    kind = np.dtype(dtype).kind
+    np.save(path, np.full(shape, fill if kind in "fc" else 1, dtype=dtype), allow_pickle=kind == "O")
+    try:
+        values, names = read_descriptors(path)
+    except VprError as e:
+        assert str(path) in str(e) and "\n" not in str(e)
+        return
+    assert values.ndim == 2 and values.dtype.kind == "f" and np.isfinite(values).all() and len(names) == len(values)

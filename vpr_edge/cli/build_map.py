@@ -28,8 +28,9 @@ def _value(opt):
 
 @app.command("build-map")
 def build_map_cmd(
-    refs: Path = typer.Argument(..., help="Folder of reference images, taken in file-name order, or a ROS bag "
-                                          "/ MCAP file with --topic."),
+    refs: Path = typer.Argument(..., help="Folder of reference images, taken in file-name order, a ROS bag "
+                                          "/ MCAP file with --topic, or a file of global descriptors computed "
+                                          "elsewhere (.npy rows, hloc .h5)."),
     out: str = typer.Option(..., "--out", "-o", help="Map file to write (.npz); written atomically, never over "
                             "an input nor inside the reference folder. A symbolic link is written through."),
     features: Optional[FrontOpt] = typer.Option(None, metavar="FRONT_END", help="Local descriptors: "

@@ -30,8 +30,9 @@ def evaluate_cmd(
     map_path: Optional[Path] = typer.Option(None, "--map", "-m", help="Map from build-map: the queries are "
                                             "encoded with its model and codebook."),
     queries: Optional[Path] = typer.Option(None, "--queries", "-q", help="Query frames: a folder (file-name "
-                                           "order), a video, or a ROS bag / MCAP file with --topic. Row i of "
-                                           "the ground truth is frame i."),
+                                           "order), a video, a ROS bag / MCAP file with --topic, or a file of "
+                                           "global descriptors (.npy, .h5) for a map of them. Row i of the "
+                                           "ground truth is frame i."),
     topic: Optional[str] = typer.Option(None, help="With a bag as --queries: its image topic."),
     similarity: Optional[Path] = typer.Option(None, "--similarity", help="Evaluate a (Q, R) float .npy "
                                               "similarity matrix instead (rows = queries, higher = more "

@@ -84,7 +84,8 @@ def localize_cmd(
     map_path: Path = typer.Option(..., "--map", "-m", help="Map file written by build-map."),
     stream: str = typer.Option(..., "--stream", "-s", metavar="SOURCE",
                                help="Folder of frames (file-name order), a video file, a camera (0, 1, ... "
-                                    "or /dev/video0), a network stream (rtsp://...) or a ROS bag (--topic)."),
+                                    "or /dev/video0), a network stream (rtsp://...), a ROS bag (--topic), or "
+                                    "for a map of descriptors a file of them (.npy rows, hloc .h5)."),
     model: Optional[Path] = typer.Option(None, help="ONNX feature model; must be the map's model (default: "
                                          "$VPR_EDGE_MODEL if set, else the file the map was built with if it "
                                          "still exists, else the bundled one)."),
@@ -142,6 +143,7 @@ def localize_cmd(
         localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
                               min_confidence=min_confidence, threads=threads, calibration=calibration,
                               precision=precision.value)
+        localizer.query.check_source(stream)   # descriptors for a map of descriptors, images for one of images
         if precision.value == "auto" and "form" in localizer.front_description:   # what auto chose, said once
             typer.echo(f"vpr-edge: --precision auto: {localizer.front_description['model']} "
                        f"({localizer.front_description['form']})", err=True)

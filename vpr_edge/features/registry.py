@@ -18,6 +18,9 @@ FRONT_ENDS: dict[str, str] = {
            "intensity and x/y-gradient comparisons, 256 bits selected on the references",
     "pixels": "SeqSLAM's image: grey 64x32, every 8x8 patch normalised (a 64-dim local descriptor each)",
 }
+# what a map may record besides the image front ends: global descriptors computed elsewhere (a .npy or hloc
+# .h5 file given as REFS; ``features.descriptors``), chosen by the file, never by --features
+MAP_FRONT_ENDS = (*FRONT_ENDS, "descriptors")
 
 
 DEFAULT_FRONT_END = "cnn"   # a CNN tap (the bundled model that suits the camera, features.choice)
@@ -53,6 +56,10 @@ def make_front_end(name: str, model: Path | None = None, threads: int = 0, spec:
             from vpr_edge.features.patches import Patches
 
             return Patches(**params)
+        if name == "descriptors":
+            from vpr_edge.features.descriptors import GivenDescriptors
+
+            return GivenDescriptors(**params)
     except TypeError as e:
         raise VprError(f"front end {name}: stored parameters not understood ({e})") from None
-    raise ValueError(f"unknown front end {name!r}; choose from {', '.join(FRONT_ENDS)}")
+    raise ValueError(f"unknown front end {name!r}; choose from {', '.join(MAP_FRONT_ENDS)}")

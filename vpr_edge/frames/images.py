@@ -141,15 +141,21 @@ def _live(source: str) -> tuple[Iterator[Frame], None]:
 def open_stream(source: str | os.PathLike[str], stamps: str | os.PathLike[str] | None = None,
                 topic: str | None = None) -> tuple[Iterator[Frame], int | None]:
     """Frames from a folder of images (name order), a video file, a camera (``0``, ``/dev/video0``), a
-    network stream (``rtsp://``, ``http(s)://``) or a ROS bag / MCAP file (the image ``topic``; ``bags``), with
-    the frame count if known (None for live sources).
+    network stream (``rtsp://``, ``http(s)://``), a ROS bag / MCAP file (the image ``topic``; ``bags``) or a
+    file of global descriptors (``.npy``, ``.h5``: ``descriptors``), with the frame count if known (None for
+    live sources).
 
     Undecodable images come through as frames with ``image=None`` and an ``error`` so that the caller can
     report and skip them; a missing or empty source raises VprError at once.
     """
     text = str(source)
     from vpr_edge.frames.bags import is_bag, open_bag
+    from vpr_edge.frames.descriptors import descriptor_frames, is_descriptor_file
 
+    if is_descriptor_file(text):
+        if stamps or topic:
+            raise VprError(f"{text}: --timestamps and --topic apply to images; a descriptor file is frames in order")
+        return descriptor_frames(text)
     if is_bag(text):
         if stamps:
             raise VprError(f"{stamps}: --timestamps applies to a folder of frames; {text} stamps its own frames")

@@ -174,6 +174,28 @@ def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = DEFAULT_EN
     return PlaceMap(store.encodings(), names, encoder, meta, classifier)
 
 
+DESCRIPTOR_BLOCK = 65_536   # descriptors encoded and stored a block at a time (bounded memory at any size)
+
+
+def map_from_descriptors(values: np.ndarray, names: list[str], source: str,
+                         storage: str = DEFAULT_STORAGE) -> PlaceMap:
+    """The map of places given as global descriptors ``values`` (R, D) computed elsewhere (a memory-mapped
+    ``.npy`` or an hloc ``.h5``, ``frames.descriptors``): the ``descriptors`` front end of D dims, each vector
+    L2-normalised (encoding ``none``) and stored as ``storage``, a block at a time, so that memory holds the
+    stored map and one block whatever the route's length."""
+    from vpr_edge.encoders.flat import Flatten
+    from vpr_edge.features.descriptors import GivenDescriptors
+
+    front = GivenDescriptors(int(values.shape[1]))
+    encoder = Flatten(front.dim, 1)
+    store = EncodingWriter(len(values), encoder.dim, storage)
+    for i in range(0, len(values), DESCRIPTOR_BLOCK):
+        block = front.given(np.asarray(values[i:i + DESCRIPTOR_BLOCK]), source)
+        store.put(np.arange(i, i + len(block)), encoder.transform(block))
+    meta = _meta(front, encoder, False, FitSettings(), 0, source)
+    return PlaceMap(store.encodings(), list(names), encoder, meta)
+
+
 def map_from_local(local: np.ndarray, mask: np.ndarray | None, front: FrontEnd, names: list[str], refs_folder: str,
                    encoding: str = DEFAULT_ENCODING, encoder: Encoder | None = None, settings: FitSettings = FitSettings(),
                    svm: bool = False) -> PlaceMap:

@@ -8,7 +8,7 @@ import numpy as np
 
 from vpr_edge.encoders import encoder_from_arrays
 from vpr_edge.errors import VprError
-from vpr_edge.features.registry import FRONT_ENDS
+from vpr_edge.features.registry import MAP_FRONT_ENDS
 from vpr_edge.features.resize import RESIZE
 from vpr_edge.files import read_npz, write_npz
 from vpr_edge.index.encodings import DEFAULT_STORAGE, Encodings
@@ -63,9 +63,9 @@ def _check_meta(path: str | os.PathLike[str], meta: dict) -> None:
         if not isinstance(spec.get("name", ""), str) or not isinstance(spec.get("params") or {}, dict):
             raise VprError(f"{path}: map metadata field {key!r} needs a name (text) and params (an object)")
     front = meta.get("features") or {}
-    if front and front.get("name") not in FRONT_ENDS:
+    if front and front.get("name") not in MAP_FRONT_ENDS:
         raise VprError(f"{path}: map names front end {front.get('name')!r}, which this release does not know "
-                       f"({', '.join(FRONT_ENDS)})")
+                       f"({', '.join(MAP_FRONT_ENDS)})")
     resize = (front.get("params") or {}).get("resize")
     if resize is not None and resize not in RESIZE:
         raise VprError(f"{path}: map records resize policy {resize!r}, which this release does not know "

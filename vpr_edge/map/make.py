@@ -20,7 +20,10 @@ from vpr_edge.features.registry import DEFAULT_FRONT_END
 from vpr_edge.files import check_not_input, check_writable, writer_lock
 from vpr_edge.frames.images import list_images, load_image, read_stamps
 from vpr_edge.index.encodings import DEFAULT_STORAGE
-from vpr_edge.map.build import Progress, build_map, check_codebook_fits
+from vpr_edge.encoders.flat import Flatten
+from vpr_edge.features.descriptors import GivenDescriptors
+from vpr_edge.frames.descriptors import is_descriptor_file, read_descriptors
+from vpr_edge.map.build import Progress, build_map, check_codebook_fits, map_from_descriptors
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map, save_map
 from vpr_edge.map.model import PlaceMap
@@ -80,6 +83,7 @@ class MapPlan:
     names: list[str] | None = None           # the references' names when not their files' (a bag's BAG#N)
     scratch: tempfile.TemporaryDirectory | None = None   # where a bag's images were extracted
     model_choice: str | None = None          # why this bundled model (the camera's frame size), when chosen
+    descriptors: np.ndarray | None = None    # REFS is a descriptor file: its (R, D) vectors (memory-mapped)
 
 
 def _fit_options(o: BuildOptions) -> dict:
@@ -171,10 +175,42 @@ def _fit_settings(o: BuildOptions) -> FitSettings:
                        o.fit_iterations or d.iterations, o.seed, bool(o.tfidf))
 
 
+def _plan_descriptors(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
+    """``plan_map`` for a descriptor file (``.npy``, hloc ``.h5``): the places are its vectors, described and
+    encoded elsewhere, so the options of the image pipeline are refused; positions match the file's names."""
+    image_only = [k for k, v in (("--features", o.features), ("--model", o.model), ("--resize", o.resize),
+                                 ("--codebook", o.codebook), ("--save-codebook", o.save_codebook),
+                                 ("--topic", o.topic), ("--positions-topic", o.positions_topic),
+                                 ("--timestamps", o.timestamps), ("--svm", o.svm or None),
+                                 ("--alpha", o.alpha), *_fit_options(o).items()) if v is not None]
+    if o.encoding not in (None, "none"):
+        image_only.append(f"--encoding {o.encoding}")
+    if o.positions == "exif":
+        image_only.append("--positions exif")
+    if image_only:
+        raise VprError(f"{refs}: global descriptors are described and encoded already; drop "
+                       f"{', '.join(image_only)}")
+    _check_outputs(refs, out, o)
+    values, names = read_descriptors(refs)
+    positions = read_positions(o.positions, names) if o.positions else None
+    base = load_map(out, mmap=True) if o.append else None
+    front = GivenDescriptors(int(values.shape[1]))
+    if base is not None:
+        _check_appended_positions(base, positions, positions is not None, out, str(o.positions))
+        if base.fingerprint != front.fingerprint:
+            raise VprError(f"{refs}: descriptors of {front.dim} dims cannot extend {out}, a map of "
+                           f"{base.features.get('name')} {base.stored.shape[1]}-dim encodings")
+    storage = o.storage or (base.stored.storage if base else DEFAULT_STORAGE)
+    return MapPlan(refs, out, [], front, "none", Flatten(front.dim, 1), _fit_settings(o), storage, o, base,
+                   positions=positions, names=names, descriptors=values)
+
+
 def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     """Every check that can be made before the work (VprError, one line), and every default decided."""
     from vpr_edge.encoders.fit import require_sklearn
 
+    if is_descriptor_file(refs):
+        return _plan_descriptors(refs, out, o)
     bag = is_bag(refs)
     gpx = o.positions is not None and o.positions.lower().endswith(".gpx")
     _check_options(refs, out, o, bag, gpx)
@@ -253,8 +289,11 @@ def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
     meanwhile is kept, and the result replaces it."""
     o = plan.options
     try:
-        place_map = build_map(plan.files, plan.front, plan.encoding, plan.given, plan.settings, o.batch_size, o.svm,
-                              plan.storage, progress=progress)
+        if plan.descriptors is not None:
+            place_map = map_from_descriptors(plan.descriptors, plan.names, str(plan.refs), plan.storage)
+        else:
+            place_map = build_map(plan.files, plan.front, plan.encoding, plan.given, plan.settings, o.batch_size,
+                                  o.svm, plan.storage, progress=progress)
     finally:
         if plan.scratch is not None:
             plan.scratch.cleanup()

@@ -9,9 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.errors import MapChanged
+from vpr_edge.errors import MapChanged, VprError
 from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
+from vpr_edge.features.descriptors import GivenDescriptors
+from vpr_edge.frames.descriptors import is_descriptor_file, read_descriptors
 from vpr_edge.frames.images import Frame
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map
@@ -58,22 +60,54 @@ class MapQuery:
         """Reference image names, in map order (index = reference index)."""
         return self.map.names
 
+    @property
+    def takes_descriptors(self) -> bool:
+        """Whether the map's places are global descriptors computed elsewhere (queries: descriptor files)."""
+        return isinstance(self.front, GivenDescriptors)
+
+    def check_source(self, source: str | os.PathLike[str]) -> None:
+        """VprError naming ``source`` when it is the other kind of input than the map's places: a descriptor
+        file (``.npy``, ``.h5``) for a map of images, images for a map of descriptors, or descriptors of
+        another dimension (checked before the work)."""
+        if is_descriptor_file(source) and not self.takes_descriptors:
+            raise VprError(f"{source}: global descriptors given, but the map {self.path} describes images with "
+                           f"its {self.front.name} front end")
+        if self.takes_descriptors and not is_descriptor_file(source):
+            raise VprError(f"{source}: the map {self.path} holds global descriptors of {self.front.dim} dims: "
+                           f"give a descriptor file (.npy, .h5) of the same network, not images")
+        if self.takes_descriptors:
+            dims = read_descriptors(source)[0].shape[1]   # checked whole (NaN, objects) before any output
+            if dims != self.front.dim:
+                raise VprError(f"{source}: descriptors of {dims} dims, but the map's places are descriptors of "
+                               f"{self.front.dim} dims")
+
     def encode(self, images: Sequence[np.ndarray]) -> np.ndarray:
         """RGB uint8 images (H, W, 3) -> encodings (B, D) float32 comparable with the map's (one model run)."""
         return self.map.encode(*self.front.local(images))
 
+    def encode_descriptors(self, descriptors: np.ndarray, source: str = "") -> np.ndarray:
+        """Global descriptors (B, D) of a map of descriptors -> encodings (B, D) float32 (L2-normalised)."""
+        if not self.takes_descriptors:
+            raise VprError(f"{source or 'descriptors'}: global descriptors given, but the map {self.path} "
+                           f"describes images with its {self.front.name} front end")
+        return self.map.encode(self.front.given(descriptors, source))
+
     def encode_frames(self, frames: Iterable[Frame], batch_size: int,
                       on_skip: Callable[[Frame], None]) -> Iterator[tuple[Frame, np.ndarray]]:
-        """Yield (frame, encoding (D,)) for each decodable frame, ``batch_size`` frames per model run;
-        undecodable frames go to ``on_skip``."""
+        """Yield (frame, encoding (D,)) for each readable frame (an image, or a descriptor file's vector),
+        ``batch_size`` frames per model run; undecodable frames go to ``on_skip``."""
         pending: list[Frame] = []
 
         def flush() -> Iterator[tuple[Frame, np.ndarray]]:
-            yield from zip(pending, self.encode([f.image for f in pending]))
+            if pending[0].descriptor is not None:
+                encoded = self.encode_descriptors(np.stack([f.descriptor for f in pending]), pending[0].name)
+            else:
+                encoded = self.encode([f.image for f in pending])
+            yield from zip(pending, encoded)
             pending.clear()
 
         for frame in frames:
-            if frame.image is None:
+            if not frame.readable:
                 on_skip(frame)
                 continue
             pending.append(frame)
