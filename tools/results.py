@@ -14,8 +14,8 @@ thread, over each dataset's aligned stream), both in this run: the ratio is the 
 ``--quick`` is all of that (minutes on 2 cores); the full run (no ``--quick``) is the same today: the other
 tables of docs/results.md keep the command each was measured with. OUT gets results.json (every figure, the
 commit and the machine) and results.md (the tables). ``--write-docs`` also copies results.json to
-docs/generated/results.json and rewrites the README's results table from it (a test checks that the README
-holds exactly the table that file gives).
+docs/generated/results.json and rewrites from it the README's results table and docs/results.md's
+answered-right table (a test checks that both hold exactly the tables that file gives).
 """
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ import numpy as np
 from vpr_edge import Localizer
 from vpr_edge.errors import VprError, one_line_errors
 from vpr_edge.evaluation import Source, Truth, evaluate
-from vpr_edge.evaluation.report import readme_table
+from vpr_edge.evaluation.report import answers_table, readme_table
 from vpr_edge.evaluation.streams import KINDS, derive_streams
 from vpr_edge.evaluation.yardstick import yardstick_ms
 from vpr_edge.frames.images import open_stream
@@ -147,15 +147,16 @@ def write_docs(doc: dict) -> None:
     gen.mkdir(exist_ok=True)
     with atomic_output(gen / "results.json") as tmp:
         tmp.write_text(json.dumps(doc, indent=1) + "\n")
-    readme = ROOT / "README.md"
-    text = readme.read_text()
-    start, end = "<!-- results table: tools/results.py -->\n", "<!-- end of results table -->"
-    if start not in text or end not in text:
-        raise VprError(f"{readme}: the results table's markers are missing")
-    head, rest = text.split(start)
-    _, tail = rest.split(end)
-    with atomic_output(readme) as tmp:
-        tmp.write_text(head + start + readme_table(doc) + "\n" + end + tail)
+    for doc_file, table in ((ROOT / "README.md", readme_table(doc)),
+                            (ROOT / "docs" / "results.md", answers_table(doc))):
+        text = doc_file.read_text()
+        start, end = "<!-- results table: tools/results.py -->\n", "<!-- end of results table -->"
+        if start not in text or end not in text:
+            raise VprError(f"{doc_file}: the results table's markers are missing")
+        head, rest = text.split(start)
+        _, tail = rest.split(end)
+        with atomic_output(doc_file) as tmp:
+            tmp.write_text(head + start + table + "\n" + end + tail)
 
 
 def main() -> int:

@@ -180,6 +180,20 @@ STREAM_LABELS = {"aligned": "aligned", "speed2": "speed ×2", "speed3": "speed �
                  "detour": "detour"}
 
 
+def answers_table(doc: dict) -> str:
+    """docs/results.md's "Right or silent" table from ``tools/results.py``'s JSON: per dataset, the share of
+    answered frames right and of mapped frames answered right by the ``stream`` matcher within ±2."""
+    names = list(doc["datasets"])
+    kinds = list(doc["datasets"][names[0]]["streams"])
+    lines = ["| `stream`, ±2 | " + " | ".join(kinds) + " |", "|---|" + "---|" * len(kinds)]
+    for n in names:
+        label = n.capitalize() if n == "corridor" else n
+        for key, what in (("answered_right", "answered right"), ("mapped_right", "mapped right")):
+            cells = [doc["datasets"][n]["streams"][k]["stream"]["2"][key] for k in kinds]
+            lines.append(f"| {label} {what} | " + " | ".join("-" if v is None else f"{v:.3f}" for v in cells) + " |")
+    return "\n".join(lines)
+
+
 def readme_table(doc: dict) -> str:
     """The README's results table from ``tools/results.py``'s JSON: per derived stream, R@1 within ±2 / ±1
     of the ``stream`` matcher and online SeqSLAM on each dataset."""
