@@ -164,10 +164,10 @@ def glob_escape(name: str) -> str:
 def atomic_output(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path beside ``path`` (beside its target, for a symbolic link); when the block ends
     without error, fsync it, give it the replaced file's mode and owner (a new file: the umask's mode) and
-    rename it over the target; a target this user may not write is refused first, as ``cp`` refuses it. On error, Ctrl-C or
-    SIGTERM the temporary file is removed and the target is left as it was; the temporary files of writers
-    that died are removed first (and said). A special file (``/dev/stdout``) is yielded as it is, written in place. An
-    OSError without a file name (a full disk mid-write) is given ``path``'s name."""
+    rename it over the target; a target this user may not write is refused first, as ``cp`` refuses it. On
+    error, Ctrl-C or SIGTERM the temporary file is removed and the target is left as it was; the temporary
+    files of writers that died are removed first (and said). A special file (``/dev/stdout``) is yielded as it
+    is, written in place. An OSError without a file name (a full disk mid-write) is given ``path``'s name."""
     path = Path(path)
     if is_special(path):
         yield path

@@ -101,7 +101,8 @@ def localize_cmd(
                                          "every reference every frame)." % MATCHERS["stream"].params["window"]),
     min_confidence: Optional[float] = typer.Option(
         None, help="Frames scoring below this are reported lost (reference and position fields empty). "
-                   "Default: the mode's own (stream: %.1f; other modes: never lost)." % MATCHERS["stream"].min_confidence),
+                   "Default: the mode's own (stream: %.1f; other modes: never lost)."
+                   % MATCHERS["stream"].min_confidence),
     param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE", help=PARAM_HELP),
     calibration: Optional[Path] = typer.Option(None, help="A calibration (evaluate --save-calibration on a "
                                                "labelled drive of this route): each line's confidence is then "
