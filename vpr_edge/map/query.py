@@ -14,7 +14,7 @@ from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.features.descriptors import GivenDescriptors
 from vpr_edge.frames.descriptors import is_descriptor_file, read_descriptors
-from vpr_edge.frames.images import Frame
+from vpr_edge.frames.frame import Frame
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map
 from vpr_edge.map.model import PlaceMap
