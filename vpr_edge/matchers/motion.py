@@ -126,9 +126,10 @@ def stillness(encodings: Iterable[np.ndarray], threshold: float | None = None, m
 def route_stands(blocks: Iterable[np.ndarray], threshold: float, memory: int = MEMORY) -> np.ndarray:
     """The map's references in route order, as consecutive blocks (n, D) -> (R,) bool: True where a reference
     stands by the motion cue (``MotionCue`` over the references: it shows the view of the last one that
-    moved, the mapping drive stood there). Consecutive cosines are computed a block at a time; only a
-    standing stretch compares with its anchor one row at a time (about 1 us a reference)."""
-    cue = MotionCue(threshold, memory)
+    moved, the mapping drive stood there). Consecutive cosines are computed a block at a time; the decisions
+    run over plain floats (about 1 us a reference), and only a standing stretch compares with its anchor
+    row by row."""
+    steps = _Steps(int(memory))
     out: list[np.ndarray] = []
     anchor: np.ndarray | None = None      # unit row of the anchor, when it is not the previous row
     prev: np.ndarray | None = None        # unit previous row (zero row: None)
@@ -137,20 +138,25 @@ def route_stands(blocks: Iterable[np.ndarray], threshold: float, memory: int = M
         norm = np.linalg.norm(x, axis=1)
         unit = np.divide(x, norm[:, None], out=np.zeros_like(x), where=norm[:, None] > 0)
         lead = unit[:1] if prev is None else prev[None]
-        cos = np.einsum("ij,ij->i", unit, np.concatenate([lead, unit[:-1]]))
-        flags = np.zeros(len(x), bool)
+        cos = np.einsum("ij,ij->i", unit, np.concatenate([lead, unit[:-1]])).tolist()
+        zero = (norm == 0).tolist()
+        flags = [False] * len(x)
+        have_prev = prev is not None
         for i in range(len(x)):
-            if norm[i] == 0 or (prev is None and anchor is None):
-                anchor, prev = None, (unit[i] if norm[i] else None)   # no cue: this row becomes the anchor
+            if zero[i] or not (have_prev or anchor is not None):
+                anchor, have_prev = None, not zero[i]      # no cue: this row becomes the anchor
                 continue
             d = 1.0 - (cos[i] if anchor is None else float(unit[i] @ anchor))
-            _, flags[i] = cue.judge(d)
-            if flags[i]:
-                anchor = prev if anchor is None else anchor
+            if 1.0 - d / steps.typical() >= threshold:   # stands (MotionCue.judge, inlined)
+                flags[i] = True
+                if anchor is None:
+                    anchor = unit[i - 1] if i else prev
             else:
+                steps.add(d)
                 anchor = None
-            prev = unit[i]
-        out.append(flags)
+            have_prev = True
+        prev = unit[-1] if len(x) and not zero[-1] else None
+        out.append(np.array(flags, bool))
     return np.concatenate(out) if out else np.zeros(0, bool)
 
 
