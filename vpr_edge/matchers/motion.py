@@ -127,9 +127,9 @@ def route_stands(blocks: Iterable[np.ndarray], threshold: float, memory: int = M
     """The map's references in route order, as consecutive blocks (n, D) -> (R,) bool: True where a reference
     stands by the motion cue (``MotionCue`` over the references: it shows the view of the last one that
     moved, the mapping drive stood there). Consecutive cosines are computed a block at a time; the decisions
-    run over plain floats (about 1 us a reference), and only a standing stretch compares with its anchor
-    row by row."""
-    steps = _Steps(int(memory))
+    (``MotionCue.judge``) run over plain floats, and only a standing stretch compares with its anchor row by
+    row."""
+    cue = MotionCue(threshold, memory)
     out: list[np.ndarray] = []
     anchor: np.ndarray | None = None      # unit row of the anchor, when it is not the previous row
     prev: np.ndarray | None = None        # unit previous row (zero row: None)
@@ -146,14 +146,11 @@ def route_stands(blocks: Iterable[np.ndarray], threshold: float, memory: int = M
             if zero[i] or not (have_prev or anchor is not None):
                 anchor, have_prev = None, not zero[i]      # no cue: this row becomes the anchor
                 continue
-            d = 1.0 - (cos[i] if anchor is None else float(unit[i] @ anchor))
-            if 1.0 - d / steps.typical() >= threshold:   # stands (MotionCue.judge, inlined)
-                flags[i] = True
-                if anchor is None:
-                    anchor = unit[i - 1] if i else prev
-            else:
-                steps.add(d)
+            _, flags[i] = cue.judge(1.0 - (cos[i] if anchor is None else float(unit[i] @ anchor)))
+            if not flags[i]:
                 anchor = None
+            elif anchor is None:
+                anchor = unit[i - 1] if i else prev
             have_prev = True
         prev = unit[-1] if len(x) and not zero[-1] else None
         out.append(np.array(flags, bool))
