@@ -105,8 +105,8 @@ def from_map(query: MapQuery, queries: str | os.PathLike[str], n_truth: int, tru
     the chain ``Localizer`` runs), their cosine similarities to the map's references, with ``svm`` the map's
     per-place SVM decision values, and each decoded frame's query encodings (from which each matcher's motion
     cue is computed, as ``localize`` computes it)."""
+    frames = _count_checked(queries, n_truth, truth_src, topic)   # a descriptor file's values checked here
     query.check_source(queries)
-    frames = _count_checked(queries, n_truth, truth_src, topic)
     if svm:
         query.map.check_scores("svm", query.path)
     t0 = time.perf_counter()

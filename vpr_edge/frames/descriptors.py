@@ -50,7 +50,8 @@ def _checked(path: Path, values: np.ndarray) -> np.ndarray:
     return values
 
 
-def _read_npy(path: Path) -> np.ndarray:
+def _open_npy(path: Path) -> np.ndarray:
+    """A ``.npy`` memory-mapped, never unpickled (VprError naming ``path``); its values not yet checked."""
     try:
         values = np.load(path, mmap_mode="r", allow_pickle=False)
     except ValueError as e:
@@ -59,7 +60,7 @@ def _read_npy(path: Path) -> np.ndarray:
         raise VprError(f"{path}: not a readable .npy array ({str(e).splitlines()[0][:100]})") from None
     except (OSError, EOFError) as e:
         raise VprError(f"{path}: cannot read ({getattr(e, 'strerror', None) or e})") from None
-    return _checked(path, values)
+    return values
 
 
 def _read_h5(path: Path) -> tuple[np.ndarray, list[str]]:
@@ -94,9 +95,28 @@ def read_descriptors(path: str | os.PathLike[str]) -> tuple[np.ndarray, list[str
     if not path.is_file():
         raise VprError(f"{path}: no such descriptor file")
     if path.suffix.lower() == ".npy":
-        values = _read_npy(path)
+        values = _checked(path, _open_npy(path))
         return values, [f"{i:06d}" for i in range(len(values))]
     return _read_h5(path)
+
+
+def descriptor_dims(path: str | os.PathLike[str]) -> int:
+    """D of a descriptor file, read without going through its values (a ``.npy``'s header; an ``.h5``'s
+    first vector); the values are checked where they are read (``read_descriptors``)."""
+    path = Path(path)
+    if path.suffix.lower() == ".npy":
+        values = _open_npy(path)
+        return int(values.shape[1]) if values.ndim == 2 else int(_checked(path, values).shape[1])
+    require_h5py(path)
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            first = f.visititems(lambda name, obj: int(np.size(obj)) if isinstance(obj, h5py.Dataset) and
+                                 name.rsplit("/", 1)[-1] == H5_DATASET else None)
+    except (OSError, ValueError) as e:
+        raise VprError(f"{path}: not a readable HDF5 file ({str(e).splitlines()[0][:100]})") from None
+    return int(first) if first is not None else int(_read_h5(path)[0].shape[1])
 
 
 def descriptor_frames(path: str | os.PathLike[str]) -> tuple[Iterator[Frame], int]:

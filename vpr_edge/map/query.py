@@ -13,7 +13,7 @@ from vpr_edge.errors import MapChanged, VprError
 from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.features.descriptors import GivenDescriptors
-from vpr_edge.frames.descriptors import is_descriptor_file, read_descriptors
+from vpr_edge.frames.descriptors import descriptor_dims, is_descriptor_file
 from vpr_edge.frames.frame import Frame
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map
@@ -76,7 +76,7 @@ class MapQuery:
             raise VprError(f"{source}: the map {self.path} holds global descriptors of {self.front.dim} dims: "
                            f"give a descriptor file (.npy, .h5) of the same network, not images")
         if self.takes_descriptors:
-            dims = read_descriptors(source)[0].shape[1]   # checked whole (NaN, objects) before any output
+            dims = descriptor_dims(source)   # the header: the values are checked where the frames are read
             if dims != self.front.dim:
                 raise VprError(f"{source}: descriptors of {dims} dims, but the map's places are descriptors of "
                                f"{self.front.dim} dims")
