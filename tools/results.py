@@ -71,13 +71,10 @@ def commit() -> dict:
 
 
 def figures(report) -> dict:
-    """The figures of one matcher's ``ModeReport`` that the tables quote."""
-    def num(v: float) -> float | None:
-        return None if v is None or np.isnan(v) else round(float(v), 6)
-    return {"r1": num(report.recall[1]), "auc": num(report.auc), "answered_right": num(report.answered_right),
-            "mapped_right": num(report.mapped_right), "lost_unmapped": num(report.lost_unmapped),
-            "lost_mapped": num(report.lost_mapped), "exit_frames": [num(v) for v in report.exit_frames],
-            "lock_frames": [num(v) for v in report.lock_frames]}
+    """The figures of one matcher's ``ModeReport`` that the tables quote (from ``as_json``: evaluate --json's)."""
+    js = report.as_json()
+    return {"r1": js["recall_at_1"]} | {k: js[k] for k in ("auc", "answered_right", "mapped_right", "lost_unmapped",
+                                                          "lost_mapped", "exit_frames", "lock_frames")}
 
 
 def per_frame_ms(map_path: Path, stream: Path) -> float:

@@ -180,6 +180,11 @@ STREAM_LABELS = {"aligned": "aligned", "speed2": "speed ×2", "speed3": "speed �
                  "detour": "detour"}
 
 
+def _dataset_label(name: str) -> str:
+    """How the tables name a shared dataset (Corridor is a proper name; nordland-dev a folder's)."""
+    return name.capitalize() if name == "corridor" else name
+
+
 def answers_table(doc: dict) -> str:
     """docs/results.md's "Right or silent" table from ``tools/results.py``'s JSON: per dataset, the share of
     answered frames right and of mapped frames answered right by the ``stream`` matcher within ±2."""
@@ -187,7 +192,7 @@ def answers_table(doc: dict) -> str:
     kinds = list(doc["datasets"][names[0]]["streams"])
     lines = ["| `stream`, ±2 | " + " | ".join(kinds) + " |", "|---|" + "---|" * len(kinds)]
     for n in names:
-        label = n.capitalize() if n == "corridor" else n
+        label = _dataset_label(n)
         for key, what in (("answered_right", "answered right"), ("mapped_right", "mapped right")):
             cells = [doc["datasets"][n]["streams"][k]["stream"]["2"][key] for k in kinds]
             lines.append(f"| {label} {what} | " + " | ".join("-" if v is None else f"{v:.3f}" for v in cells) + " |")
@@ -198,7 +203,7 @@ def readme_table(doc: dict) -> str:
     """The README's results table from ``tools/results.py``'s JSON: per derived stream, R@1 within ±2 / ±1
     of the ``stream`` matcher and online SeqSLAM on each dataset."""
     names = list(doc["datasets"])
-    head = ["stream"] + [f"{n.capitalize() if n == 'corridor' else n} {m}" for n in names
+    head = ["stream"] + [f"{_dataset_label(n)} {m}" for n in names
                          for m in ("`stream`", "online SeqSLAM")]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     kinds = list(doc["datasets"][names[0]]["streams"])

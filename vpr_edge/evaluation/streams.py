@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vpr_edge.errors import VprError
-from vpr_edge.frames.images import load_image
+from vpr_edge.frames.images import list_images, load_image
 from vpr_edge.files import atomic_output
 
 KINDS: tuple[str, ...] = ("aligned", "speed2", "speed3", "stop-and-go", "camera-stops", "variable", "partial",
@@ -156,8 +156,6 @@ def derive_streams(dataset: str | os.PathLike[str], out: str | os.PathLike[str],
     ``out``/ref (the map's first ``map_places`` places; default two thirds) and per kind ``out``/KIND with
     ``out``/KIND.csv (``derive_stream``, ``write_stream``; camera-stops with ``CAMERA`` exposures). Inputs are
     checked first (VprError). Returns frames per kind and, under "map places", the map's size."""
-    from vpr_edge.frames.images import list_images
-
     dataset, out = Path(dataset), Path(out)
     refs, queries = list_images(dataset / "ref"), list_images(dataset / "query")
     if len(refs) != len(queries):
