@@ -7,10 +7,11 @@ from typing import Optional
 
 import typer
 
-from vpr_edge.cli.common import (MODEL_HELP, THREADS_HELP, EncodingOpt, FrontOpt, ResizeOpt, StorageOpt, app,
-                                 user_errors)
+from vpr_edge.cli.common import (MODEL_HELP, THREADS_HELP, EncodingOpt, FrontOpt, LayoutOpt, ResizeOpt, StorageOpt,
+                                 app, user_errors)
 from vpr_edge.encoders import ENCODERS, FitSettings
 from vpr_edge.features import FRONT_ENDS
+from vpr_edge.features.conventions import GivenConventions
 from vpr_edge.features.resize import RESIZE
 from vpr_edge.encoders.base import DEFAULT_PCA_DIM
 from vpr_edge.files import output_path
@@ -44,6 +45,20 @@ def build_map_cmd(
     resize: Optional[ResizeOpt] = typer.Option(None, help="cnn only: how images are brought to the model's "
                                                "input: " + "; ".join(f"{k}: {v}" for k, v in RESIZE.items())
                                                + ". Recorded in the map; queries are resized the same way."),
+    input_size: Optional[str] = typer.Option(None, metavar="WxH", help="A --model without vpr_edge metadata (a "
+                                             "network exported elsewhere): its input size in pixels (default: "
+                                             "the model's, where fixed). docs/models.md, Your own network."),
+    mean: Optional[str] = typer.Option(None, metavar="R,G,B|imagenet", help="A --model without vpr_edge "
+                                       "metadata: the mean subtracted per channel, on the [0, 1] pixel scale, in "
+                                       "the model's channel order (required for such a model)."),
+    std: Optional[str] = typer.Option(None, metavar="R,G,B|imagenet", help="A --model without vpr_edge "
+                                      "metadata: the std divided by per channel, on the [0, 1] scale (required "
+                                      "for such a model)."),
+    bgr: bool = typer.Option(False, "--bgr", help="A --model without vpr_edge metadata takes its channels "
+                             "as B, G, R (default R, G, B)."),
+    layout: Optional[LayoutOpt] = typer.Option(None, help="A --model without vpr_edge metadata: its input "
+                                               "layout, nchw or nhwc (default: read from the model's input "
+                                               "shape, nchw if that does not tell)."),
     codebook: Optional[Path] = typer.Option(
         None, help="Reuse this codebook (.npz from --save-codebook) instead of fitting one on the references."),
     components: Optional[int] = typer.Option(None, min=1, help="Codebook size when fitting: GMM components "
@@ -100,7 +115,8 @@ def build_map_cmd(
                                fit_iterations=fit_iterations, svm=svm, seed=seed,
                                save_codebook=output_path(save_codebook) if save_codebook else None,
                                storage=_value(storage), positions=positions, timestamps=timestamps, topic=topic,
-                               positions_topic=positions_topic, append=append, batch_size=batch_size, threads=threads)
+                               positions_topic=positions_topic, append=append, batch_size=batch_size, threads=threads,
+                               inputs=GivenConventions(input_size, mean, std, bgr, _value(layout)))
         plan = plan_map(refs, output_path(out), options)
         with typer.progressbar(length=len(plan.files), label="extracting", file=sys.stderr,
                                hidden=not sys.stderr.isatty()) as bar:

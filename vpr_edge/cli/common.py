@@ -15,6 +15,7 @@ from vpr_edge.encoders import ENCODERS
 from vpr_edge.errors import Terminated, VprError, os_error_line, printable, warn
 from vpr_edge.features import FRONT_ENDS
 from vpr_edge.features.choice import PRECISIONS
+from vpr_edge.features.conventions import LAYOUTS
 from vpr_edge.features.resize import RESIZE
 from vpr_edge.index.encodings import STORAGES
 from vpr_edge.matchers import MATCHERS, Matcher, get_matcher, param_key
@@ -41,6 +42,7 @@ ModeOpt = Enum("ModeOpt", {name: name for name in MATCHERS}, type=str)  # type: 
 StorageOpt = Enum("StorageOpt", {name: name for name in STORAGES}, type=str)  # type: ignore[misc]
 FrontOpt = Enum("FrontOpt", {name: name for name in FRONT_ENDS}, type=str)  # type: ignore[misc]
 ResizeOpt = Enum("ResizeOpt", {name: name for name in RESIZE}, type=str)  # type: ignore[misc]
+LayoutOpt = Enum("LayoutOpt", {name: name for name in LAYOUTS}, type=str)  # type: ignore[misc]
 PrecisionOpt = Enum("PrecisionOpt", {name: name for name in PRECISIONS}, type=str)  # type: ignore[misc]
 EncodingOpt = Enum("EncodingOpt", {name: name for name in ENCODERS}, type=str)  # type: ignore[misc]
 

@@ -16,11 +16,17 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from vpr_edge.errors import VprError
+
 
 @runtime_checkable
 class FrontEnd(Protocol):
     name: str
     binary: bool
+
+    @property
+    def is_global(self) -> bool:
+        """One global descriptor an image (N = 1), stored as it is: encoding none, no codebook."""
 
     @property
     def dim(self) -> int:
@@ -68,6 +74,7 @@ class Handcrafted:
 
     source_fingerprint: str | None = None
     needs_fit: bool = False
+    is_global: bool = False
 
     def describe(self) -> dict:  # pragma: no cover - every subclass defines it
         raise NotImplementedError
@@ -102,3 +109,12 @@ def grey(rgb: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     g = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
     interp = cv2.INTER_AREA if g.shape[1] >= size[0] else cv2.INTER_LINEAR
     return cv2.resize(g, size, interpolation=interp)
+
+
+def check_finite(local: np.ndarray, names: Sequence[str], front: str) -> None:
+    """VprError naming the first image of ``names`` whose descriptors in ``local`` (B, N, K) are not all
+    finite (a model that gives NaN or infinity for some input), before it reaches a map or an answer."""
+    bad = ~np.isfinite(local.reshape(len(local), -1)).all(axis=1)
+    if bad.any():
+        raise VprError(f"{names[int(np.argmax(bad))]}: the {front} front end gives NaN or infinite descriptors "
+                       f"for this image (a model that does not take such input?)")

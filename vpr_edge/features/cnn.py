@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError, warn
+from vpr_edge.features.conventions import GivenConventions, InputConventions
 from vpr_edge.features.resize import RESIZE, content_cells, fit_to_input
 from vpr_edge.files import file_sha256
 from vpr_edge.resources import SMALL_MODEL_FILE, bundled_model
@@ -102,7 +103,8 @@ class FeatureExtractor:
     binary = False
     needs_fit = False
 
-    def __init__(self, model_path: str | os.PathLike[str], threads: int = 0, resize: str | None = None) -> None:
+    def __init__(self, model_path: str | os.PathLike[str], threads: int = 0, resize: str | None = None,
+                 conventions: InputConventions | GivenConventions | None = None) -> None:
         import onnxruntime as ort
 
         self.path = Path(model_path)
@@ -117,17 +119,36 @@ class FeatureExtractor:
         try:
             self.session = ort.InferenceSession(str(self.path), opts, providers=["CPUExecutionProvider"])
         except Exception as e:  # onnxruntime raises several private exception types
-            raise VprError(f"{self.path}: not a loadable ONNX model ({str(e).splitlines()[0][:120]})") from None
+            raise VprError(f"{self.path}: not a loadable ONNX model on onnxruntime's CPU provider "
+                           f"({str(e).splitlines()[0][:120]})") from None
+        inp, out = self.session.get_inputs()[0], self.session.get_outputs()[0]
+        self._input = inp.name
+        # a model exported with a fixed batch size runs that many images at a time (``_run``)
+        self._batch = inp.shape[0] if isinstance(inp.shape[0], int) and inp.shape[0] > 0 else None
+        self.output = _output_kind(self.path, out.shape)
         raw = self.session.get_modelmeta().custom_metadata_map.get("vpr_edge")
-        if raw is None:
-            raise VprError(f"{self.path}: ONNX model has no vpr_edge metadata (export it with vpr_edge_export)")
-        info = _checked_info(self.path, raw)
-        self.info: dict = info
         self.fingerprint = file_sha256(self.path)
-        self.size = (int(info["input_width"]), int(info["input_height"]))
-        self._mean = np.asarray(info["mean"], np.float32)
-        self._std = np.asarray(info["std"], np.float32)
-        self._input = self.session.get_inputs()[0].name
+        stated = conventions if isinstance(conventions, InputConventions) else None
+        if raw is not None:
+            if stated is not None or (isinstance(conventions, GivenConventions) and conventions.given):
+                given = conventions.options() if isinstance(conventions, GivenConventions) else ["the map's"]
+                raise VprError(f"{self.path}: the model records its input conventions in its vpr_edge metadata; "
+                               f"drop {', '.join(given)}")
+            info = _checked_info(self.path, raw)
+            self.conventions = InputConventions.from_record(info, str(self.path))
+            self.stated = False
+        else:
+            if stated is None:
+                stated = (conventions or GivenConventions()).resolve(inp.shape, str(self.path))
+            self.conventions = stated
+            self.stated = True      # recorded in the map: its queries are preprocessed the same way
+            info = self._probed_info()
+        self.info: dict = info
+        c = self.conventions
+        self.size = (c.width, c.height)
+        self._mean = np.asarray(c.mean, np.float32)
+        self._std = np.asarray(c.std, np.float32)
+        self._planes = (2, 1, 0) if c.bgr else (0, 1, 2)    # the image's channel read into each model channel
         self.resize = str(resize or info.get("resize") or "stretch")
         # the numeric form run and why (``as_run``: map.front.map_front_end says why it chose it)
         self.form = "int8" if info.get("quantization") else "fp32"
@@ -135,7 +156,24 @@ class FeatureExtractor:
             raise VprError(f"{self.path}: unknown resize policy {self.resize!r}; choose from {', '.join(RESIZE)}")
         self._scale = (1.0 / (255.0 * self._std)).astype(np.float32)   # (x / 255 - mean) / std, per channel
         self._offset = (self._mean / self._std).astype(np.float32)
-        self._fill = np.clip(np.rint(self._mean * 255.0), 0, 255).astype(np.uint8)
+        # padding is the mean colour (a zero input), in the image's RGB order
+        self._fill = np.clip(np.rint(self._mean[list(self._planes)] * 255.0), 0, 255).astype(np.uint8)
+
+    def _probed_info(self) -> dict:
+        """Metadata for a model exported elsewhere: what one run on a blank image shows of its output."""
+        blank = np.zeros((1, 3, self.conventions.height, self.conventions.width), np.float32)
+        try:
+            shape = self._run(blank).shape
+        except VprError:
+            raise
+        except Exception as e:  # onnxruntime's own errors: an input that contradicts the model
+            raise VprError(f"{self.path}: the model does not run on a {self.conventions.width}x"
+                           f"{self.conventions.height} {self.conventions.layout} input "
+                           f"({str(e).splitlines()[0][:120]}); check --input-size and --layout") from None
+        grid = (1, 1) if self.output == "global" else (int(shape[3]), int(shape[2]))
+        return {"schema": MODEL_SCHEMA, "backbone": self.path.stem, "tap": self.session.get_outputs()[0].name,
+                "output": self.output, "channels": int(shape[1]), "grid_width": grid[0], "grid_height": grid[1],
+                "weights_sha256": self.fingerprint} | self.conventions.describe()
 
     def as_run(self, form: str) -> "FeatureExtractor":
         """This extractor (the same session) described as running in ``form``: its numeric form and why it
@@ -161,12 +199,21 @@ class FeatureExtractor:
 
     @property
     def n_local(self) -> int:
-        """N = grid width x grid height of the tap."""
-        return int(self.info["grid_width"]) * int(self.info["grid_height"])
+        """N = grid width x grid height of the tap; 1 for a global model (its one descriptor an image)."""
+        return 1 if self.output == "global" else int(self.info["grid_width"]) * int(self.info["grid_height"])
+
+    @property
+    def is_global(self) -> bool:
+        """Whether the model outputs one global descriptor an image (B, D), encoded as it is (no codebook)."""
+        return self.output == "global"
 
     def describe(self) -> dict:
-        """The front-end record of a map (the model's identity is recorded beside it: ``identity``)."""
-        return {"name": self.name, "params": {"resize": self.resize}}
+        """The front-end record of a map (the model's identity is recorded beside it: ``identity``); with
+        the input conventions when the user stated them (a model without vpr_edge metadata)."""
+        params: dict = {"resize": self.resize}
+        if self.stated:
+            params["input"] = self.conventions.describe()
+        return {"name": self.name, "params": params}
 
     def identity(self) -> dict:
         """The model a map was built with: its metadata, file name, absolute path and SHA-256."""
@@ -185,7 +232,7 @@ class FeatureExtractor:
         ``pad`` the mask (B, N) of the cells that see the image (the padding's descriptors, the same in every
         image, would otherwise weigh in every encoding); else no mask."""
         x = self.local_features(np.stack([self.preprocess(im) for im in images]))
-        if self.resize != "pad":
+        if self.resize != "pad" or self.is_global:
             return x, None
         grid = (int(self.info["grid_width"]), int(self.info["grid_height"]))
         return x, np.stack([content_cells(im.shape, self.size, grid) for im in images])
@@ -198,17 +245,49 @@ class FeatureExtractor:
                  + (f" (bundled: --model {bundled_model(SMALL_MODEL_FILE)})" if self.size[0] > 160 else ""))
         x = fit_to_input(rgb, self.size, self.resize, self._fill)
         out = np.empty((3,) + x.shape[:2], np.float32)
-        for c in range(3):  # one plane at a time, in place: 4x faster than whole-image float temporaries
-            np.multiply(x[:, :, c], self._scale[c], out=out[c], casting="unsafe")
+        for c, src in enumerate(self._planes):  # one plane at a time, in place: 4x faster than float temporaries
+            np.multiply(x[:, :, src], self._scale[c], out=out[c], casting="unsafe")
             out[c] -= self._offset[c]
         return out
 
+    def _run(self, batch: np.ndarray) -> np.ndarray:
+        """Preprocessed batch (B, 3, H, W) float32 -> the model's output, in its layout (NHWC models get
+        the batch transposed) and, for a model of fixed batch size, that many images a run (the last run
+        padded with blank images)."""
+        x = batch.astype(np.float32, copy=False)
+        if self.conventions.layout == "nhwc":
+            x = np.ascontiguousarray(x.transpose(0, 2, 3, 1))
+        if self._batch is None or len(x) == self._batch:
+            return self.session.run(None, {self._input: x})[0]
+        parts = []
+        for i in range(0, len(x), self._batch):
+            part = x[i:i + self._batch]
+            short = self._batch - len(part)
+            if short:
+                part = np.concatenate([part, np.zeros((short,) + part.shape[1:], np.float32)])
+            parts.append(self.session.run(None, {self._input: part})[0][:self._batch - short])
+        return np.concatenate(parts)
+
     def feature_maps(self, batch: np.ndarray) -> np.ndarray:
-        """Preprocessed batch (B, 3, H, W) float32 -> tap output (B, K, h, w) float32."""
-        return self.session.run(None, {self._input: batch.astype(np.float32, copy=False)})[0]
+        """Preprocessed batch (B, 3, H, W) float32 -> the model's output: the tap (B, K, h, w) float32, or
+        a global model's descriptors (B, D)."""
+        return self._run(batch)
 
     def local_features(self, batch: np.ndarray) -> np.ndarray:
-        """Preprocessed batch (B, 3, H, W) -> local descriptors (B, N = h*w, K) float32."""
+        """Preprocessed batch (B, 3, H, W) -> local descriptors (B, N = h*w, K) float32; a global model's
+        descriptor as its one local descriptor (B, 1, D)."""
         fmap = self.feature_maps(batch)
+        if self.is_global:
+            return np.ascontiguousarray(fmap, np.float32)[:, None, :]
         b, k = fmap.shape[:2]
         return np.ascontiguousarray(fmap.reshape(b, k, -1).transpose(0, 2, 1))
+
+
+def _output_kind(path: Path, shape: list) -> str:
+    """"global" for an output (batch, D), "local" for a feature map (batch, K, h, w); VprError else."""
+    if len(shape) == 2:
+        return "global"
+    if len(shape) == 4:
+        return "local"
+    raise VprError(f"{path}: model output has rank {len(shape)} ({shape}); expected a global descriptor "
+                   f"(batch, D) or a feature map (batch, K, h, w)")

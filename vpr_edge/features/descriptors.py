@@ -20,6 +20,7 @@ class GivenDescriptors(Handcrafted):
     dims: int
     name: str = field(default="descriptors", init=False, repr=False)
     binary: bool = field(default=False, init=False, repr=False)
+    is_global: bool = field(default=True, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if not (isinstance(self.dims, int) and self.dims > 0):

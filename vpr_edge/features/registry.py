@@ -5,11 +5,13 @@ from pathlib import Path
 
 from vpr_edge.errors import VprError
 from vpr_edge.features.base import FrontEnd
+from vpr_edge.features.conventions import GivenConventions
 
 
 FRONT_ENDS: dict[str, str] = {
-    "cnn": "an ONNX layer tap of a CNN (--model; default the bundled EfficientNet-Lite0 stage5): its W x H map "
-           "as W*H local K-dim descriptors",
+    "cnn": "an ONNX model (--model; default the bundled EfficientNet-Lite0 stage5 tap): a layer tap's W x H map "
+           "as W*H local K-dim descriptors, or a place recognition network's global descriptor (output "
+           "(batch, D)), encoded as it is",
     "hog": "OpenCV HOG on the grey image at 128x64: each 16x16 block (4 cells x 9 bins) a local descriptor; "
            "encoding none gives the whole image's HOG",
     "sift": "OpenCV SIFT on a dense grid (every 16 px, 16 px keypoints) of the grey image at 128x96",
@@ -26,17 +28,22 @@ MAP_FRONT_ENDS = (*FRONT_ENDS, "descriptors")
 DEFAULT_FRONT_END = "cnn"   # a CNN tap (the bundled model that suits the camera, features.choice)
 
 
-def make_front_end(name: str, model: Path | None = None, threads: int = 0, spec: dict | None = None) -> FrontEnd:
+def make_front_end(name: str, model: Path | None = None, threads: int = 0, spec: dict | None = None,
+                   conventions: GivenConventions | None = None) -> FrontEnd:
     """The front end ``name`` with default parameters, or as ``spec`` (a map's ``describe()``) records it.
-    ``model``/``threads`` apply to ``cnn`` only. ValueError for an unknown name."""
+    ``model``/``threads`` and the input ``conventions`` stated for a model without vpr_edge metadata
+    (``features.conventions``) apply to ``cnn`` only. ValueError for an unknown name."""
     params = dict((spec or {}).get("params") or {})
     if name == "cnn":
         from vpr_edge.features.cnn import FeatureExtractor, resolve_model
+        from vpr_edge.features.conventions import InputConventions
 
         resize = params.pop("resize", None)
+        recorded = params.pop("input", None)
         if params:
             raise VprError(f"front end cnn: stored parameters not understood ({', '.join(params)})")
-        return FeatureExtractor(resolve_model(model), threads, resize)
+        stated = InputConventions.from_record(recorded, "the map's input conventions") if recorded else conventions
+        return FeatureExtractor(resolve_model(model), threads, resize, stated)
     if model is not None:
         raise VprError(f"{model}: front end {name} takes no model; drop --model")
     try:

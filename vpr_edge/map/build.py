@@ -13,6 +13,7 @@ from vpr_edge.encoders import Encoder, FitSettings, fit_encoder
 from vpr_edge.encoders.registry import DEFAULT_ENCODING
 from vpr_edge.errors import VprError
 from vpr_edge.features import FrontEnd
+from vpr_edge.features.base import check_finite
 from vpr_edge.frames.images import load_image
 from vpr_edge.index.encodings import DEFAULT_STORAGE, EncodingWriter, Encodings
 from vpr_edge.map.front import front_end_meta
@@ -28,6 +29,7 @@ def described(files: Sequence[Path], order: np.ndarray, front: FrontEnd, batch_s
     for i in range(0, len(order), batch_size):
         idx = order[i:i + batch_size]
         x, m = front.local([load_image(files[j]) for j in idx])
+        check_finite(x, [str(files[j]) for j in idx], front.name)
         if progress:
             progress(len(idx))
         yield idx, x, m

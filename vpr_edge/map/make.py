@@ -16,6 +16,7 @@ from vpr_edge.errors import VprError, warn
 from vpr_edge.features import FrontEnd, make_front_end
 from vpr_edge.features.choice import bundled_for_sha256, model_for_frame
 from vpr_edge.features.cnn import model_from_env
+from vpr_edge.features.conventions import GivenConventions
 from vpr_edge.features.registry import DEFAULT_FRONT_END
 from vpr_edge.files import check_not_input, check_writable, writer_lock
 from vpr_edge.frames.images import list_images, load_image, read_stamps
@@ -58,6 +59,7 @@ class BuildOptions:
     topic: str | None = None         # refs is a ROS bag: its image topic
     positions_topic: str | None = None   # ... and its NavSatFix / Odometry topic
     append: bool = False
+    inputs: GivenConventions = GivenConventions()   # a model without vpr_edge metadata: its input conventions
     batch_size: int = 8
     threads: int = 0
 
@@ -99,7 +101,7 @@ def _check_options(refs: Path, out: Path, o: BuildOptions, bag: bool, gpx: bool)
     if o.append:
         given_opts = [k for k, v in (("--codebook", o.codebook), ("--alpha", o.alpha), ("--features", o.features),
                                      ("--resize", o.resize), ("--encoding", o.encoding), ("--svm", o.svm or None))
-                      if v is not None]
+                      if v is not None] + o.inputs.options()
         if given_opts:
             raise VprError(f"{o.codebook or out}: --append describes and encodes as the map does; drop "
                            f"{', '.join(given_opts)}")
@@ -183,6 +185,7 @@ def _plan_descriptors(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
                                  ("--topic", o.topic), ("--positions-topic", o.positions_topic),
                                  ("--timestamps", o.timestamps), ("--svm", o.svm or None),
                                  ("--alpha", o.alpha), *_fit_options(o).items()) if v is not None]
+    image_only += o.inputs.options()
     if o.encoding not in (None, "none"):
         image_only.append(f"--encoding {o.encoding}")
     if o.positions == "exif":
@@ -226,14 +229,13 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     given, cb_meta = load_codebook(o.codebook) if o.codebook else (None, {})
     if given is not None and o.encoding is not None and o.encoding != given.name:
         raise VprError(f"{o.codebook}: codebook is for encoding {given.name}, not --encoding {o.encoding}")
-    enc_name = base.encoder.name if base else given.name if given else o.encoding or DEFAULT_ENCODING
-    _warn_inapplicable(enc_name, o)
-    if (given is None and base is None and ENCODERS[enc_name].needs_fit) or o.svm:
-        require_sklearn()
     ort_threads = use_threads(o.threads)
     front_name = o.features or (cb_meta.get("features") or {}).get("name", DEFAULT_FRONT_END)
     if o.resize is not None and front_name != "cnn":   # (with --append, --resize was refused above)
         raise VprError(f"--resize applies to the cnn front end, not {front_name}")
+    if o.inputs.given and (front_name != "cnn" or (o.model is None and model_from_env() is None)):
+        raise VprError(f"{', '.join(o.inputs.options())}: input conventions of a model given with --model "
+                       f"(the cnn front end)")
     model, choice = o.model, None
     by_camera = front_name == "cnn" and base is None and model is None and model_from_env() is None
     if by_camera and given is not None:   # the bundled model the codebook was fitted with, if it is one
@@ -244,7 +246,15 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     if base is not None:
         front = map_front_end(base, out, o.model, ort_threads)
     else:   # a bag's frames are seen only once extracted: its model is chosen then (the same front end)
-        front = make_front_end(front_name, model, ort_threads, spec=spec)
+        front = make_front_end(front_name, model, ort_threads, spec=spec, conventions=o.inputs)
+    enc_name = base.encoder.name if base else given.name if given else o.encoding or default_encoding(front)
+    if front.is_global and base is None and (enc_name != "none" or given is not None):
+        drop = f"--codebook {o.codebook}" if given is not None else f"--encoding {enc_name}"
+        raise VprError(f"{front.path}: a global-descriptor model gives one descriptor an image, stored as it "
+                       f"is (encoding none, no codebook): drop {drop}")
+    _warn_inapplicable(enc_name, o)
+    if (given is None and base is None and ENCODERS[enc_name].needs_fit) or o.svm:
+        require_sklearn()
     if enc_name == "none" and front.n_local is None:
         raise VprError(f"encoding none needs a front end with a fixed grid of descriptors; {front.name} detects "
                        f"keypoints (a varying number per image): choose bow, vlad, fv or ifv")
@@ -254,6 +264,8 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
         check_codebook_fits(given, cb_meta, front, str(o.codebook))
         if o.alpha is not None:
             given = given.with_alpha(o.alpha)
+    if front.is_global and given is None:
+        given = Flatten(front.dim, 1)       # the descriptor L2-normalised: nothing to fit
     storage = o.storage or (base.stored.storage if base else DEFAULT_STORAGE)
     names = scratch = None
     if bag:   # the work starts here: the bag's images are decoded once, into a scratch folder
@@ -272,6 +284,12 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
             base.positions.check_frame(positions, str(refs))
     return MapPlan(refs, out, files, front, enc_name, given, _fit_settings(o), storage, o, base, cb_meta,
                    positions, names, scratch, choice)
+
+
+def default_encoding(front: FrontEnd) -> str:
+    """The encoding a new map of ``front`` gets: ``none`` for a global-descriptor model (its output is the
+    place's vector), else ``DEFAULT_ENCODING``."""
+    return "none" if front.is_global else DEFAULT_ENCODING
 
 
 def _camera_model(first: Path) -> tuple[Path, str]:

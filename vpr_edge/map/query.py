@@ -11,6 +11,7 @@ import numpy as np
 
 from vpr_edge.errors import MapChanged, VprError
 from vpr_edge.features import FrontEnd
+from vpr_edge.features.base import check_finite
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.features.descriptors import GivenDescriptors
 from vpr_edge.frames.descriptors import descriptor_dims, is_descriptor_file
@@ -102,7 +103,9 @@ class MapQuery:
             if pending[0].descriptor is not None:
                 encoded = self.encode_descriptors(np.stack([f.descriptor for f in pending]), pending[0].name)
             else:
-                encoded = self.encode([f.image for f in pending])
+                local, mask = self.front.local([f.image for f in pending])
+                check_finite(local, [f.name for f in pending], self.front.name)
+                encoded = self.map.encode(local, mask)
             yield from zip(pending, encoded)
             pending.clear()
 
