@@ -1,6 +1,7 @@
 """The measurement tools run and print what they promise (small sizes; no timing is asserted)."""
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -56,6 +57,9 @@ def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> 
      "evidence_decay must be in [0, 1)"),
     ("results.py", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--quick"], "not a dataset folder with ref/"),
     ("bench_matcher.py", ["--stop-noise", "-1"], "--stop-noise must be >= 0"),
+    ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "gem"], "--front gem: expected NAME=MODEL"),
+    ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "gem={tmp}/no.onnx"], "model file not found"),
+    ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "default"], "not a tools/derive_streams.py folder"),
 ])
 def test_new_tools_refuse_bad_input_in_one_line(tmp_path: Path, name: str, args: list[str], needle: str) -> None:
     """One line on stderr naming the problem, exit 2, before any work (nothing written)."""
@@ -234,3 +238,25 @@ def test_results_quick_measures_every_stream(tmp_path: Path, small_refs: Path, s
             assert all(0 <= t["2"]["r1"] <= 1 and t["1"]["r1"] <= t["2"]["r1"] for t in modes.values())
     assert all(doc["speed"][n]["x_yardstick"] > 0 for n in doc["datasets"])
     assert "| aligned |" in out and "yardstick" in out
+
+
+@pytest.mark.slow
+def test_compare_front_ends_reports_each_front_end(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
+    """tools/compare_front_ends.py on the sample's first 24 frames: the default and a GeM global model, each
+    stream's cells and the bytes a place / ms a frame lines."""
+    pytest.importorskip("torch")
+    from vpr_edge.evaluation.streams import derive_streams
+    from vpr_edge_export.onnx_export import default_weights, export_global
+
+    (tmp_path / "data").mkdir()
+    shutil.copytree(small_refs, tmp_path / "data" / "ref")
+    shutil.copytree(small_queries, tmp_path / "data" / "query")
+    derive_streams(tmp_path / "data", tmp_path / "ds")
+    gem = tmp_path / "gem.onnx"
+    export_global("gem", default_weights("efficientnet_lite0"), 160, 120, gem, backbone="efficientnet_lite0",
+                  tap="stage5")
+    out = tool("compare_front_ends.py", "--streams", str(tmp_path / "ds"), "--front", "default", "--front",
+               f"gem={gem}")
+    assert "| default |" in out and "| gem |" in out
+    assert "gem: 116 bytes a place" in out and "x the yardstick" in out
+    assert (tmp_path / "ds" / "map.gem.npz").is_file()

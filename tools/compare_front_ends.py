@@ -1,0 +1,110 @@
+#!/usr/bin/env python3
+"""Front ends side by side on derived streams (docs/results.md, "A global front end"): one map per model,
+evaluated by the library's ``evaluate`` on every derived stream, with the bytes a place and ms a frame.
+
+    python tools/derive_streams.py --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
+    python -m vpr_edge_export.onnx_export --architecture gem --backbone efficientnet_lite0 --tap stage5 \\
+        --width 160 --height 120 --out out/models/lite0_stage5_gem_160x120.onnx
+    python tools/compare_front_ends.py --streams out/nordland-dev out/corridor \\
+        --front default --front gem=out/models/lite0_stage5_gem_160x120.onnx
+
+``--front NAME=MODEL`` builds ``OUT/map.NAME.npz`` with ``--model MODEL`` (``default``: the default build, no
+model given). For each dataset it prints, per front end, the ``stream`` mode's R@1 within the tolerance,
+answered right, mapped right and unmapped lost per stream, and ``single``'s R@1 (the front end alone); then
+bytes a place and ms a frame (``Localizer`` on one thread over the aligned stream, after the first frame)
+beside the yardstick measured in the same run (one fp32 inference of the bundled 320x240 model).
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from vpr_edge import Localizer
+from vpr_edge.errors import VprError, one_line_errors
+from vpr_edge.evaluation import Source, Truth, evaluate
+from vpr_edge.evaluation.streams import KINDS
+from vpr_edge.evaluation.yardstick import yardstick_ms
+from vpr_edge.frames.images import open_stream
+from vpr_edge.map import load_map
+from vpr_edge.map.make import BuildOptions, plan_map, write_map
+from vpr_edge.matchers import get_matcher
+from vpr_edge.threads import use_threads
+
+
+def per_frame_ms(map_path: Path, stream: Path) -> float:
+    """ms a frame of the whole per-frame chain on one thread, the first frame (the start) excluded."""
+    loc = Localizer(map_path, threads=1)
+    frames, _ = open_stream(stream)
+    stamps = [time.perf_counter() for _ in loc.run(frames)]
+    return 1e3 * (stamps[-1] - stamps[0]) / max(1, len(stamps) - 1)
+
+
+def fronts(given: list[str]) -> dict[str, Path | None]:
+    out: dict[str, Path | None] = {}
+    for item in given:
+        name, _, model = item.partition("=")
+        if name != "default" and not model:
+            raise VprError(f"--front {item}: expected NAME=MODEL.onnx (or default)")
+        if model and not Path(model).is_file():
+            raise VprError(f"{model}: model file not found")
+        out[name] = Path(model) if model else None
+    return out
+
+
+def check_streams(folders: list[Path]) -> None:
+    """VprError naming the first folder that is not a derive_streams output (ref/ and every stream with its csv)."""
+    for folder in folders:
+        missing = [n for n in ("ref", *KINDS, *(f"{k}.csv" for k in KINDS)) if not (folder / n).exists()]
+        if missing:
+            raise VprError(f"{folder}: not a tools/derive_streams.py folder (no {missing[0]})")
+
+
+def run(a: argparse.Namespace) -> int:
+    use_threads(1)
+    models = fronts(a.front)
+    check_streams(a.streams)
+    matchers = {m: get_matcher(m) for m in ("single", "stream")}
+    for folder in a.streams:
+        yard = [yardstick_ms()]
+        rows: dict[str, dict] = {}
+        for name, model in models.items():
+            map_path = folder / f"map.{name}.npz"
+            write_map(plan_map(folder / "ref", map_path, BuildOptions(model=model, threads=1)))
+            per_kind = {}
+            for kind in KINDS:
+                ev = evaluate(Source(map=map_path, queries=folder / kind), Truth(gt=folder / f"{kind}.csv"),
+                              matchers, a.tolerance)
+                per_kind[kind] = {m: r.as_json() for m, r in ev.reports.items()}
+            rows[name] = {"streams": per_kind, "bytes": load_map(map_path).stored.bytes_per_place,
+                          "ms": per_frame_ms(map_path, folder / "aligned")}
+        yard.append(yardstick_ms())
+        ref = sum(yard) / len(yard)
+        print(f"\n{folder.name}, tolerance ±{a.tolerance}: stream R@1 / answered right / mapped right / unmapped "
+              f"lost; single R@1\n")
+        print("| front end | " + " | ".join(KINDS) + " |")
+        print("|---|" + "---|" * len(KINDS))
+        for name, r in rows.items():
+            cells = []
+            for kind in KINDS:
+                s, one = r["streams"][kind]["stream"], r["streams"][kind]["single"]
+                vals = [s["recall_at_1"], s["answered_right"], s["mapped_right"], s["lost_unmapped"]]
+                cells.append(" / ".join("-" if v is None else f"{v:.2f}" for v in vals) + f"; {one['recall_at_1']:.2f}")
+            print(f"| {name} | " + " | ".join(cells) + " |")
+        print()
+        for name, r in rows.items():
+            print(f"{name}: {r['bytes']} bytes a place, {r['ms']:.2f} ms a frame = {r['ms'] / ref:.2f}x the "
+                  f"yardstick ({' / '.join(f'{y:.2f}' for y in yard)} ms before / after)")
+    return 0
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--streams", type=Path, nargs="+", required=True, help="folders of tools/derive_streams.py")
+    p.add_argument("--front", action="append", required=True, help="NAME=MODEL.onnx, or default")
+    p.add_argument("--tolerance", type=int, default=2)
+    return one_line_errors("compare_front_ends", lambda: run(p.parse_args()))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
