@@ -104,7 +104,7 @@ def test_local_search_reads_only_the_window(api_map: Path, small_queries: Path) 
     files = sorted(small_queries.iterdir())
     sizes: list[int] = []
     real = loc.map.scores
-    loc.map = type(loc.map)(loc.map.stored, loc.map.names, loc.map.encoder, loc.map.meta)   # same map, spied
+    loc.query.map = type(loc.map)(loc.map.stored, loc.map.names, loc.map.encoder, loc.map.meta)   # spied
     object.__setattr__(loc.map, "scores", lambda q, kind="cosine", rows=None: sizes.append(
         len(loc.names) if rows is None else len(rows)) or real(q, kind, rows))
     pushed = [loc.push(load_image(f)) for f in files]

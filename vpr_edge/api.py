@@ -118,10 +118,6 @@ class Localizer:
         """The map (``MapQuery.map``)."""
         return self.query.map
 
-    @map.setter
-    def map(self, place_map: PlaceMap) -> None:
-        self.query.map = place_map
-
     @property
     def front(self) -> FrontEnd:
         """The front end its frames go through (``MapQuery.front``)."""
@@ -179,11 +175,15 @@ class Localizer:
                      "heading": None if heading != heading else heading}
         return Match(index, name, ref, self.map.names[ref], score, False, stamp, confidence, **place)
 
+    def _check_online(self) -> None:
+        """ValueError unless the mode matches frame by frame (``push`` and ``push_encoding``)."""
+        if self._online is None:
+            raise ValueError(f"mode {self.matcher.name} is offline (it needs the whole sequence): use run()")
+
     def push(self, rgb: np.ndarray, name: str = "", stamp: float | None = None) -> Match:
         """Localise the next frame of the stream (RGB uint8 (H, W, 3), taken at ``stamp`` seconds, which the
         answer carries); online modes only."""
-        if self._online is None:
-            raise ValueError(f"mode {self.matcher.name} is offline (it needs the whole sequence): use run()")
+        self._check_online()
         image = np.asarray(rgb)
         if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8 or min(image.shape[:2]) < MIN_SIDE:
             raise VprError(f"frame must be RGB uint8 (H, W, 3) of at least {MIN_SIDE}x{MIN_SIDE} pixels, got "
@@ -193,8 +193,7 @@ class Localizer:
     def push_encoding(self, encoding: np.ndarray, name: str = "", stamp: float | None = None) -> Match:
         """``push`` for a frame already encoded (``encode``; (D,) float): its motion cue, the similarities the
         matcher asks for, the matcher's update and the output line; online modes only."""
-        if self._online is None:
-            raise ValueError(f"mode {self.matcher.name} is offline (it needs the whole sequence): use run()")
+        self._check_online()
         with self._lock:
             ref, score, where = self._step(np.asarray(encoding, np.float32))
             self._count += 1
