@@ -156,6 +156,19 @@ _VGG16_TAPS = {"block3_conv3": 15, "block4_conv3": 22, "block5_conv3": 29}
 _VGG16_FC = {"fc1": (0,), "fc2": (0, 3)}
 
 
+def vgg16_features() -> list[nn.Module]:
+    """torchvision VGG16's ``features``, layer by layer (its indices: conv at 0, ReLU at 1, ...)."""
+    layers: list[nn.Module] = []
+    cin = 3
+    for v in _VGG16_CFG:
+        if v == "M":
+            layers.append(nn.MaxPool2d(2, 2))
+        else:
+            layers += [nn.Conv2d(cin, int(v), 3, padding=1), nn.ReLU(inplace=False)]
+            cin = int(v)
+    return layers
+
+
 class VGG16(nn.Module):
     """VGG16 ``features`` up to and including the ReLU after ``tap`` (torchvision layout). ``fc1``/``fc2``:
     all of ``features`` (pool5 included), torchvision's average pooling to 7x7, then ``classifier.0`` (and
@@ -167,14 +180,7 @@ class VGG16(nn.Module):
         super().__init__()
         if tap not in _VGG16_TAPS and tap not in _VGG16_FC:
             raise ValueError(f"unknown vgg16 tap {tap!r}; choose from {sorted(_VGG16_TAPS) + sorted(_VGG16_FC)}")
-        layers: list[nn.Module] = []
-        cin = 3
-        for v in _VGG16_CFG:
-            if v == "M":
-                layers.append(nn.MaxPool2d(2, 2))
-            else:
-                layers += [nn.Conv2d(cin, int(v), 3, padding=1), nn.ReLU(inplace=False)]
-                cin = int(v)
+        layers = vgg16_features()
         self.fc = _VGG16_FC.get(tap, ())
         self.features = nn.Sequential(*(layers if self.fc else layers[: _VGG16_TAPS[tap] + 1]))
         if self.fc:
@@ -254,35 +260,76 @@ class Bottleneck(nn.Module):
         return F.relu(y + identity)
 
 
+class BasicBlock(nn.Module):
+    """torchvision ResNet-18/34 block."""
+
+    def __init__(self, cin: int, width: int, stride: int) -> None:
+        super().__init__()
+        self.conv1 = nn.Conv2d(cin, width, 3, stride=stride, padding=1, bias=False)
+        self.bn1 = nn.BatchNorm2d(width)
+        self.conv2 = nn.Conv2d(width, width, 3, padding=1, bias=False)
+        self.bn2 = nn.BatchNorm2d(width)
+        self.downsample: nn.Module | None = None
+        if stride != 1 or cin != width:
+            self.downsample = nn.Sequential(nn.Conv2d(cin, width, 1, stride=stride, bias=False), nn.BatchNorm2d(width))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
+        y = self.bn2(self.conv2(F.relu(self.bn1(self.conv1(x)))))
+        return F.relu(y + (x if self.downsample is None else self.downsample(x)))
+
+
+RESNETS = {"resnet18": (False, (2, 2, 2, 2)), "resnet34": (False, (3, 4, 6, 3)), "resnet50": (True, (3, 4, 6, 3)),
+           "resnet101": (True, (3, 4, 23, 3)), "resnet152": (True, (3, 8, 36, 3))}
+
+
+def resnet_parts(name: str, n_layers: int) -> list[tuple[str, nn.Module]]:
+    """torchvision ResNet ``name``'s stem and its first ``n_layers`` layers as (attribute, module) pairs."""
+    bottleneck, blocks = RESNETS[name]
+    parts: list[tuple[str, nn.Module]] = [("conv1", nn.Conv2d(3, 64, 7, stride=2, padding=3, bias=False)),
+                                          ("bn1", nn.BatchNorm2d(64)), ("relu", nn.ReLU()),
+                                          ("maxpool", nn.MaxPool2d(3, stride=2, padding=1))]
+    cin = 64
+    for i, (width, repeats) in enumerate(zip((64, 128, 256, 512), blocks[:n_layers]), start=1):
+        layer = []
+        for r in range(repeats):
+            stride = 2 if r == 0 and i > 1 else 1
+            layer.append(Bottleneck(cin, width, stride) if bottleneck else BasicBlock(cin, width, stride))
+            cin = width * 4 if bottleneck else width
+        parts.append((f"layer{i}", nn.Sequential(*layer)))
+    return parts
+
+
+def resnet_channels(name: str, n_layers: int) -> int:
+    bottleneck = RESNETS[name][0]
+    return (64, 128, 256, 512)[n_layers - 1] * (4 if bottleneck else 1)
+
+
+class NamedParts(nn.Module):
+    """Modules run in order, kept under their torchvision attribute names (``conv1``, ``layer3``, ...)."""
+
+    def __init__(self, parts: list[tuple[str, nn.Module]]) -> None:
+        super().__init__()
+        self.order = [name for name, _ in parts]
+        for name, module in parts:
+            setattr(self, name, module)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
+        for name in self.order:
+            x = getattr(self, name)(x)
+        return x
+
+
 # Caffe/Keras naming: res3d = last block of layer2, res4f = last of layer3, res5c = last of layer4.
 _RESNET50_TAPS = {"res3d": 2, "res4f": 3, "res5c": 4}
-_RESNET50_LAYERS = [(64, 3, 1), (128, 4, 2), (256, 6, 2), (512, 3, 2)]
 
 
-class ResNet50(nn.Module):
+class ResNet50(NamedParts):
     """ResNet50 trunk up to the output of the last bottleneck of the tap's stage (torchvision layout)."""
 
     def __init__(self, tap: str = "res4f") -> None:
-        super().__init__()
         if tap not in _RESNET50_TAPS:
             raise ValueError(f"unknown resnet50 tap {tap!r}; choose from {sorted(_RESNET50_TAPS)}")
-        self.conv1 = nn.Conv2d(3, 64, 7, stride=2, padding=3, bias=False)
-        self.bn1 = nn.BatchNorm2d(64)
-        self.maxpool = nn.MaxPool2d(3, stride=2, padding=1)
-        cin = 64
-        self.n_layers = _RESNET50_TAPS[tap]
-        for i, (width, repeats, stride) in enumerate(_RESNET50_LAYERS[: self.n_layers], start=1):
-            blocks = []
-            for r in range(repeats):
-                blocks.append(Bottleneck(cin, width, stride if r == 0 else 1))
-                cin = width * 4
-            setattr(self, f"layer{i}", nn.Sequential(*blocks))
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
-        x = self.maxpool(F.relu(self.bn1(self.conv1(x))))
-        for i in range(1, self.n_layers + 1):
-            x = getattr(self, f"layer{i}")(x)
-        return x
+        super().__init__(resnet_parts("resnet50", _RESNET50_TAPS[tap]))
 
 
 _IMAGENET_MEAN = (0.485, 0.456, 0.406)

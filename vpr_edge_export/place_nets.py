@@ -30,7 +30,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from vpr_edge_export.backbones import _VGG16_CFG, Bottleneck
+from vpr_edge_export.backbones import RESNETS, NamedParts, resnet_channels, resnet_parts, vgg16_features
 
 IMAGENET = ((0.485, 0.456, 0.406), (0.229, 0.224, 0.225))
 
@@ -82,76 +82,9 @@ class NetVLAD(nn.Module):
         return F.normalize(vlad, p=2.0, dim=1)
 
 
-class BasicBlock(nn.Module):
-    """torchvision ResNet-18/34 block."""
-
-    def __init__(self, cin: int, width: int, stride: int) -> None:
-        super().__init__()
-        self.conv1 = nn.Conv2d(cin, width, 3, stride=stride, padding=1, bias=False)
-        self.bn1 = nn.BatchNorm2d(width)
-        self.conv2 = nn.Conv2d(width, width, 3, padding=1, bias=False)
-        self.bn2 = nn.BatchNorm2d(width)
-        self.downsample: nn.Module | None = None
-        if stride != 1 or cin != width:
-            self.downsample = nn.Sequential(nn.Conv2d(cin, width, 1, stride=stride, bias=False), nn.BatchNorm2d(width))
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
-        y = self.bn2(self.conv2(F.relu(self.bn1(self.conv1(x)))))
-        return F.relu(y + (x if self.downsample is None else self.downsample(x)))
-
-
-RESNETS = {"resnet18": (False, (2, 2, 2, 2)), "resnet34": (False, (3, 4, 6, 3)), "resnet50": (True, (3, 4, 6, 3)),
-           "resnet101": (True, (3, 4, 23, 3)), "resnet152": (True, (3, 8, 36, 3))}
-
-
-def resnet_parts(name: str, n_layers: int) -> list[tuple[str, nn.Module]]:
-    """torchvision ResNet ``name``'s stem and its first ``n_layers`` layers as (attribute, module) pairs."""
-    bottleneck, blocks = RESNETS[name]
-    parts: list[tuple[str, nn.Module]] = [("conv1", nn.Conv2d(3, 64, 7, stride=2, padding=3, bias=False)),
-                                          ("bn1", nn.BatchNorm2d(64)), ("relu", nn.ReLU()),
-                                          ("maxpool", nn.MaxPool2d(3, stride=2, padding=1))]
-    cin = 64
-    for i, (width, repeats) in enumerate(zip((64, 128, 256, 512), blocks[:n_layers]), start=1):
-        layer = []
-        for r in range(repeats):
-            stride = 2 if r == 0 and i > 1 else 1
-            layer.append(Bottleneck(cin, width, stride) if bottleneck else BasicBlock(cin, width, stride))
-            cin = width * 4 if bottleneck else width
-        parts.append((f"layer{i}", nn.Sequential(*layer)))
-    return parts
-
-
-def resnet_channels(name: str, n_layers: int) -> int:
-    bottleneck = RESNETS[name][0]
-    return (64, 128, 256, 512)[n_layers - 1] * (4 if bottleneck else 1)
-
-
 def vgg16_conv5_3() -> nn.Sequential:
     """torchvision VGG16's ``features`` up to conv5_3, without its ReLU (indices 0 ... 28)."""
-    layers: list[nn.Module] = []
-    cin = 3
-    for v in _VGG16_CFG:
-        if v == "M":
-            layers.append(nn.MaxPool2d(2, 2))
-        else:
-            layers += [nn.Conv2d(cin, int(v), 3, padding=1), nn.ReLU()]
-            cin = int(v)
-    return nn.Sequential(*layers[:29])
-
-
-class NamedParts(nn.Module):
-    """Modules run in order, kept under their torchvision attribute names (``conv1``, ``layer3``, ...)."""
-
-    def __init__(self, parts: list[tuple[str, nn.Module]]) -> None:
-        super().__init__()
-        self.order = [name for name, _ in parts]
-        for name, module in parts:
-            setattr(self, name, module)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:  # noqa: D102
-        for name in self.order:
-            x = getattr(self, name)(x)
-        return x
+    return nn.Sequential(*vgg16_features()[:29])
 
 
 class MixerLayer(nn.Module):
