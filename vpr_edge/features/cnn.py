@@ -123,7 +123,7 @@ class FeatureExtractor:
                            f"({str(e).splitlines()[0][:120]})") from None
         inp, out = self.session.get_inputs()[0], self.session.get_outputs()[0]
         self._input = inp.name
-        # a model exported with a fixed batch size runs that many images at a time (``_run``)
+        # a model exported with a fixed batch size runs that many images at a time (``feature_maps``)
         self._batch = inp.shape[0] if isinstance(inp.shape[0], int) and inp.shape[0] > 0 else None
         self.output = _output_kind(self.path, out.shape)
         raw = self.session.get_modelmeta().custom_metadata_map.get("vpr_edge")
@@ -163,9 +163,7 @@ class FeatureExtractor:
         """Metadata for a model exported elsewhere: what one run on a blank image shows of its output."""
         blank = np.zeros((1, 3, self.conventions.height, self.conventions.width), np.float32)
         try:
-            shape = self._run(blank).shape
-        except VprError:
-            raise
+            shape = self.feature_maps(blank).shape
         except Exception as e:  # onnxruntime's own errors: an input that contradicts the model
             raise VprError(f"{self.path}: the model does not run on a {self.conventions.width}x"
                            f"{self.conventions.height} {self.conventions.layout} input "
@@ -250,10 +248,10 @@ class FeatureExtractor:
             out[c] -= self._offset[c]
         return out
 
-    def _run(self, batch: np.ndarray) -> np.ndarray:
-        """Preprocessed batch (B, 3, H, W) float32 -> the model's output, in its layout (NHWC models get
-        the batch transposed) and, for a model of fixed batch size, that many images a run (the last run
-        padded with blank images)."""
+    def feature_maps(self, batch: np.ndarray) -> np.ndarray:
+        """Preprocessed batch (B, 3, H, W) float32 -> the model's output: the tap (B, K, h, w) float32, or
+        a global model's descriptors (B, D). NHWC models get the batch transposed; a model of fixed batch
+        size runs that many images a call (the last call padded with blank images)."""
         x = batch.astype(np.float32, copy=False)
         if self.conventions.layout == "nhwc":
             x = np.ascontiguousarray(x.transpose(0, 2, 3, 1))
@@ -267,11 +265,6 @@ class FeatureExtractor:
                 part = np.concatenate([part, np.zeros((short,) + part.shape[1:], np.float32)])
             parts.append(self.session.run(None, {self._input: part})[0][:self._batch - short])
         return np.concatenate(parts)
-
-    def feature_maps(self, batch: np.ndarray) -> np.ndarray:
-        """Preprocessed batch (B, 3, H, W) float32 -> the model's output: the tap (B, K, h, w) float32, or
-        a global model's descriptors (B, D)."""
-        return self._run(batch)
 
     def local_features(self, batch: np.ndarray) -> np.ndarray:
         """Preprocessed batch (B, 3, H, W) -> local descriptors (B, N = h*w, K) float32; a global model's

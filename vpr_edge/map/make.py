@@ -250,7 +250,7 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     enc_name = base.encoder.name if base else given.name if given else o.encoding or default_encoding(front)
     if front.is_global and base is None and (enc_name != "none" or given is not None):
         drop = f"--codebook {o.codebook}" if given is not None else f"--encoding {enc_name}"
-        raise VprError(f"{front.path}: a global-descriptor model gives one descriptor an image, stored as it "
+        raise VprError(f"{front.identity().get('model_path', front.name)}: a global-descriptor model gives one descriptor an image, stored as it "
                        f"is (encoding none, no codebook): drop {drop}")
     _warn_inapplicable(enc_name, o)
     if (given is None and base is None and ENCODERS[enc_name].needs_fit) or o.svm:

@@ -82,9 +82,12 @@ class MapQuery:
                 raise VprError(f"{source}: descriptors of {dims} dims, but the map's places are descriptors of "
                                f"{self.front.dim} dims")
 
-    def encode(self, images: Sequence[np.ndarray]) -> np.ndarray:
-        """RGB uint8 images (H, W, 3) -> encodings (B, D) float32 comparable with the map's (one model run)."""
-        return self.map.encode(*self.front.local(images))
+    def encode(self, images: Sequence[np.ndarray], names: Sequence[str] | None = None) -> np.ndarray:
+        """RGB uint8 images (H, W, 3) -> encodings (B, D) float32 comparable with the map's (one model run);
+        VprError naming the image (``names``, else its place in the batch) whose descriptors are not finite."""
+        local, mask = self.front.local(images)
+        check_finite(local, names or [f"image {i} of the batch" for i in range(len(images))], self.front.name)
+        return self.map.encode(local, mask)
 
     def encode_descriptors(self, descriptors: np.ndarray, source: str = "") -> np.ndarray:
         """Global descriptors (B, D) of a map of descriptors -> encodings (B, D) float32 (L2-normalised)."""
@@ -103,9 +106,7 @@ class MapQuery:
             if pending[0].descriptor is not None:
                 encoded = self.encode_descriptors(np.stack([f.descriptor for f in pending]), pending[0].name)
             else:
-                local, mask = self.front.local([f.image for f in pending])
-                check_finite(local, [f.name for f in pending], self.front.name)
-                encoded = self.map.encode(local, mask)
+                encoded = self.encode([f.image for f in pending], [f.name for f in pending])
             yield from zip(pending, encoded)
             pending.clear()
 
