@@ -17,27 +17,16 @@ beside the yardstick measured in the same run (one fp32 inference of the bundled
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 
-from vpr_edge import Localizer
 from vpr_edge.errors import VprError, one_line_errors
 from vpr_edge.evaluation import Source, Truth, evaluate
 from vpr_edge.evaluation.streams import KINDS
-from vpr_edge.evaluation.yardstick import yardstick_ms
-from vpr_edge.frames.images import open_stream
+from vpr_edge.evaluation.yardstick import chain_ms, yardstick_ms
 from vpr_edge.map import load_map
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
 from vpr_edge.matchers import get_matcher
 from vpr_edge.threads import use_threads
-
-
-def per_frame_ms(map_path: Path, stream: Path) -> float:
-    """ms a frame of the whole per-frame chain on one thread, the first frame (the start) excluded."""
-    loc = Localizer(map_path, threads=1)
-    frames, _ = open_stream(stream)
-    stamps = [time.perf_counter() for _ in loc.run(frames)]
-    return 1e3 * (stamps[-1] - stamps[0]) / max(1, len(stamps) - 1)
 
 
 def fronts(given: list[str]) -> dict[str, Path | None]:
@@ -77,7 +66,7 @@ def run(a: argparse.Namespace) -> int:
                               matchers, a.tolerance)
                 per_kind[kind] = {m: r.as_json() for m, r in ev.reports.items()}
             rows[name] = {"streams": per_kind, "bytes": load_map(map_path).stored.bytes_per_place,
-                          "ms": per_frame_ms(map_path, folder / "aligned")}
+                          "ms": chain_ms(map_path, folder / "aligned")}
         yard.append(yardstick_ms())
         ref = sum(yard) / len(yard)
         print(f"\n{folder.name}, tolerance ±{a.tolerance}: stream R@1 / answered right / mapped right / unmapped "

@@ -25,18 +25,15 @@ import json
 import os
 import platform
 import subprocess
-import time
 from pathlib import Path
 
 import numpy as np
 
-from vpr_edge import Localizer
 from vpr_edge.errors import VprError, one_line_errors
 from vpr_edge.evaluation import Source, Truth, evaluate
 from vpr_edge.evaluation.report import answers_table, readme_table
 from vpr_edge.evaluation.streams import KINDS, derive_streams
-from vpr_edge.evaluation.yardstick import yardstick_ms
-from vpr_edge.frames.images import open_stream
+from vpr_edge.evaluation.yardstick import chain_ms, yardstick_ms
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
 from vpr_edge.matchers import get_matcher
 
@@ -77,15 +74,6 @@ def figures(report) -> dict:
                                                           "lost_mapped", "exit_frames", "lock_frames")}
 
 
-def per_frame_ms(map_path: Path, stream: Path) -> float:
-    """The default chain's ms a frame once started: ``Localizer.run`` on one thread over ``stream`` (the first
-    frame, which pays the start, excluded)."""
-    loc = Localizer(map_path, threads=1)
-    frames, _ = open_stream(stream)
-    stamps = [time.perf_counter() for _ in loc.run(frames)]
-    return 1e3 * (stamps[-1] - stamps[0]) / max(1, len(stamps) - 1)
-
-
 def measure(datasets: Path, out: Path) -> dict:
     """Every figure of the quick run (module docstring) as JSON-ready data."""
     doc: dict = {"tool": "tools/results.py --quick", "date": datetime.date.today().isoformat(), **commit(),
@@ -106,7 +94,7 @@ def measure(datasets: Path, out: Path) -> dict:
                     rows.setdefault(kind, {}).setdefault(mode, {})[str(tol)] = figures(report)
         doc["datasets"][name] = {"map_places": counts["map places"], "frames": {k: counts[k] for k in KINDS},
                                  "streams": rows}
-        doc["speed"][name] = {"ms_per_frame": round(per_frame_ms(map_path, folder / "aligned"), 3)}
+        doc["speed"][name] = {"ms_per_frame": round(chain_ms(map_path, folder / "aligned"), 3)}
         print(f"{name}: measured", flush=True)
     yard.append(yardstick_ms())
     doc["speed"]["yardstick_ms"] = [round(y, 3) for y in yard]

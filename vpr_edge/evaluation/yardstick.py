@@ -2,6 +2,7 @@
 thread, measured in the same run as what it is compared with (a shared machine's speed drifts; ratios hold)."""
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -32,3 +33,15 @@ def yardstick_ms(runs: int = 40) -> float:
         sess.run(None, {inp.name: x})
         times.append(time.perf_counter() - t0)
     return 1e3 * float(np.median(times))
+
+
+def chain_ms(map_path: str | os.PathLike[str], stream: str | os.PathLike[str]) -> float:
+    """The whole per-frame chain's ms a frame once started: ``Localizer.run`` on one thread over the frames of
+    ``stream`` (the first frame, which pays the start, excluded), to be read beside ``yardstick_ms``."""
+    from vpr_edge.api import Localizer
+    from vpr_edge.frames.images import open_stream
+
+    loc = Localizer(map_path, threads=1)
+    frames, _ = open_stream(stream)
+    stamps = [time.perf_counter() for _ in loc.run(frames)]
+    return 1e3 * (stamps[-1] - stamps[0]) / max(1, len(stamps) - 1)
