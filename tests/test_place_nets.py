@@ -130,6 +130,10 @@ def test_checkpoint_that_does_not_fit_is_one_line(tmp_path: Path, capsys: pytest
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("onnx_export: error:") and str(ckpt) in err[0], err
     assert not out.exists()
+    # a trained architecture without its checkpoint: no weights are downloaded
+    assert export_main(["--architecture", "netvlad", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "give its checkpoint with --weights FILE" in err[0] and not out.exists()
     # a checkpoint of another architecture: what it lacks, named
     assert export_main(["--architecture", "mixvpr", "--weights", str(ckpt), "--out", str(out)]) == 2
     assert "not a mixvpr checkpoint" in capsys.readouterr().err
