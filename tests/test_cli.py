@@ -109,7 +109,7 @@ def test_localize_jsonl_file_and_reused_codebook(tmp_path: Path, small_map: Path
     proc = run("localize", "-m", second, "-s", small_queries, "-o", out, "--batch-size", "4")
     assert proc.returncode == 0, proc.stderr
     lines = [json.loads(x) for x in out.read_text().splitlines()]
-    assert len(lines) == 24 and list(lines[0]) == ["frame_index", "frame", "stamp", "ref_index", "ref", "x", "y",
+    assert len(lines) == 24 and list(lines[0]) == ["frame_index", "frame", "stamp", "ref_index", "ref", "drive", "x", "y",
                                                    "lat", "lon", "heading", "along_m", "score", "confidence", "lost"]
     assert all(m["ref_index"] is None and m["ref"] is None for m in lines if m["lost"])   # nulls when lost
 
@@ -284,12 +284,13 @@ def test_append_grows_the_map_with_its_codebook(tmp_path: Path, small_refs: Path
     assert run("build-map", first, "-o", grown, "--components", "4", "--storage", "float32").returncode == 0
     before = load_map(grown)
     proc = run("build-map", second, "-o", grown, "--append")
-    assert proc.returncode == 0 and "(10 appended)" in proc.stderr and "float32" in proc.stderr, proc.stderr
+    assert proc.returncode == 0 and "(10 in 1 drive appended)" in proc.stderr and "float32" in proc.stderr, proc.stderr
     after = load_map(grown)
     assert after.names == sorted(p.name for p in small_refs.iterdir())
     np.testing.assert_array_equal(after.encodings[:14], before.encodings)          # old references untouched
     np.testing.assert_array_equal(after.encoder.gmm.means, before.encoder.gmm.means)
-    assert after.meta["appended"] == [{"folder": str(second), "first_index": 14, "count": 10}]
+    assert [(d.name, d.first, d.count, d.source) for d in after.drives.items] == \
+        [("a", 0, 14, str(first)), ("b", 14, 10, str(second))]
     # the same references in one go with the same codebook give the same encodings
     cb = tmp_path / "cb.npz"
     before.encoder.save(cb, {"model_sha256": before.meta["model_sha256"]})

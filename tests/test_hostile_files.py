@@ -20,7 +20,7 @@ from vpr_edge.evaluation import sources, truth
 from vpr_edge.features.cnn import _checked_info
 from vpr_edge.features.patches import Patches
 from vpr_edge.files import read_npz, write_npz
-from vpr_edge.map import load_map, map_from_local, save_map
+from vpr_edge.map import MAP_SCHEMA, load_map, map_from_local, save_map
 
 FUZZ = settings(max_examples=200, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
@@ -41,7 +41,7 @@ def valid_map(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, dict]:
     pm = map_from_local(local, None, front, [f"{i}.png" for i in range(6)], "refs", "none")
     path = tmp_path_factory.mktemp("fuzz") / "valid.npz"
     save_map(pm, path)
-    arrays, meta = read_npz(path, "map", 3)
+    arrays, meta = read_npz(path, "map", MAP_SCHEMA)
     return {k: np.array(v) for k, v in arrays.items()}, meta
 
 
@@ -59,7 +59,7 @@ def _digest(path: Path) -> str:
 
 @FUZZ
 @given(edits=st.dictionaries(st.sampled_from(["names", "storage", "schema", "features", "encoding",
-                                              "descriptor_dim", "n_refs", "dim", "svm", "alpha", "appended",
+                                              "descriptor_dim", "n_refs", "dim", "svm", "alpha", "appended", "drives",
                                               "model", "codebook", "kind", "other"]), json_values, min_size=1,
                              max_size=3))
 def test_map_metadata_mutations(valid_map: tuple[dict, dict], tmp_path: Path, edits: dict) -> None:

@@ -27,6 +27,7 @@ from vpr_edge.evaluation.scoring import score_result
 from vpr_edge.frames.images import list_images, load_image
 from vpr_edge.map import MapQuery
 from vpr_edge.matchers import get_matcher, run_online, run_rows
+from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.threads import use_threads
 from vpr_edge.evaluation.streams import KINDS
 
@@ -43,7 +44,7 @@ def main() -> int:
     a = p.parse_args()
     query = MapQuery(a.map, ort_threads=use_threads(a.threads))   # the map and its front end, as localize opens them
     place_map = query.map
-    matcher = get_matcher("stream").on_route(query.references())
+    matcher = get_matcher("stream").on_route(query.references(), RouteGraph(*query.joins()))
     r = len(place_map.names)
     print(f"map {a.map}: {r} references x {place_map.stored.shape[1]} dims {place_map.stored.storage}; "
           f"keep {a.keep}, calib {a.calib}, tolerance {a.tolerance}")

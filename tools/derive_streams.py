@@ -13,6 +13,13 @@ vibration: ``streams.CAMERA``); with --repeat-noise S every other kind's repeats
 
     vpr-edge build-map OUT/ref --out OUT/map.npz
     vpr-edge evaluate --map OUT/map.npz --queries OUT/speed2 --gt OUT/speed2.csv
+
+With --drives N the map's places are also cut into N drives, OUT/drives/0 .. N-1, whose frames share names
+(frame_0000.jpg ... in each), with ground truth naming places DRIVE/NAME (OUT/drives/KIND.csv); the drives are
+printed in a shuffled order, as a fleet's come in (``streams.cut_into_drives``):
+
+    vpr-edge build-map OUT/drives/2 OUT/drives/0 OUT/drives/3 OUT/drives/1 --out OUT/drives.npz
+    vpr-edge evaluate --map OUT/drives.npz --queries OUT/speed2 --gt OUT/drives/speed2.csv
 """
 from __future__ import annotations
 
@@ -20,7 +27,7 @@ import argparse
 from pathlib import Path
 
 from vpr_edge.errors import one_line_errors
-from vpr_edge.evaluation.streams import KINDS, derive_streams
+from vpr_edge.evaluation.streams import KINDS, cut_into_drives, derive_streams
 
 
 def main() -> int:
@@ -35,6 +42,7 @@ def main() -> int:
                    help="sigma (grey levels) of Gaussian sensor noise on a frame that repeats the one before "
                         "(stops, slow crawls), so that a stopped vehicle's frames are alike but not identical "
                         "(default 0: the same file again)")
+    p.add_argument("--drives", type=int, default=0, help="also cut the map into this many drives (OUT/drives/)")
     a = p.parse_args()
     return one_line_errors("derive_streams", lambda: _run(a))
 
@@ -46,6 +54,8 @@ def _run(a: argparse.Namespace) -> int:
     for kind, frames in counts.items():
         print(f"{kind:12s} {frames:6d} frames")
     print(f"map places: {n_mapped} (folder {a.out / 'ref'})")
+    if a.drives:
+        print("drives, shuffled:", " ".join(cut_into_drives(a.out, a.drives, a.seed)))
     return 0
 
 

@@ -26,18 +26,20 @@ from vpr_edge.frames.images import MIN_SIDE, Frame
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.map import MapQuery, PlaceMap
 from vpr_edge.matchers import Matcher, get_matcher, is_lost, step
+from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.threads import use_threads
 
 
-RESULTS_SCHEMA = 2   # the output line (docs/formats.md, docs/results-line.schema.json); 2: stamp, position, nulls
+RESULTS_SCHEMA = 3   # the output line (docs/formats.md, docs/results-line.schema.json); 3: drive; 2: stamp, position
 
 
 @dataclass(frozen=True)
 class Match:
     """One output line (``RESULTS_SCHEMA``): the query frame (its index in the stream, name and time in seconds
-    or None), the matched reference (index and image name; None when lost), its place when the map has
+    or None), the matched reference (index, image name and the name of its drive; None when lost), its place when the map has
     positions (``x``/``y`` metres or ``lat``/``lon`` degrees, the other pair None; ``heading`` degrees or None;
-    ``along_m``, metres along the route from its first reference; all None when lost or without positions),
+    ``along_m``, metres along its drive from the drive's first reference; all None when lost or without
+    positions),
     interpolated between references where the matcher resolves finer than one reference, a score (higher =
     more confident; its meaning per mode: docs/matchers.md), the ``confidence`` (the probability that the
     answer is right, from a calibration of the mode; None without one) and the lost flag."""
@@ -56,18 +58,19 @@ class Match:
     lon: float | None = None
     heading: float | None = None
     along_m: float | None = None
+    drive: str | None = None
 
     def fields(self) -> dict:
         """The line as a dict in the schema's order (JSON lines; CSV writes None as an empty cell); a file
         name whose bytes are not UTF-8 with those bytes as ``\\xNN`` (``errors.printable``)."""
         line = {k: getattr(self, k) for k in FIELDS}
-        for k in ("frame", "ref"):
+        for k in ("frame", "ref", "drive"):
             if line[k] is not None:
                 line[k] = printable(line[k])
         return line
 
 
-FIELDS = ("frame_index", "frame", "stamp", "ref_index", "ref", "x", "y", "lat", "lon", "heading", "along_m",
+FIELDS = ("frame_index", "frame", "stamp", "ref_index", "ref", "drive", "x", "y", "lat", "lon", "heading", "along_m",
           "score", "confidence", "lost")
 
 
@@ -97,7 +100,8 @@ class Localizer:
         ort_threads = 0 if threads is None else use_threads(threads)
         self.query = MapQuery(map_path, model, ort_threads, precision)   # the map and its front end, once
         self.map.check_scores(self.matcher.scores, map_path)
-        self.matcher = self.matcher.on_route(self.query.references())   # where the map's drive stood
+        # where the map's drives stood, where they start and where they meet
+        self.matcher = self.matcher.on_route(self.query.references(), RouteGraph(*self.query.joins()))
         self._calibration = None
         if calibration is not None:
             from vpr_edge.calibration import load
@@ -169,11 +173,12 @@ class Localizer:
         confidence = None if self._calibration is None else self._calibration(score)
         place: dict = {}
         if self.map.positions is not None:
-            coords, heading, along = self.map.positions.at(ref if where is None else where)
+            coords, heading, along = self.map.place_at(ref if where is None else where)
             keys = ("lat", "lon") if self.map.positions.geo else ("x", "y")
             place = {keys[0]: float(coords[0]), keys[1]: float(coords[1]), "along_m": along,
                      "heading": None if heading != heading else heading}
-        return Match(index, name, ref, self.map.names[ref], score, False, stamp, confidence, **place)
+        return Match(index, name, ref, self.map.names[ref], score, False, stamp, confidence, **place,
+                     drive=self.map.drives.of_ref(ref).name)
 
     def _check_online(self) -> None:
         """ValueError unless the mode matches frame by frame (``push`` and ``push_encoding``)."""

@@ -29,9 +29,11 @@ def _value(opt):
 
 @app.command("build-map")
 def build_map_cmd(
-    refs: Path = typer.Argument(..., help="Folder of reference images, taken in file-name order, a ROS bag "
-                                          "/ MCAP file with --topic, or a file of global descriptors computed "
-                                          "elsewhere (.npy rows, hloc .h5)."),
+    refs: list[str] = typer.Argument(..., metavar="DRIVE...", help="One or more drives, each kept as a "
+                                     "sequence of its own: a folder of reference images (file-name order), a ROS "
+                                     "bag / MCAP file with --topic, or a file of global descriptors computed "
+                                     "elsewhere (.npy rows, hloc .h5). A drive is named after its folder or file; "
+                                     "NAME=PATH names it."),
     out: str = typer.Option(..., "--out", "-o", help="Map file to write (.npz); written atomically, never over "
                             "an input nor inside the reference folder. A symbolic link is written through."),
     features: Optional[FrontOpt] = typer.Option(None, metavar="FRONT_END", help="Local descriptors: "
@@ -85,36 +87,39 @@ def build_map_cmd(
                                                  f"with a scale per row (default {DEFAULT_STORAGE}; a quarter of "
                                                  "float32's bytes, docs/results.md), float16 or float32. With "
                                                  "--append: the map's own unless given."),
-    positions: Optional[str] = typer.Option(None, metavar="FILE|exif", help="Where each reference is: a CSV "
+    positions: Optional[list[str]] = typer.Option(None, metavar="FILE|exif", help="Where each reference is "
+                                            "(with several drives: once per drive, in their order): a CSV "
                                             "with x,y (metres) or lat,lon (degrees), optional heading and z/alt, "
                                             "and a name column (or one row per reference, in order); a GPX "
                                             "track (.gpx) matched by time (--timestamps, or a bag's); or exif: "
                                             "the images' GPS tags (the geo extra). References without a fix "
                                             "are placed between fixes. Stored in the map; localize then answers "
                                             "with positions."),
-    timestamps: Optional[Path] = typer.Option(None, help="With --positions TRACK.gpx and a folder: a CSV "
-                                              "frame,stamp giving each reference's time (Unix seconds), to match "
-                                              "the track by time."),
+    timestamps: Optional[list[Path]] = typer.Option(None, help="With --positions TRACK.gpx and a folder: a "
+                                                    "CSV frame,stamp giving each reference's time (Unix "
+                                                    "seconds), to match the track by time (once per drive)."),
     topic: Optional[str] = typer.Option(None, help="REFS is a ROS 1/2 bag or MCAP file: its image topic "
                                         "(sensor_msgs/Image or CompressedImage; the ros extra)."),
     positions_topic: Optional[str] = typer.Option(None, help="With a bag: the NavSatFix or Odometry topic "
                                                   "giving each image's position (interpolated in time)."),
-    append: bool = typer.Option(False, "--append", help="Add REFS' images after the references of the map "
-                                "at --out, described and encoded as its own (the map is replaced "
-                                "atomically); the route grows without refitting."),
+    append: bool = typer.Option(False, "--append", help="Add each DRIVE as a drive of its own to the map at "
+                                "--out, described and encoded as its own (its places copied, not re-encoded; "
+                                "the map is replaced atomically); the map grows without refitting."),
     batch_size: int = typer.Option(8, min=1, help="Images per model run."),
     threads: int = typer.Option(0, min=0, help=THREADS_HELP),
 ) -> None:
-    """Build a map from a folder of reference images: describe each (a CNN tap by default, or a handcrafted
-    front end), fit the codebook unless --codebook is given, encode every reference (an Improved Fisher
-    Vector by default), optionally train an SVM per place, and write one map file."""
+    """Build a map from one or more drives of reference images: describe each image (a CNN tap by default, or
+    a handcrafted front end), fit the codebook unless --codebook is given, encode every reference (an
+    Improved Fisher Vector by default), optionally train an SVM per place, and write one map file that keeps
+    each drive as a sequence of its own."""
     with user_errors():
         options = BuildOptions(features=_value(features), encoding=_value(encoding), model=model,
                                resize=_value(resize), codebook=codebook, components=components, pca_dim=pca_dim,
                                whiten=whiten, alpha=alpha, tfidf=tfidf, max_descriptors=max_descriptors,
                                fit_iterations=fit_iterations, svm=svm, seed=seed,
                                save_codebook=output_path(save_codebook) if save_codebook else None,
-                               storage=_value(storage), positions=positions, timestamps=timestamps, topic=topic,
+                               storage=_value(storage), positions=tuple(positions or ()),
+                               timestamps=tuple(timestamps or ()), topic=topic,
                                positions_topic=positions_topic, append=append, batch_size=batch_size, threads=threads,
                                inputs=GivenConventions(input_size, mean, std, bgr, _value(layout)))
         plan = plan_map(refs, output_path(out), options)

@@ -18,13 +18,18 @@ from dataclasses import dataclass
 import numpy as np
 
 
-def correct_candidates(ranked: np.ndarray, truth: np.ndarray, tolerance: int = 0) -> np.ndarray:
-    """(Q, k) candidates and (Q, T) padded truth -> (Q, k) bool: candidate within ``tolerance`` of a truth."""
+def correct_candidates(ranked: np.ndarray, truth: np.ndarray, tolerance: int = 0,
+                       drive: np.ndarray | None = None) -> np.ndarray:
+    """(Q, k) candidates and (Q, T) padded truth -> (Q, k) bool: candidate within ``tolerance`` of a truth
+    (and, with ``drive`` (R,), each reference's drive, in the truth's drive: neighbours in the map are not
+    neighbours on the road across a drive's end)."""
     ranked = np.asarray(ranked)
     if ranked.ndim == 1:
         ranked = ranked[:, None]
     valid = truth >= 0                                                        # (Q, T)
     near = np.abs(ranked[:, :, None] - truth[:, None, :]) <= tolerance        # (Q, k, T)
+    if drive is not None:
+        near &= drive[np.maximum(ranked, 0)][:, :, None] == drive[np.maximum(truth, 0)][:, None, :]
     return (near & valid[:, None, :]).any(axis=2) & (ranked >= 0)
 
 
@@ -89,10 +94,14 @@ def recall_at_full_precision(curve: PRCurve) -> float:
     return float(curve.recall[exact].max()) if exact.any() else 0.0
 
 
-def localisation_error(refs: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """Per query: |answer - nearest correct reference| in references (Q,) float; NaN for unmapped queries."""
+def localisation_error(refs: np.ndarray, truth: np.ndarray, drive: np.ndarray | None = None) -> np.ndarray:
+    """Per query: |answer - nearest correct reference| in references (Q,) float; NaN for unmapped queries
+    (with ``drive`` (R,): infinite where no correct reference is in the answer's drive)."""
     valid = truth >= 0
     dist = np.where(valid, np.abs(np.asarray(refs)[:, None] - truth), np.iinfo(np.int64).max)
+    if drive is not None:
+        other = drive[np.asarray(refs)][:, None] != drive[np.maximum(truth, 0)]
+        dist = np.where(valid & other, np.iinfo(np.int64).max, dist)
     err = dist.min(axis=1).astype(np.float64)
     err[~valid.any(axis=1)] = np.nan
     return err

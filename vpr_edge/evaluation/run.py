@@ -15,6 +15,7 @@ from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
 from vpr_edge.evaluation.truth import Truth
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.matchers import MATCHERS, Matcher, check_lost_line, get_matcher
+from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.map import MapQuery, PlaceMap, load_map
 from vpr_edge.positions import Positions
 from vpr_edge.threads import use_threads
@@ -110,7 +111,8 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     with_svm = any(m.scores == "svm" for m in chosen.values())
     if with_svm and query is None:
         raise VprError("mode svm needs --map (a map built with build-map --svm)")
-    rows, gt_shape = truth.load(query.map.positions if query is not None else None)
+    rows, gt_shape = truth.load(query.map.positions if query is not None else None,
+                                None if query is None else query.map.labels)
     if source.similarity is not None:
         sims = sources.from_file(source.similarity)
     elif source.pixels:
@@ -125,11 +127,13 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
         rows = rows[sims.kept]
     check_truth_fits(rows, gt_shape, sims.cosine, truth.name)
     by_kind = {"cosine": sims.cosine, "svm": sims.svm}
-    if sims.references is not None:   # the map's own stops, for matchers that read them
-        chosen = {name: m.on_route(sims.references.in_order()) for name, m in chosen.items()}
+    if sims.references is not None:   # the map's own stops and drives, for matchers that read them
+        graph = None if query is None else RouteGraph(*query.joins())
+        chosen = {name: m.on_route(sims.references.in_order(), graph) for name, m in chosen.items()}
+    drive = None if query is None or len(query.map.drives) < 2 else query.map.drives.of_each()
     reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions,
                                    (calibration or {}).get(name),
-                                   None if sims.encodings is None else m.cue(sims.encodings))
+                                   None if sims.encodings is None else m.cue(sims.encodings), drive)
                for name, m in chosen.items()}
     return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms, rows,
                       sims.positions, sims.front)

@@ -66,16 +66,18 @@ class ModeReport:
 
 def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, tolerance: int = 1,
                   min_confidence: float | None = None, positions: Positions | None = None,
-                  calibration: Curve | None = None, still: np.ndarray | None = None) -> ModeReport:
+                  calibration: Curve | None = None, still: np.ndarray | None = None,
+                  drive: np.ndarray | None = None) -> ModeReport:
     """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics); with the
     references' ``positions``, the error in metres too; with a ``calibration`` (score -> probability right,
     ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error. ``still`` (Q,): each
-    frame's motion cue (``Matcher.cue`` of the query encodings; None: a bare similarity matrix)."""
+    frame's motion cue (``Matcher.cue`` of the query encodings; None: a bare similarity matrix). ``drive`` (R,):
+    each reference's drive in a map of several (answers within ``tolerance`` count only in the truth's drive)."""
     t0 = time.perf_counter()
     result = matcher.run(sim, k=max(RECALL_KS), still=still)
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)
     threshold = matcher.lost_line(min_confidence)
-    report = replace(score_result(result, truth, tolerance, threshold, ms, positions),
+    report = replace(score_result(result, truth, tolerance, threshold, ms, positions, drive),
                      settings=matcher.params | {"min_confidence": threshold})
     if calibration is not None:
         ece, table = metrics.reliability(calibration.of(report.scores), report.correct)
@@ -84,13 +86,14 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
 
 
 def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshold: float | None = None,
-                 match_ms: float = float("nan"), positions: Positions | None = None) -> ModeReport:
+                 match_ms: float = float("nan"), positions: Positions | None = None,
+                 drive: np.ndarray | None = None) -> ModeReport:
     """A matcher's answers (``Result``, Q frames) against ``truth`` (Q, T); frames scoring below
-    ``threshold`` count as lost (None: no lost state)."""
+    ``threshold`` count as lost (None: no lost state); ``drive``: as ``evaluate_mode``'s."""
     mapped = (truth >= 0).any(axis=1)
-    correct = metrics.correct_candidates(result.ranked, truth, tolerance)
+    correct = metrics.correct_candidates(result.ranked, truth, tolerance, drive)
     curve = metrics.pr_curve(result.scores, correct[:, 0], int(mapped.sum()))
-    err = metrics.localisation_error(result.refs, truth)
+    err = metrics.localisation_error(result.refs, truth, drive)
     lost = is_lost(result.scores, threshold)
 
     def share(mask: np.ndarray) -> float:

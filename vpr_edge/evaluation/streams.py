@@ -19,7 +19,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError
 from vpr_edge.frames.images import list_images, load_image
-from vpr_edge.files import atomic_output
+from vpr_edge.files import atomic_output, read_csv_rows
 
 KINDS: tuple[str, ...] = ("aligned", "speed2", "speed3", "stop-and-go", "camera-stops", "variable", "partial",
                           "detour")
@@ -176,3 +176,41 @@ def derive_streams(dataset: str | os.PathLike[str], out: str | os.PathLike[str],
                      exposure=CAMERA if kind == "camera-stops" else None)
         counts[kind] = len(places)
     return counts | {"map places": n_mapped}
+
+
+DRIVES_FOLDER = "drives"   # derive_streams --drives: the map cut into drives, under OUT/drives/
+
+
+def cut_into_drives(out: str | os.PathLike[str], n_drives: int, seed: int = 0) -> list[str]:
+    """A multi-drive version of a derived dataset: ``out``/ref (the map's places in route order) cut into
+    ``n_drives`` drives of consecutive places, ``out``/drives/0, 1, ... whose frames are named alike in every
+    drive (``frame_0000.jpg`` ...: every camera names its frames so), and per stream kind with ground truth
+    ``out``/drives/KIND.csv naming the true place as ``DRIVE/NAME``. Returns the drives' folders in a shuffled
+    order (seeded), the order a fleet's drives come in."""
+    out = Path(out)
+    refs = list_images(out / "ref")
+    if not 1 <= n_drives <= len(refs):
+        raise VprError(f"--drives must be in 1..{len(refs)}, got {n_drives}")
+    root = out / DRIVES_FOLDER
+    if root.exists():
+        shutil.rmtree(root)
+    bounds = np.linspace(0, len(refs), n_drives + 1).round().astype(int)
+    label = {}
+    for k in range(n_drives):
+        (root / str(k)).mkdir(parents=True)
+        for i, place in enumerate(range(bounds[k], bounds[k + 1])):
+            name = f"frame_{i:04d}{refs[place].suffix}"
+            try:
+                os.link(refs[place], root / str(k) / name)
+            except OSError:
+                shutil.copyfile(refs[place], root / str(k) / name)
+            label[place] = f"{k}/{name}"
+    for truth in [out / f"{kind}.csv" for kind in KINDS if (out / f"{kind}.csv").is_file()]:
+        rows = read_csv_rows(truth, "ground truth")
+        lines = ["query,references"] + [f"{row[0]}," + " ".join(label[int(v)] for v in (row[1].split() if len(row) > 1
+                                                                                          else []))
+                                        for _, row in rows[1:]]
+        with atomic_output(root / truth.name) as tmp:
+            tmp.write_text("\n".join(lines) + "\n")
+    order = np.random.default_rng(seed).permutation(n_drives)
+    return [str(root / str(k)) for k in order]

@@ -1,8 +1,9 @@
 """Ground truth for evaluation, from three sources, as a padded int array (Q, T): per query its correct
 references, -1 as padding (a row of -1: the query's place is not in the map).
 
-* the project's CSV: header ``query,references``, one row per query 0..Q-1, space-separated reference
-  indices, an empty field for a place that is not in the map;
+* the project's CSV: header ``query,references``, one row per query 0..Q-1, space-separated references
+  (indices, or with a map ``DRIVE/NAME`` labels: a drive and an image name in it), an empty field for a
+  place that is not in the map;
 * a boolean (Q, R) ``.npy`` matrix, True where query and reference show the same place (VPR_Tutorial's
   GThard / GTsoft), read without pickle;
 * positions: two CSV files (references, queries) with columns ``x,y`` (metres) or ``lat,lon`` (degrees);
@@ -11,7 +12,7 @@ references, -1 as padding (a row of -1: the query's place is not in the map).
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,9 +33,11 @@ def pad(sets: Sequence[Sequence[int]]) -> np.ndarray:
     return out
 
 
-def load_csv(path: str | os.PathLike[str]) -> np.ndarray:
-    """The project's ground-truth CSV -> (Q, T) padded truth."""
+def load_csv(path: str | os.PathLike[str], labels: Callable[[], dict[str, int]] | None = None) -> np.ndarray:
+    """The project's ground-truth CSV -> (Q, T) padded truth; references given as labels (``DRIVE/NAME``)
+    are looked up in ``labels()`` (a map's ``PlaceMap.labels``; None: indices only)."""
     rows = read_csv_rows(path, "ground truth")
+    resolve = _resolver(labels, path)
     rows = [(n, row) for n, row in rows if any(c.strip() for c in row)]   # a spreadsheet's empty rows
     if not rows or [c.strip().lower() for c in rows[0][1][:2]] != ["query", "references"]:
         raise VprError(f"{path}: not a ground-truth CSV (expected the header 'query,references')")
@@ -43,7 +46,8 @@ def load_csv(path: str | os.PathLike[str]) -> np.ndarray:
     for n, row in rows[1:]:
         try:
             q = int(row[0])
-            refs = [int(v) for v in (row[1].split() if len(row) > 1 else [])]
+            tokens = row[1].split() if len(row) > 1 else []
+            refs = [int(v) if v.lstrip("-").isdigit() else resolve(v, n) for v in tokens]
         except ValueError:
             raise VprError(f"{path}: line {n}: expected 'query,ref ref ...'") from None
         if q in out:
@@ -55,6 +59,24 @@ def load_csv(path: str | os.PathLike[str]) -> np.ndarray:
     if any(v < 0 for refs in out.values() for v in refs):
         raise VprError(f"{path}: reference indices must be >= 0")
     return pad([out[i] for i in range(len(out))])
+
+
+def _resolver(labels: Callable[[], dict[str, int]] | None, path: str | os.PathLike[str]
+              ) -> Callable[[str, int], int]:
+    """A reference named ``DRIVE/NAME`` on line ``line`` -> its index, the map's labels read once on first use
+    (VprError naming the file and line if there is none)."""
+    table: dict[str, int] = {}
+
+    def resolve(token: str, line: int) -> int:
+        if labels is None:
+            raise VprError(f"{path}: line {line}: reference {token!r} is a name; names are read against a map "
+                           f"(--map)")
+        if not table:
+            table.update(labels())
+        if token not in table:
+            raise VprError(f"{path}: line {line}: no reference {token!r} in the map (references are DRIVE/NAME)")
+        return table[token]
+    return resolve
 
 
 def load_matrix(path: str | os.PathLike[str]) -> np.ndarray:
@@ -99,9 +121,11 @@ class Truth:
     positions: tuple[str | os.PathLike[str], str | os.PathLike[str]] | None = None
     radius: float = 25.0
 
-    def load(self, map_positions: Positions | None = None) -> tuple[np.ndarray, tuple[int, ...] | None]:
+    def load(self, map_positions: Positions | None = None, labels: Callable[[], dict[str, int]] | None = None
+             ) -> tuple[np.ndarray, tuple[int, ...] | None]:
         """(Q, T) padded correct references, and the (Q, R) shape of a matrix file (else None). With
-        ``positions`` ("map", QUERIES.csv) the references' positions are ``map_positions`` (the map's own)."""
+        ``positions`` ("map", QUERIES.csv) the references' positions are ``map_positions`` (the map's own);
+        a CSV's references named ``DRIVE/NAME`` are looked up in ``labels()`` (the map's)."""
         if (self.gt is None) == (self.positions is None):
             raise VprError("give ground truth: --gt FILE (.csv or .npy) or --gt-positions REFS.csv QUERIES.csv")
         if self.positions is not None and str(self.positions[0]) == "map":
@@ -115,7 +139,7 @@ class Truth:
             return from_positions(self.positions[0], self.positions[1], self.radius), None
         if Path(self.gt).suffix.lower() == ".npy":
             return load_matrix(self.gt), np.load(self.gt, mmap_mode="r").shape
-        return load_csv(self.gt), None
+        return load_csv(self.gt, labels), None
 
     @property
     def name(self) -> str:

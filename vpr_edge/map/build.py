@@ -179,22 +179,28 @@ def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = DEFAULT_EN
 DESCRIPTOR_BLOCK = 65_536   # descriptors encoded and stored a block at a time (bounded memory at any size)
 
 
-def map_from_descriptors(values: np.ndarray, names: list[str], source: str,
-                         storage: str = DEFAULT_STORAGE) -> PlaceMap:
+def map_from_descriptors(values: np.ndarray | Sequence[np.ndarray], names: list[str],
+                         source: str | Sequence[str], storage: str = DEFAULT_STORAGE) -> PlaceMap:
     """The map of places given as global descriptors ``values`` (R, D) computed elsewhere (a memory-mapped
-    ``.npy`` or an hloc ``.h5``, ``frames.descriptors``): the ``descriptors`` front end of D dims, each vector
+    ``.npy`` or an hloc ``.h5``, ``frames.descriptors``; or several such arrays, one per drive, taken one
+    after another, each from its ``source``): the ``descriptors`` front end of D dims, each vector
     L2-normalised (encoding ``none``) and stored as ``storage``, a block at a time, so that memory holds the
     stored map and one block whatever the route's length."""
     from vpr_edge.encoders.flat import Flatten
     from vpr_edge.features.descriptors import GivenDescriptors
 
-    front = GivenDescriptors(int(values.shape[1]))
+    parts = [values] if isinstance(values, np.ndarray) else list(values)
+    sources = [source] * len(parts) if isinstance(source, str) else list(source)
+    front = GivenDescriptors(int(parts[0].shape[1]))
     encoder = Flatten(front.dim, 1)
-    store = EncodingWriter(len(values), encoder.dim, storage)
-    for i in range(0, len(values), DESCRIPTOR_BLOCK):
-        block = front.given(np.asarray(values[i:i + DESCRIPTOR_BLOCK]), source)
-        store.put(np.arange(i, i + len(block)), encoder.transform(block))
-    meta = _meta(front, encoder, False, FitSettings(), 0, source)
+    store = EncodingWriter(sum(len(p) for p in parts), encoder.dim, storage)
+    at = 0
+    for part, where in zip(parts, sources):
+        for i in range(0, len(part), DESCRIPTOR_BLOCK):
+            block = front.given(np.asarray(part[i:i + DESCRIPTOR_BLOCK]), where)
+            store.put(np.arange(at, at + len(block)), encoder.transform(block))
+            at += len(block)
+    meta = _meta(front, encoder, False, FitSettings(), 0, sources[0])
     return PlaceMap(store.encodings(), list(names), encoder, meta)
 
 

@@ -12,11 +12,12 @@ from vpr_edge.features.registry import MAP_FRONT_ENDS
 from vpr_edge.features.resize import RESIZE
 from vpr_edge.files import read_npz, write_npz
 from vpr_edge.index.encodings import DEFAULT_STORAGE, Encodings
+from vpr_edge.map.drives import Drives
 from vpr_edge.map.model import PlaceMap, Svm
 from vpr_edge.positions import Positions
 
-MAP_SCHEMA = 3          # 3: front end ("features") and encoder ("encoding", arrays encoder_*) recorded; SVM
-READS_SCHEMAS = (1, 2, 3)  # 2: IFV only, int8/float16/float32 encodings; 1: IFV, float32
+MAP_SCHEMA = 4          # 4: drives; 3: front end ("features") and encoder ("encoding", arrays encoder_*); SVM
+READS_SCHEMAS = (1, 2, 3, 4)  # 2: IFV only, int8/float16/float32 encodings; 1: IFV, float32
 
 
 def save_map(place_map: PlaceMap, path: str | os.PathLike[str], storage: str = DEFAULT_STORAGE) -> None:
@@ -27,7 +28,8 @@ def save_map(place_map: PlaceMap, path: str | os.PathLike[str], storage: str = D
     meta = place_map.meta | {"kind": "map", "schema": MAP_SCHEMA, "names": place_map.names, "storage": storage,
                         "n_refs": len(place_map.names), "dim": int(place_map.stored.shape[1]), "features": place_map.features,
                         "descriptor_dim": place_map.encoder.input_dim,
-                        "encoding": {"name": place_map.encoder.name, "params": place_map.encoder.params()}}
+                        "encoding": {"name": place_map.encoder.name, "params": place_map.encoder.params()},
+                        "drives": place_map.drives.meta()}
     if place_map.positions is not None:
         arrays |= place_map.positions.to_arrays()
         meta["positions"] = place_map.positions.meta()
@@ -46,6 +48,7 @@ _FIELDS: dict[str, tuple[type, ...]] = {
     "descriptor_dim": (int,), "features": (dict,), "features_fingerprint": (str,), "encoding": (dict,),
     "model": (dict,), "model_file": (str,), "model_path": (str,), "model_sha256": (str,), "codebook": (dict,),
     "svm": (dict,), "appended": (list,), "refs_folder": (str,), "alpha": (int, float), "positions": (dict,),
+    "drives": (list,),
 }
 
 
@@ -127,4 +130,5 @@ def _assemble(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
             positions = Positions.from_arrays(arrays, meta["positions"], len(names))
         except (ValueError, KeyError) as e:
             raise VprError(f"{path}: map's positions are inconsistent ({e})") from None
-    return PlaceMap(stored, names, encoder, meta, svm, positions)
+    drives = None if meta.get("drives") is None else Drives.from_meta(meta["drives"], len(names), str(path))
+    return PlaceMap(stored, names, encoder, meta, svm, positions, drives)

@@ -3,7 +3,9 @@ against the others, the references and the files before any work; ``write_map`` 
 and the tools call these two, so each default lives here once."""
 from __future__ import annotations
 
+import os
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -24,6 +26,7 @@ from vpr_edge.index.encodings import DEFAULT_STORAGE
 from vpr_edge.encoders.flat import Flatten
 from vpr_edge.features.descriptors import GivenDescriptors
 from vpr_edge.frames.descriptors import is_descriptor_file, read_descriptors
+from vpr_edge.map.drives import Drives, check_unique, drive_name, spans_of
 from vpr_edge.map.build import Progress, build_map, check_codebook_fits, map_from_descriptors
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map, save_map
@@ -54,8 +57,8 @@ class BuildOptions:
     seed: int = 0
     save_codebook: Path | None = None
     storage: str | None = None
-    positions: str | None = None     # a CSV file, or "exif" for the images' GPS tags
-    timestamps: Path | None = None   # a folder's frames' times (frame,stamp CSV), for --positions track.gpx
+    positions: tuple[str, ...] = ()      # per drive a CSV or GPX file, or ("exif",): the images' GPS tags
+    timestamps: tuple[Path, ...] = ()    # per drive its frames' times (frame,stamp CSV), for --positions track.gpx
     topic: str | None = None         # refs is a ROS bag: its image topic
     positions_topic: str | None = None   # ... and its NavSatFix / Odometry topic
     append: bool = False
@@ -63,16 +66,44 @@ class BuildOptions:
     batch_size: int = 8
     threads: int = 0
 
+    def __post_init__(self) -> None:   # one value given as such: one drive's
+        for key in ("positions", "timestamps"):
+            value = getattr(self, key)
+            if value is None or isinstance(value, (str, os.PathLike)):
+                object.__setattr__(self, key, () if value is None else (value,))
+
+
+@dataclass
+class DrivePlan:
+    """One drive as ``write_map`` will take it: its ``name``, where its frames come from (``source``), its
+    image files (a bag's once extracted), their names where not the files' (a bag's BAG#N, a descriptor
+    file's rows), its positions, its frames' times (seconds; None: not known) and, for a descriptor file, its
+    (n, D) vectors (memory-mapped)."""
+
+    name: str
+    source: Path
+    files: list[Path] = field(default_factory=list)
+    names: list[str] | None = None
+    positions: Positions | None = None
+    stamps: np.ndarray | None = None
+    descriptors: np.ndarray | None = None
+
+    @property
+    def count(self) -> int:
+        return len(self.descriptors) if self.descriptors is not None else len(self.files)
+
+    def place_names(self) -> list[str]:
+        return list(self.names) if self.names is not None else [f.name for f in self.files]
+
 
 @dataclass
 class MapPlan:
-    """What ``write_map`` will do: the reference ``files``, the ``front`` end, the encoder (``given``: a
-    codebook or the appended map's; None: fitted on the references), the fit ``settings``, the storage, and
-    with ``append`` the map ``base`` the references go after."""
+    """What ``write_map`` will do: the ``drives`` (``DrivePlan``, in the order given), the ``front`` end, the
+    encoder (``given``: a codebook or the appended map's; None: fitted on the references), the fit
+    ``settings``, the storage, and with ``append`` the map ``base`` the drives go after."""
 
-    refs: Path
     out: Path
-    files: list[Path]
+    drives: list[DrivePlan]
     front: FrontEnd
     encoding: str
     given: Encoder | None
@@ -81,11 +112,32 @@ class MapPlan:
     options: BuildOptions
     base: PlaceMap | None = None
     codebook_meta: dict = field(default_factory=dict)
-    positions: Positions | None = None
-    names: list[str] | None = None           # the references' names when not their files' (a bag's BAG#N)
-    scratch: tempfile.TemporaryDirectory | None = None   # where a bag's images were extracted
+    scratch: tempfile.TemporaryDirectory | None = None   # where bags' images were extracted
     model_choice: str | None = None          # why this bundled model (the camera's frame size), when chosen
-    descriptors: np.ndarray | None = None    # REFS is a descriptor file: its (R, D) vectors (memory-mapped)
+
+    @property
+    def files(self) -> list[Path]:
+        """Every drive's image files, drive after drive."""
+        return [f for d in self.drives for f in d.files]
+
+    @property
+    def refs(self) -> Path:
+        """The first drive's source (a map of one drive: its folder or file)."""
+        return self.drives[0].source
+
+    @property
+    def positions(self) -> Positions | None:
+        """Every drive's positions, drive after drive (None: the drives have none)."""
+        if self.drives[0].positions is None:
+            return None
+        out = self.drives[0].positions
+        for d in self.drives[1:]:
+            out = out.concat(d.positions)
+        return out
+
+    def drive_list(self) -> Drives:
+        return Drives.of([d.name for d in self.drives], [d.count for d in self.drives],
+                         [str(d.source) for d in self.drives], [spans_of(d.stamps) for d in self.drives])
 
 
 def _fit_options(o: BuildOptions) -> dict:
@@ -93,8 +145,35 @@ def _fit_options(o: BuildOptions) -> dict:
             "--max-descriptors": o.max_descriptors, "--fit-iterations": o.fit_iterations, "--tfidf": o.tfidf}
 
 
-def _check_options(refs: Path, out: Path, o: BuildOptions, bag: bool, gpx: bool) -> None:
-    """Options that contradict each other, or the kind of ``refs`` (a folder or a bag)."""
+def parse_drive(text: str | os.PathLike[str]) -> tuple[str | None, Path]:
+    """A REFS argument -> (the drive's name if given, its path): ``NAME=PATH`` names a drive (a path that
+    exists as given is taken as a path, whatever it holds)."""
+    text = os.fspath(text)
+    name, sep, path = text.partition("=")
+    if not sep or Path(text).exists() or not name:
+        return None, Path(text)
+    return name, Path(path)
+
+
+def _per_drive(o: BuildOptions, n: int) -> list[tuple[str | None, Path | None]]:
+    """Each drive's --positions and --timestamps: as many as drives, in their order; one --positions exif for
+    them all; none. VprError otherwise."""
+    def spread(values: tuple, option: str) -> list:
+        if not values:
+            return [None] * n
+        if len(values) == n:
+            return list(values)
+        if option == "--positions" and values == ("exif",):
+            return ["exif"] * n
+        raise VprError(f"{option} {values[0]}: given {len(values)} time(s) for {n} drives: give one per drive, "
+                       f"in the drives' order" + (" (or --positions exif for all)" if option == "--positions" else ""))
+    return list(zip(spread(o.positions, "--positions"), spread(o.timestamps, "--timestamps")))
+
+
+def _check_options(refs: Path, out: Path, o: BuildOptions, positions: str | None, timestamps: Path | None,
+                   bag: bool, gpx: bool) -> None:
+    """Options that contradict each other, or the kind of the drive ``refs`` (a folder or a bag) with its
+    ``positions`` and ``timestamps``."""
     fit_options = _fit_options(o)
     fixed = f"--codebook {o.codebook}" if o.codebook else \
         f"--append (the map {out} has its codebook)" if o.append else None
@@ -110,50 +189,64 @@ def _check_options(refs: Path, out: Path, o: BuildOptions, bag: bool, gpx: bool)
         raise VprError(f"{given_opts}: options for fitting a codebook, but {fixed} is given")
     if not bag and (o.topic or o.positions_topic):
         raise VprError(f"{refs}: --topic and --positions-topic apply to a ROS bag or MCAP file")
-    if o.positions and o.positions_topic:
-        raise VprError(f"--positions {o.positions} and --positions-topic {o.positions_topic}: give one")
-    if bag and o.positions == "exif":
+    if positions and o.positions_topic:
+        raise VprError(f"--positions {positions} and --positions-topic {o.positions_topic}: give one")
+    if bag and positions == "exif":
         raise VprError(f"{refs}: --positions exif reads image files; a bag's positions come from --positions-topic")
-    if gpx and not bag and o.timestamps is None:
-        raise VprError(f"{o.positions}: a GPX track is matched to the frames by time: give --timestamps "
+    if gpx and not bag and timestamps is None:
+        raise VprError(f"{positions}: a GPX track is matched to the frames by time: give --timestamps "
                        f"FILE (frame,stamp in Unix seconds) for the folder {refs}")
-    if o.timestamps is not None and bag:
-        raise VprError(f"{o.timestamps}: a bag's images carry their own stamps; drop --timestamps")
-    if o.timestamps is not None and not gpx:
-        raise VprError(f"{o.timestamps}: --timestamps serves --positions TRACK.gpx; nothing else uses it here")
+    if timestamps is not None and bag:
+        raise VprError(f"{timestamps}: a bag's images carry their own stamps; drop --timestamps")
+    if timestamps is not None and not gpx:
+        raise VprError(f"{timestamps}: --timestamps serves --positions TRACK.gpx; nothing else uses it here")
 
 
-def _check_outputs(refs: Path, out: Path, o: BuildOptions) -> None:
+def _check_outputs(drives: list[Path], out: Path, o: BuildOptions) -> None:
     """The outputs can be written and are none of the inputs."""
     for target in (out, o.save_codebook):
         if target:
             check_writable(target)
     # (the map --append reads is also the one it replaces: its own input, by design)
     check_not_input({"--out": out, "--save-codebook": o.save_codebook},
-                    [refs, o.codebook, o.model, None if o.positions in (None, "exif") else o.positions,
-                     o.timestamps])
+                    [*drives, o.codebook, o.model, *[p for p in o.positions if p != "exif"], *o.timestamps])
 
 
-def _folder_positions(files: list[Path], o: BuildOptions, gpx: bool) -> Positions | None:
-    """A folder's references' positions from --positions (a CSV, a GPX track with --timestamps, or exif)."""
-    if o.positions == "exif":
-        return from_exif(files)
+def _folder_positions(files: list[Path], positions: str | None, timestamps: Path | None,
+                      gpx: bool) -> tuple[Positions | None, np.ndarray | None]:
+    """A folder's references' positions from its --positions (a CSV, a GPX track with --timestamps, or exif),
+    and their times where --timestamps gives them."""
+    if positions == "exif":
+        return from_exif(files), None
     if gpx:
-        return from_gpx(o.positions, np.asarray(read_stamps(o.timestamps, [f.name for f in files])))
-    if o.positions is not None:
-        return read_positions(o.positions, [f.name for f in files])
-    return None
+        stamps = np.asarray(read_stamps(timestamps, [f.name for f in files]))
+        return from_gpx(positions, stamps), stamps
+    if positions is not None:
+        return read_positions(positions, [f.name for f in files]), None
+    return None, None
 
 
-def _check_appended_positions(base: PlaceMap, positions: Positions | None, given: bool, out: Path,
-                              where: str) -> None:
-    """Appended references have positions exactly when the map has, in its frame."""
-    if (base.positions is None) == given:
-        raise VprError(f"{out}: the map has positions: give --positions for the appended references"
+def _check_names(specs: list[tuple[str, Path]], base: PlaceMap | None, out: Path) -> None:
+    """VprError for two drives of one name among those given, or beside the appended map's."""
+    check_unique([n for n, _ in specs], "the drives given")
+    if base is not None:
+        check_unique(base.drives.names + [n for n, _ in specs], f"{out} and the appended drives")
+
+
+def _check_drive_positions(base: PlaceMap | None, drives: list[DrivePlan], given: list[bool], out: Path) -> None:
+    """Every drive has positions, or none has; appended drives have them exactly when the map has, in its frame."""
+    if any(given) and not all(given):
+        missing = drives[given.index(False)].name
+        raise VprError(f"{drives[given.index(True)].name} has positions, {missing} has none: a map has positions "
+                       f"for every drive or for none")
+    if base is not None and (base.positions is None) == given[0]:
+        raise VprError(f"{out}: the map has positions: give --positions for the appended drives"
                        if base.positions is not None else
                        f"{out}: the map has no positions; --positions cannot be given to --append")
-    if positions is not None:
-        base.positions.check_frame(positions, where)
+    first = base.positions if base is not None else next((d.positions for d in drives if d.positions), None)
+    for d in drives:
+        if first is not None and d.positions is not None:
+            first.check_frame(d.positions, str(d.source))
 
 
 def _warn_inapplicable(enc_name: str, o: BuildOptions) -> None:
@@ -177,55 +270,77 @@ def _fit_settings(o: BuildOptions) -> FitSettings:
                        o.fit_iterations or d.iterations, o.seed, bool(o.tfidf))
 
 
-def _plan_descriptors(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
-    """``plan_map`` for a descriptor file (``.npy``, hloc ``.h5``): the places are its vectors, described and
-    encoded elsewhere, so the options of the image pipeline are refused; positions match the file's names."""
+def _plan_descriptors(specs: list[tuple[str, Path]], out: Path, o: BuildOptions, base: PlaceMap | None) -> MapPlan:
+    """``plan_map`` for descriptor files (``.npy``, hloc ``.h5``): the places are their vectors, described and
+    encoded elsewhere, so the options of the image pipeline are refused; positions match the files' names."""
     image_only = [k for k, v in (("--features", o.features), ("--model", o.model), ("--resize", o.resize),
                                  ("--codebook", o.codebook), ("--save-codebook", o.save_codebook),
                                  ("--topic", o.topic), ("--positions-topic", o.positions_topic),
-                                 ("--timestamps", o.timestamps), ("--svm", o.svm or None),
+                                 ("--timestamps", o.timestamps or None), ("--svm", o.svm or None),
                                  ("--alpha", o.alpha), *_fit_options(o).items()) if v is not None]
     image_only += o.inputs.options()
     if o.encoding not in (None, "none"):
         image_only.append(f"--encoding {o.encoding}")
-    if o.positions == "exif":
+    if "exif" in o.positions:
         image_only.append("--positions exif")
     if image_only:
-        raise VprError(f"{refs}: global descriptors are described and encoded already; drop "
+        raise VprError(f"{specs[0][1]}: global descriptors are described and encoded already; drop "
                        f"{', '.join(image_only)}")
-    _check_outputs(refs, out, o)
-    values, names = read_descriptors(refs)
-    positions = read_positions(o.positions, names) if o.positions else None
-    base = load_map(out, mmap=True) if o.append else None
-    front = GivenDescriptors(int(values.shape[1]))
-    if base is not None:
-        _check_appended_positions(base, positions, positions is not None, out, str(o.positions))
-        if base.fingerprint != front.fingerprint:
-            raise VprError(f"{refs}: descriptors of {front.dim} dims cannot extend {out}, a map of "
-                           f"{base.features.get('name')} {base.stored.shape[1]}-dim encodings")
+    _check_names(specs, base, out)
+    _check_outputs([p for _, p in specs], out, o)
+    drives = []
+    for (name, path), (positions, _) in zip(specs, _per_drive(o, len(specs))):
+        values, names = read_descriptors(path)
+        drives.append(DrivePlan(name, path, names=names, descriptors=values,
+                                positions=read_positions(positions, names) if positions else None))
+    _check_drive_positions(base, drives, [d.positions is not None for d in drives], out)
+    front = GivenDescriptors(int(drives[0].descriptors.shape[1]))
+    for d in drives[1:]:
+        if d.descriptors.shape[1] != front.dim:
+            raise VprError(f"{d.source}: descriptors of {d.descriptors.shape[1]} dims, {drives[0].source}'s "
+                           f"have {front.dim}: the drives of a map come from one network")
+    if base is not None and base.fingerprint != front.fingerprint:
+        raise VprError(f"{specs[0][1]}: descriptors of {front.dim} dims cannot extend {out}, a map of "
+                       f"{base.features.get('name')} {base.stored.shape[1]}-dim encodings")
     storage = o.storage or (base.stored.storage if base else DEFAULT_STORAGE)
-    return MapPlan(refs, out, [], front, "none", Flatten(front.dim, 1), _fit_settings(o), storage, o, base,
-                   positions=positions, names=names, descriptors=values)
+    return MapPlan(out, drives, front, "none", Flatten(front.dim, 1), _fit_settings(o), storage, o, base)
 
 
-def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
-    """Every check that can be made before the work (VprError, one line), and every default decided."""
+def plan_map(refs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], out: Path,
+             o: BuildOptions) -> MapPlan:
+    """Every check that can be made before the work (VprError, one line), and every default decided.
+    ``refs``: one drive or several (``parse_drive``: a folder, video, bag or descriptor file, or NAME=PATH),
+    each kept as a drive of its own in the given order."""
     from vpr_edge.encoders.fit import require_sklearn
 
-    if is_descriptor_file(refs):
-        return _plan_descriptors(refs, out, o)
-    bag = is_bag(refs)
-    gpx = o.positions is not None and o.positions.lower().endswith(".gpx")
-    _check_options(refs, out, o, bag, gpx)
-    _check_outputs(refs, out, o)
-    files = [] if bag else list_images(refs)
-    if gpx:
-        require_gpxpy(o.positions)
-    base = load_map(out, mmap=True) if o.append else None
-    positions = None if bag else _folder_positions(files, o, gpx)
-    if base is not None:
-        _check_appended_positions(base, positions, positions is not None or bool(o.positions or o.positions_topic),
-                                  out, str(o.positions))
+    given_refs = [refs] if isinstance(refs, (str, os.PathLike)) else list(refs)
+    if not given_refs:
+        raise VprError("build-map: give at least one drive (a folder of images, a video, a bag or a descriptor file)")
+    specs = [(drive_name(str(p), n), p) for n, p in map(parse_drive, given_refs)]
+    kinds = {is_descriptor_file(p) for _, p in specs}
+    if len(kinds) > 1:
+        raise VprError(f"{specs[0][1]}, {specs[1][1]}: the drives of a map are all descriptor files or all images "
+                       f"(folders, videos, bags), not both")
+    base = None
+    if o.append:
+        check_writable(out)
+        base = load_map(out, mmap=True)
+    if kinds == {True}:
+        return _plan_descriptors(specs, out, o, base)
+    per = _per_drive(o, len(specs))
+    bags, gpxs = [is_bag(p) for _, p in specs], [pos is not None and pos.lower().endswith(".gpx") for pos, _ in per]
+    for (_, path), (pos, ts), bag, gpx in zip(specs, per, bags, gpxs):
+        _check_options(path, out, o, pos, ts, bag, gpx)
+    _check_names(specs, base, out)
+    _check_outputs([p for _, p in specs], out, o)
+    drives = [DrivePlan(name, path, [] if bag else list_images(path)) for (name, path), bag in zip(specs, bags)]
+    if any(gpxs):
+        require_gpxpy(next(pos for pos, _ in per if pos))
+    for d, (pos, ts), bag, gpx in zip(drives, per, bags, gpxs):
+        if not bag:
+            d.positions, d.stamps = _folder_positions(d.files, pos, ts, gpx)
+    given_pos = [bool(pos or o.positions_topic) for pos, _ in per]
+    _check_drive_positions(base, drives, given_pos, out)
     given, cb_meta = load_codebook(o.codebook) if o.codebook else (None, {})
     if given is not None and o.encoding is not None and o.encoding != given.name:
         raise VprError(f"{o.codebook}: codebook is for encoding {given.name}, not --encoding {o.encoding}")
@@ -238,10 +353,11 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
                        f"(the cnn front end)")
     model, choice = o.model, None
     by_camera = front_name == "cnn" and base is None and model is None and model_from_env() is None
+    first_image = next((d.files[0] for d in drives if d.files), None)
     if by_camera and given is not None:   # the bundled model the codebook was fitted with, if it is one
         model = bundled_for_sha256(cb_meta.get("features_fingerprint") or cb_meta.get("model_sha256"))
-    elif by_camera and not bag:
-        model, choice = _camera_model(files[0])
+    elif by_camera and first_image is not None:
+        model, choice = _camera_model(first_image)
     spec = {"params": {"resize": o.resize}} if o.resize else None
     if base is not None:
         front = map_front_end(base, out, o.model, ort_threads)
@@ -267,23 +383,34 @@ def plan_map(refs: Path, out: Path, o: BuildOptions) -> MapPlan:
     if front.is_global and given is None:
         given = Flatten(front.dim, 1)       # the descriptor L2-normalised: nothing to fit
     storage = o.storage or (base.stored.storage if base else DEFAULT_STORAGE)
-    names = scratch = None
-    if bag:   # the work starts here: the bag's images are decoded once, into a scratch folder
+    scratch = None
+    if any(bags):   # the work starts here: each bag's images are decoded once, into a scratch folder
         scratch = tempfile.TemporaryDirectory(prefix="vpr-edge-bag-")
-        files, names, stamps = extract_images(refs, o.topic, Path(scratch.name))
-        if by_camera and given is None:
-            model, choice = _camera_model(files[0])
+        for k, (d, (pos, _), bag, gpx) in enumerate(zip(drives, per, bags, gpxs)):
+            if bag:
+                _extract_bag(d, Path(scratch.name) / str(k), o, pos, gpx, base)
+        if by_camera and given is None and first_image is None:
+            model, choice = _camera_model(drives[0].files[0])
             front = make_front_end(front_name, model, ort_threads, spec=spec)
-        if o.positions_topic:
-            positions = bag_positions(refs, o.positions_topic, stamps)
-        elif gpx:
-            positions = from_gpx(o.positions, stamps)
-        elif o.positions:
-            positions = read_positions(o.positions, names)
-        if base is not None and positions is not None:
-            base.positions.check_frame(positions, str(refs))
-    return MapPlan(refs, out, files, front, enc_name, given, _fit_settings(o), storage, o, base, cb_meta,
-                   positions, names, scratch, choice)
+    return MapPlan(out, drives, front, enc_name, given, _fit_settings(o), storage, o, base, cb_meta, scratch,
+                   choice)
+
+
+def _extract_bag(d: DrivePlan, folder: Path, o: BuildOptions, positions: str | None, gpx: bool,
+                 base: PlaceMap | None) -> None:
+    """A bag drive's images decoded into ``folder``, with their names, times and positions (from
+    --positions-topic, a GPX track matched by time, or a CSV by name)."""
+    folder.mkdir()
+    d.files, d.names, stamps = extract_images(d.source, o.topic, folder)
+    d.stamps = np.asarray(stamps, np.float64)
+    if o.positions_topic:
+        d.positions = bag_positions(d.source, o.positions_topic, stamps)
+    elif gpx:
+        d.positions = from_gpx(positions, d.stamps)
+    elif positions:
+        d.positions = read_positions(positions, d.names)
+    if base is not None and d.positions is not None:
+        base.positions.check_frame(d.positions, str(d.source))
 
 
 def default_encoding(front: FrontEnd) -> str:
@@ -302,24 +429,25 @@ def _camera_model(first: Path) -> tuple[Path, str]:
 
 def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
     """Build the planned map and write it (and the codebook, if asked) atomically; returns a one-line summary.
-    The references are described and encoded first; then, holding the map's writer lock (``files.writer_lock``:
-    one writer at a time), an appended map is read again, so that a concurrent ``--append`` that finished
-    meanwhile is kept, and the result replaces it."""
+    The drives are described and encoded first, one after another, as one route for the codebook fit; then,
+    holding the map's writer lock (``files.writer_lock``: one writer at a time), an appended map is read
+    again, so that a concurrent ``--append`` that finished meanwhile is kept, and the result replaces it."""
     o = plan.options
+    names = [n for d in plan.drives for n in d.place_names()]
     try:
-        if plan.descriptors is not None:
-            place_map = map_from_descriptors(plan.descriptors, plan.names, str(plan.refs), plan.storage)
+        if plan.drives[0].descriptors is not None:
+            place_map = map_from_descriptors([d.descriptors for d in plan.drives], names,
+                                             [str(d.source) for d in plan.drives], plan.storage)
         else:
             place_map = build_map(plan.files, plan.front, plan.encoding, plan.given, plan.settings, o.batch_size,
                                   o.svm, plan.storage, progress=progress)
     finally:
         if plan.scratch is not None:
             plan.scratch.cleanup()
-    place_map = replace(place_map, positions=plan.positions)
-    if plan.model_choice is not None:
-        place_map = replace(place_map, meta=place_map.meta | {"model_choice": plan.model_choice})
-    if plan.names is not None:
-        place_map = replace(place_map, names=plan.names, meta=place_map.meta | {"refs_folder": str(plan.refs)})
+    meta = place_map.meta | ({"model_choice": plan.model_choice} if plan.model_choice is not None else {})
+    meta = {k: v for k, v in meta.items() if k != "refs_folder"} | \
+        ({"refs_folder": str(plan.refs)} if len(plan.drives) == 1 else {})
+    place_map = replace(place_map, names=names, meta=meta, positions=plan.positions, drives=plan.drive_list())
     with writer_lock(plan.out):
         if plan.base is not None:
             base = load_map(plan.out, mmap=True)
@@ -335,8 +463,11 @@ def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
     book = f", {place_map.encoder.n_components}-entry codebook ({how})" if place_map.encoder.needs_fit else ""
     policy = (place_map.features.get("params") or {}).get("resize")
     how_resized = f" (frames resized by {policy})" if policy not in (None, "stretch") else ""
-    appended = f" ({len(plan.files)} appended)" if plan.base else ""
-    return (f"wrote {plan.out}: {len(place_map.names)} references{appended}, "
+    count = sum(d.count for d in plan.drives)
+    drives = f" in {len(place_map.drives)} drives" if len(place_map.drives) > 1 else ""
+    appended = f" ({count} in {len(plan.drives)} drive{'s' if len(plan.drives) > 1 else ''} appended)" \
+        if plan.base else ""
+    return (f"wrote {plan.out}: {len(place_map.names)} references{drives}{appended}, "
             f"{place_map.stored.shape[1]}-dim {plan.storage} {place_map.features['name']}{how_resized} + "
             f"{place_map.encoder.name} encodings{book}{', an SVM per place' if place_map.svm is not None else ''}")
 
@@ -346,6 +477,7 @@ def summary(path: Path) -> dict:
     pm = load_map(path, mmap=True)
     meta = {k: v for k, v in pm.meta.items() if k not in ("names", "n_refs", "dim")}
     route = {"route": pm.positions.summary()} if pm.positions is not None else {}
+    meta["drives"] = pm.drives.meta()
     here = {}
     if pm.features.get("name") == "cnn":
         try:

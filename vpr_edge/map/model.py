@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from vpr_edge.encoders import Encoder
 from vpr_edge.errors import VprError, warn
 from vpr_edge.index.encodings import Encodings
+from vpr_edge.map.drives import Drives
 from vpr_edge.positions import Positions
 
 CNN = {"name": "cnn", "params": {}}
@@ -34,8 +36,9 @@ class Svm:
 class PlaceMap:
     """Reference encodings as stored (``index.encodings.Encodings``: unit rows, R x D), their image names, the
     encoder (``vpr_edge.encoders``), metadata (``features``: the front end's record; ``model_*`` for cnn;
-    how the codebook was made), when built with ``--svm`` the per-place classifiers, and when built with
-    ``--positions`` where each reference place is (``positions.Positions``)."""
+    how the codebook was made), when built with ``--svm`` the per-place classifiers, when built with
+    ``--positions`` where each reference place is (``positions.Positions``), and its ``drives``
+    (``map.drives.Drives``; not given: the references are one drive, named after their folder)."""
 
     stored: Encodings
     names: list[str]
@@ -43,6 +46,14 @@ class PlaceMap:
     meta: dict
     svm: Svm | None = None
     positions: Positions | None = None
+    drives: Drives = None   # type: ignore[assignment]  # None -> one drive (set in __post_init__)
+
+    def __post_init__(self) -> None:
+        if self.drives is None:
+            name = Path(str(self.meta.get("refs_folder") or "route")).name or "route"
+            object.__setattr__(self, "drives", Drives.single(name, len(self.names), self.meta.get("refs_folder")))
+        elif self.drives.n_refs != len(self.names):
+            raise ValueError(f"drives cover {self.drives.n_refs} places, the map has {len(self.names)}")
 
     @property
     def encodings(self) -> np.ndarray:
@@ -84,33 +95,41 @@ class PlaceMap:
             return e if e.storage == storage else Encodings.pack(e.dense(), storage)
 
         svm = None if self.svm is None else Svm(packed(self.svm.weights), self.svm.bias, self.svm.meta)
-        return PlaceMap(packed(self.stored), self.names, self.encoder, self.meta, svm, self.positions)
+        return PlaceMap(packed(self.stored), self.names, self.encoder, self.meta, svm, self.positions, self.drives)
 
     def extended(self, more: "PlaceMap") -> "PlaceMap":
-        """This map with ``more``'s references after its own (``more`` encoded with this map's front end,
-        encoder and model; raises VprError otherwise). The result is in this map's storage: its stored rows
-        are copied as they are (into RAM, never expanded to float32). An SVM is not carried over (its
-        classifiers would need retraining on the whole route)."""
+        """This map with ``more``'s drives after its own (``more`` encoded with this map's front end, encoder
+        and model; VprError otherwise, or for a drive name the map has already). The result is in this map's
+        storage: its stored rows are copied as they are (into RAM, never expanded to float32). An SVM is not
+        carried over (its classifiers would need retraining on the whole route)."""
         if not self.encoder.same_as(more.encoder) or more.meta.get("features_fingerprint") != self.fingerprint:
-            raise VprError("appended references must be described and encoded with the map's own front end, "
+            raise VprError("appended drives must be described and encoded with the map's own front end, "
                            "model and codebook")
-        clash = sorted(set(self.names) & set(more.names))
-        if clash:
-            warn(f"{len(clash)} appended reference name(s) already in the map (e.g. {clash[0]}); results name "
-                 f"references by index too")
+        drives = self.drives.then(more.drives)
         if (self.positions is None) != (more.positions is None):
-            raise VprError("the map has positions: give --positions for the appended references too"
+            raise VprError("the map has positions: give --positions for the appended drives too"
                            if self.positions is not None else
-                           "the map has no positions: appended references cannot bring some")
+                           "the map has no positions: appended drives cannot bring some")
         positions = None if self.positions is None else self.positions.concat(more.positions)
         if self.svm is not None:
             warn("the map's SVM is dropped by --append (rebuild with --svm to train it on the whole route)")
-        appended = self.meta.get("appended", []) + [{"folder": more.meta.get("refs_folder"),
-                                                     "first_index": len(self.names), "count": len(more.names)}]
         meta = {k: v for k, v in self.meta.items() if k != "svm"}
         return PlaceMap(self.stored.concat(more.stored), self.names + more.names, self.encoder,
-                        meta | {"appended": appended, "vpr_edge_version": more.meta.get("vpr_edge_version")},
-                        positions=positions)
+                        meta | {"vpr_edge_version": more.meta.get("vpr_edge_version")}, positions=positions,
+                        drives=drives)
+
+    def labels(self) -> dict[str, int]:
+        """Each place's label (``DRIVE/NAME``; in a map of one drive its ``NAME`` too) -> its index, for ground
+        truth that names references (``Drives.labels``)."""
+        return self.drives.labels(self.names)
+
+    def place_at(self, where: float) -> tuple[np.ndarray, float, float]:
+        """Where the map's place at fractional reference ``where`` is (positions needed): (coords (2,), heading
+        degrees or NaN, metres along its drive from the drive's first place); never between two drives."""
+        assert self.positions is not None
+        drive = self.drives.of_ref(int(where))
+        coords, heading, along = self.positions.at(min(float(where), float(drive.last)))
+        return coords, heading, along - float(self.positions.along()[drive.first])
 
     @property
     def fingerprint(self) -> str:

@@ -125,6 +125,11 @@ class MapQuery:
         values (``PlaceMap.scores``), to the references ``refs`` only if given."""
         return self.map.scores(encodings, kind, refs)
 
+    def joins(self) -> tuple[int, np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+        """The map's places as drives for a matcher (``matchers.route.RouteGraph``'s arguments): the number of
+        places, each drive's first place, and where drives meet (``Drives.junctions``)."""
+        return len(self.map.names), self.map.drives.starts, self.map.drives.junctions(self.map.positions)
+
     def references(self) -> Iterator[np.ndarray]:
         """The map's stored encodings in route order, a block at a time (``Matcher.on_route``)."""
         return self.map.stored.in_order()

@@ -35,6 +35,7 @@ import numpy as np
 from vpr_edge.errors import VprError
 from vpr_edge.matchers.motion import MEMORY, MotionCue, cue_at, route_stands, stillness
 from vpr_edge.matchers.params import Param, read_items
+from vpr_edge.matchers.route import RouteGraph
 
 
 class OnlineMatcher(Protocol):
@@ -154,8 +155,9 @@ class Matcher:
     params: dict[str, Any] = field(default_factory=dict)
     min_confidence: float | None = None
     scores: str = "cosine"
-    reads_route: bool = False                 # start() takes ``route``: the map's standing references
-    route: np.ndarray | None = field(default=None, repr=False, compare=False)
+    reads_route: bool = False                 # start() takes ``route`` (the map's standing references) and
+    route: np.ndarray | None = field(default=None, repr=False, compare=False)   # ``graph`` (its drives)
+    graph: RouteGraph | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not self.params:
@@ -205,7 +207,9 @@ class Matcher:
         if self.reads_route:
             if self.route is not None and len(self.route) != n_refs:
                 raise ValueError(f"matcher {self.name!r}: route of {len(self.route)} references for {n_refs}")
-            return self.start(n_refs, route=self.route, **self.params)
+            if self.graph is not None and self.graph.n_refs != n_refs:
+                raise ValueError(f"matcher {self.name!r}: drives of {self.graph.n_refs} references for {n_refs}")
+            return self.start(n_refs, route=self.route, graph=self.graph, **self.params)
         return self.start(n_refs, **self.params)
 
     @property
@@ -229,14 +233,17 @@ class Matcher:
         ``motion_cue`` gives it frame by frame (NaN where there is none)."""
         return stillness(encodings, self.still_threshold, self.still_memory)
 
-    def on_route(self, blocks: Iterable[np.ndarray]) -> "Matcher":
-        """This matcher on a map whose references are given in route order as consecutive blocks (n, D): for
-        a matcher that ``reads_route``, with the map's standing references (``motion.route_stands``); else
+    def on_route(self, blocks: Iterable[np.ndarray], graph: RouteGraph | None = None) -> "Matcher":
+        """This matcher on a map whose references are given in route order as consecutive blocks (n, D) and
+        whose drives meet as ``graph`` says (``route.RouteGraph``; None: one drive): for a matcher that
+        ``reads_route``, with the map's standing references (``motion.route_stands``) and its graph; else
         itself."""
-        if not self.reads_route or self.still_threshold is None:
+        if not self.reads_route:
             return self
-        return replace(self, route=route_stands(blocks, self.still_threshold,
-                                                self.still_memory))
+        graph = None if graph is None or graph.simple else graph
+        if self.still_threshold is None:
+            return replace(self, graph=graph)
+        return replace(self, route=route_stands(blocks, self.still_threshold, self.still_memory), graph=graph)
 
     def run(self, sim: np.ndarray, k: int = 10, still: np.ndarray | None = None) -> Result:
         """Match every row of ``sim`` (Q, R); online matchers see the rows in order, past frames only, each

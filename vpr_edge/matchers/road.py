@@ -83,11 +83,7 @@ from __future__ import annotations
 import numpy as np
 
 from vpr_edge.matchers.motion import stands
-
-
-def _beyond(per_ref: np.ndarray, i: int, w: int) -> float:
-    """The highest of ``per_ref`` (n,) more than ``w`` entries away from entry ``i`` (0 if none)."""
-    return max(float(per_ref[: max(0, i - w)].max(initial=0.0)), float(per_ref[i + w + 1:].max(initial=0.0)))
+from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, minus, places
 
 
 class RoadMatcher:
@@ -98,10 +94,12 @@ class RoadMatcher:
     def __init__(self, n_refs: int, *, vmax: float, grid: int, decay: float, bias: float, turn: float,
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
                  hold: float, stop_gain: float, stop_decay: float, still: float, still_memory: int,
-                 evidence: float, evidence_decay: float, route: np.ndarray | None = None) -> None:
+                 evidence: float, evidence_decay: float, route: np.ndarray | None = None,
+                 graph: RouteGraph | None = None) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
         ``still_memory`` is the motion cue's, read where the cue is computed). ``route``: (n_refs,) bool, the
-        references where the map's drive stood (``motion.route_stands``; None: not known)."""
+        references where the map's drive stood (``motion.route_stands``; None: not known). ``graph``: the
+        map's drives and where they meet (``route.RouteGraph``; None: one drive)."""
         if n_refs < 1:
             raise ValueError("need at least one reference")
         if not 0.0 < decay < 1.0:
@@ -129,7 +127,15 @@ class RoadMatcher:
         # references whose similarities estimate a frame's mean and spread while searching locally: a fixed
         # random sample, so that the estimate costs O(probe), not O(R)
         self._probe = np.sort(np.random.default_rng(0).choice(n_refs, min(n_refs, probe), replace=False))
-        self._win: tuple[int, int] | None = None   # references [lo, hi) searched locally; None = all
+        self.graph = RouteGraph.line(n_refs) if graph is None else graph
+        if self.graph.n_refs != n_refs:
+            raise ValueError(f"route graph of {self.graph.n_refs} references for {n_refs}")
+        # trajectories across drives: state entries whose predecessor in map order is another drive's (cut),
+        # and what the junctions carry from their sources' ends into their targets (fed)
+        self._cut = self.graph.cuts(grid, self.n_speeds)
+        self._src, self._tgt = self.graph.feeds(grid, self.n_speeds)
+        self._gap = -(-self.n_speeds // grid) + 1   # windows closer than this are searched as one
+        self._win: Intervals | None = None   # references searched locally ([lo, hi) intervals); None = all
         self.check, self.span, self.hold = max(1, int(check)), max(0, int(span)), hold
         self._held = 0                               # frames since the local search began
         # float32: the per-frame passes over (speeds x positions) are memory-bound; halving the bytes halved
@@ -159,7 +165,7 @@ class RoadMatcher:
         the answer, then the probe sample."""
         if self._win is None:
             return None
-        return np.concatenate([np.arange(*self._win), self._probe])
+        return np.concatenate([places(self._win), self._probe])
 
     def _normalise(self, s: np.ndarray, lo: int, mean: float, std: float) -> np.ndarray:
         """Similarities of references [lo, lo + len(s)) -> z-scored with the frame's ``mean`` and ``std`` over
@@ -176,18 +182,16 @@ class RoadMatcher:
             run += (z - run) / weight
         return out
 
-    def _advance(self, a: int, b: int, gain: float, stop_decay: float) -> None:
+    def _advance(self, a: int, b: int, gain: float, stop_decay: float, fed: np.ndarray | None) -> None:
         """One frame of the recursion on state columns [a, b) (z already in ``self._z[a:b]``): the max over
         v' of H(v', p) - turn * |v - v'| (forward and backward passes over speeds), shifted v grid steps
         ahead, decayed, plus z (at speed 0: decayed by ``stop_decay``, plus ``gain`` of a positive z),
-        floored at 0. Columns left of ``a`` feed it as predecessors."""
+        floored at 0. Columns left of ``a`` feed it as predecessors, except across a drive's start, where
+        the junctions into it do (``fed``: what each junction carries, ``_fed``)."""
         a0 = max(0, a - (self.n_speeds - 1))
         m, new, w = self._m[:, : b - a0], self._new[:, : b - a], b - a
         np.copyto(m, self.h[:, a0:b])
-        for v in range(1, self.n_speeds):
-            np.maximum(m[v], m[v - 1] - self.turn, out=m[v])
-        for v in range(self.n_speeds - 2, -1, -1):
-            np.maximum(m[v], m[v + 1] - self.turn, out=m[v])
+        self._speed_max(m)
         for v in range(self.n_speeds):   # a trajectory at speed v came from v grid steps behind
             k = a - v - a0
             if k >= 0:
@@ -195,6 +199,8 @@ class RoadMatcher:
             else:                        # before the route's start: nothing
                 new[v, :-k] = 0.0
                 new[v, -k:] = m[v, : max(0, w + k)]   # nothing when the step is longer than the columns
+        if fed is not None:
+            self._join(new, a, b, fed)
         new[1:] *= self.decay
         new[0] *= stop_decay
         np.maximum(new, 0.0, out=new)
@@ -207,6 +213,38 @@ class RoadMatcher:
         new[0] += zs
         np.maximum(new, 0.0, out=new)
         self.h[:, a:b] = new
+
+    def _speed_max(self, m: np.ndarray) -> None:
+        """In place over (speeds, columns): each entry the max over speeds v' of itself - turn * |v - v'|."""
+        for v in range(1, self.n_speeds):
+            np.maximum(m[v], m[v - 1] - self.turn, out=m[v])
+        for v in range(self.n_speeds - 2, -1, -1):
+            np.maximum(m[v], m[v + 1] - self.turn, out=m[v])
+
+    def _fed(self) -> np.ndarray | None:
+        """What each junction carries into the next frame, from the state as it is: (junctions, k, speeds),
+        the best speed-penalised state k columns back from the junction's end over its sources (None: a map
+        without junctions)."""
+        sj, sk, sc = self._src
+        if not len(sc):
+            return None
+        cols, inverse = np.unique(sc, return_inverse=True)
+        hs = self.h[:, cols]
+        self._speed_max(hs)
+        out = np.zeros((len(self.graph.junctions), self.n_speeds, self.n_speeds), np.float32)
+        np.maximum.at(out, (sj, sk), hs[:, inverse].T)
+        return out
+
+    def _join(self, new: np.ndarray, a: int, b: int, fed: np.ndarray) -> None:
+        """Columns [a, b) of the shifted state ``new``: predecessors across a drive's start dropped, those
+        the junctions carry (``fed``) taken in."""
+        cv, cc = self._cut
+        lo, hi = np.searchsorted(cc, [a, b])
+        new[cv[lo:hi], cc[lo:hi] - a] = 0.0
+        tj, tv, tk, tc = self._tgt
+        lo, hi = np.searchsorted(tc, [a, b])
+        if hi > lo:
+            np.maximum.at(new, (tv[lo:hi], tc[lo:hi] - a), fed[tj[lo:hi], tk[lo:hi], tv[lo:hi]])
 
     def stands(self, still: float | None) -> bool:
         """Whether a frame with motion cue ``still`` shows a standing camera (its view again) where the map's
@@ -232,32 +270,49 @@ class RoadMatcher:
         ``still``: the frame's motion cue (cosine similarity to the last moving frame's encoding,
         ``base.MotionCue``; None: none)."""
         s = np.asarray(sim_row, np.float64)
-        lo, hi = self._win if self._win is not None else (0, self.n_refs)
+        wins = self._win if self._win is not None else [(0, self.n_refs)]
+        n_win = sum(hi - lo for lo, hi in wins)
         if refs is not None:
-            if self._win is None or len(refs) != hi - lo + len(self._probe) or len(s) != len(refs):
+            if self._win is None or len(refs) != n_win + len(self._probe) or len(s) != len(refs):
                 raise ValueError("similarities must cover the references wanted() named")
-            part, probe = s[: hi - lo], s[hi - lo:]
+            part, probe = s[:n_win], s[n_win:]
         elif s.shape != (self.n_refs,):
             raise ValueError(f"similarity row must have shape ({self.n_refs},), got {s.shape}")
         else:
-            part, probe = s[lo:hi], s[self._probe] if self._win is not None else s
+            part = s if self._win is None else s[places(wins)]
+            probe = s[self._probe] if self._win is not None else s
         g = self.grid
         mean, std = float(probe.mean()), max(float(probe.std()), 1e-12)
         standing = self.stands(still)
         if not standing:   # a standing camera's view again says nothing new: the state stays
-            z = self._z[lo * g:hi * g].reshape(hi - lo, g)
-            z[:] = self._normalise(part, lo, mean, std)[:, None]
-            z -= self.bias
-            self._advance(lo * g, hi * g, *self._stop_rule(still))
-        h = self.h[:, lo * g:hi * g]
-        flat = int(np.argmax(h))
-        self._stopped = flat < h.shape[1]          # the best trajectory has speed 0
-        ref, best = lo + (flat % h.shape[1]) // g, float(h.flat[flat])
-        self._position = lo + (flat % h.shape[1]) / g
-        per_ref = h.max(axis=0).reshape(hi - lo, g).max(axis=1)
-        rival = _beyond(per_ref, ref - lo, self.rival_window)
+            fed = None if self._cut[1].size == 0 and self._tgt[3].size == 0 else self._fed()
+            at = 0
+            for lo, hi in wins:
+                z = self._z[lo * g:hi * g].reshape(hi - lo, g)
+                z[:] = self._normalise(part[at:at + hi - lo], lo, mean, std)[:, None]
+                z -= self.bias
+                at += hi - lo
+            gain, decay = self._stop_rule(still)
+            for lo, hi in wins:
+                self._advance(lo * g, hi * g, gain, decay, fed)
+        ref, best, col, stopped, per_ref = -1, -1.0, 0, False, []
+        for lo, hi in wins:
+            h = self.h[:, lo * g:hi * g]
+            flat = int(np.argmax(h))
+            if float(h.flat[flat]) > best:
+                best, ref = float(h.flat[flat]), lo + (flat % h.shape[1]) // g
+                col, stopped = lo * g + flat % h.shape[1], flat < h.shape[1]
+            per_ref.append(h.max(axis=0).reshape(hi - lo, g).max(axis=1))
+        self._stopped = stopped                    # the best trajectory has speed 0
+        self._position = col / g
+        values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
+        where = None if self._win is None else places(wins)
+        rival = max_outside(values, where, self.graph.near(ref, self.rival_window))
         # how far the answer stands out of its frame's row, averaged; a standing frame may raise it, not lower it
-        here = (float(part[max(0, ref - lo - 1):ref - lo + 2].max()) - mean) / std
+        first, last = self.graph.bounds(ref)
+        at = int(np.searchsorted(where, ref)) if where is not None else ref
+        lo_ = max(0, at - (1 if ref > first else 0))
+        here = (float(part[lo_:at + (2 if ref < last else 1)].max()) - mean) / std
         if self._evidence is None:
             self._evidence = here
         else:
@@ -266,30 +321,24 @@ class RoadMatcher:
         locked = best >= self.lock and self._evidence >= self.evidence
         # firm lock: strong evidence, and no hypothesis beyond the window half as strong (seen in global frames)
         held = bool(self.window) and best >= self.hold * self.lock and \
-            _beyond(per_ref, ref - lo, self.window) < 0.5 * best
+            max_outside(values, where, self.graph.near(ref, self.window)) < 0.5 * best
         self._follow(ref, held)
         return ref, float(locked) + 1.0 - (rival + 1.0) / (best + 1.0)
 
     def _follow(self, ref: int, held: bool) -> None:
-        """Choose the next frame's search: around ``ref`` while firmly locked (``window`` > 0), except for
-        ``span`` global frames every ``check`` frames, else everything. State outside the window is kept at
-        0 (trajectories there are dropped when the window is entered and when it moves on)."""
+        """Choose the next frame's search: the references within ``window`` of ``ref`` along the route
+        (``RouteGraph.near``: across a junction too) while firmly locked (``window`` > 0), except for ``span``
+        global frames every ``check`` frames, else everything. State outside the window is kept at 0
+        (trajectories there are dropped when the window is entered and when it moves on)."""
         self._held = self._held + 1 if (self.window and held) else 0
         if not self._held or self._held % self.check >= self.check - self.span:
             self._win = None
             return
         g = self.grid
-        lo, hi = max(0, ref - self.window), min(self.n_refs, ref + self.window + 1)
-        if self._win is None:
-            self.h[:, : lo * g] = 0.0
-            self.h[:, hi * g:] = 0.0
-        else:
-            plo, phi = self._win
-            if plo < lo:
-                self.h[:, plo * g:min(lo, phi) * g] = 0.0
-            if phi > hi:
-                self.h[:, max(hi, plo) * g:phi * g] = 0.0
-        self._win = (lo, hi)
+        win = self.graph.near(ref, self.window, self._gap)
+        for lo, hi in minus(self._win or [(0, self.n_refs)], win):
+            self.h[:, lo * g:hi * g] = 0.0
+        self._win = win
 
     def ranking(self) -> np.ndarray:
         """Best trajectory score ending at each reference (R,)."""

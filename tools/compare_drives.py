@@ -1,0 +1,115 @@
+#!/usr/bin/env python3
+"""A map of several drives against a one-folder map of the same places (docs/results.md, "Maps of several
+drives"), on derived streams, with the library's ``evaluate``.
+
+    python tools/derive_streams.py --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
+    python tools/compare_drives.py --streams out/nordland-dev out/corridor --drives 4
+
+For each dataset: the map's places (OUT/ref) are cut into ``--drives`` drives whose frames share names
+(``streams.cut_into_drives``, OUT/drives/), given to build-map in a shuffled order; three maps are built: the
+one-folder map (OUT/map.folder.npz), the drives with the one-folder map's codebook (OUT/map.drives.npz: the
+same encodings, so only the handling of drives differs) and the drives with their own codebook fitted as
+build-map fits it (OUT/map.drives-fit.npz); beside them the one-folder map fitted with another seed
+(OUT/map.folder-seed1.npz: how much a codebook's random sample alone moves the figures). Each is run with the ``stream`` mode by ``evaluate`` on every
+stream kind, and its answers are scored on the route (each answer's drive and name read back as the place of
+the one-folder route it is, so that ``--tolerance`` counts along the road across a join as in the one-folder
+map): R@1, and the frames wrong or lost in the ``--after`` frames after each join (a frame whose true place is
+in another drive than the last mapped frame's), summed over the joins; then the matcher's ms a frame
+(``evaluate``'s, whole stream) for each map.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from vpr_edge.errors import one_line_errors
+from vpr_edge.evaluation import Source, Truth, evaluate
+from vpr_edge.evaluation.streams import KINDS, cut_into_drives
+from vpr_edge.evaluation.truth import load_csv
+from vpr_edge.evaluation.metrics import correct_candidates
+from vpr_edge.map import load_map
+from vpr_edge.map.make import BuildOptions, plan_map, write_map
+from vpr_edge.matchers import get_matcher
+from vpr_edge.threads import use_threads
+
+
+def joins(truth: np.ndarray, bounds: np.ndarray) -> list[int]:
+    """Frames whose true place lies in another drive than the last mapped frame's (``bounds``: the drives'
+    first places, then the number of places)."""
+    out, last = [], None
+    for i, row in enumerate(truth):
+        if row[0] < 0:
+            continue
+        drive = int(np.searchsorted(bounds, row[0], side="right")) - 1
+        if last is not None and drive != last:
+            out.append(i)
+        last = drive
+    return out
+
+
+def route_places(path: Path, bounds: np.ndarray) -> np.ndarray:
+    """(R,) each place of the map at ``path`` as its place on the one-folder route: a drive k's frame_i is
+    place bounds[k] + i; a one-folder map's places are the route's."""
+    pm = load_map(path)
+    if len(pm.drives) == 1:
+        return np.arange(len(pm.names))
+    drive = pm.drives.of_each()
+    return np.array([bounds[int(pm.drives.items[d].name)] + int(Path(n).stem.split("_")[1])
+                     for d, n in zip(drive, pm.names)])
+
+
+def measure(folder: Path, n_drives: int, kinds: list[str], tolerance: int, after: int, seed: int) -> list[str]:
+    order = cut_into_drives(folder, n_drives, seed)
+    codebook = folder / "codebook.folder.npz"
+    maps = {"one folder": folder / "map.folder.npz", "one folder, seed 1": folder / "map.folder-seed1.npz",
+            "drives": folder / "map.drives.npz", "drives, own fit": folder / "map.drives-fit.npz"}
+    write_map(plan_map(folder / "ref", maps["one folder"], BuildOptions(threads=1, save_codebook=codebook)))
+    write_map(plan_map(folder / "ref", maps["one folder, seed 1"], BuildOptions(threads=1, seed=1)))
+    write_map(plan_map(order, maps["drives"], BuildOptions(threads=1, codebook=codebook)))
+    write_map(plan_map(order, maps["drives, own fit"], BuildOptions(threads=1)))
+    n_refs = len(list((folder / "ref").iterdir()))
+    bounds = np.linspace(0, n_refs, n_drives + 1).round().astype(int)
+    stream = {"stream": get_matcher("stream")}
+    lines = [f"{folder.name}: {n_refs} places in {n_drives} drives given as "
+             f"{' '.join(Path(d).name for d in order)}; `stream`, R@1 within ±{tolerance} / frames wrong or lost "
+             f"in the {after} after the joins (joins) / matcher ms a frame", "",
+             "| stream | joins | " + " | ".join(maps) + " |", "|---|---|" + "---|" * len(maps)]
+    for kind in kinds:
+        truth = load_csv(folder / f"{kind}.csv")
+        at = joins(truth, bounds)
+        cells = []
+        mapped = (truth >= 0).any(axis=1)
+        for name, path in maps.items():
+            gt = folder / f"{kind}.csv" if name == "one folder" else folder / "drives" / f"{kind}.csv"
+            report = evaluate(Source(map=path, queries=folder / kind, threads=1), Truth(gt=gt), stream,
+                              tolerance).reports["stream"]
+            right = correct_candidates(route_places(path, bounds)[report.refs], truth, tolerance)[:, 0]
+            bad = ~right | report.lost
+            after_joins = sum(int((bad & mapped)[j:j + after].sum()) for j in at)
+            cells.append(f"{right[mapped].mean():.3f} / {after_joins} / {report.match_ms:.2f}")
+        lines.append(f"| {kind} | {len(at)} | " + " | ".join(cells) + " |")
+    return lines + [""]
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--streams", type=Path, nargs="+", required=True, help="derive_streams outputs")
+    p.add_argument("--drives", type=int, default=4)
+    p.add_argument("--kinds", default=",".join(KINDS))
+    p.add_argument("--tolerance", type=int, default=2)
+    p.add_argument("--after", type=int, default=15, help="frames after each join counted")
+    p.add_argument("--seed", type=int, default=0, help="the drives' shuffled order")
+    a = p.parse_args()
+    use_threads(1)
+
+    def run() -> int:
+        for folder in a.streams:
+            print("\n".join(measure(folder, a.drives, a.kinds.split(","), a.tolerance, a.after, a.seed)), flush=True)
+        return 0
+    return one_line_errors("compare_drives", run)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
