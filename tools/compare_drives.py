@@ -15,7 +15,8 @@ stream kind, and its answers are scored on the route (each answer's drive and na
 the one-folder route it is, so that ``--tolerance`` counts along the road across a join as in the one-folder
 map): R@1, and the frames wrong or lost in the ``--after`` frames after each join (a frame whose true place is
 in another drive than the last mapped frame's), summed over the joins; then the matcher's ms a frame
-(``evaluate``'s, whole stream) for each map.
+(``evaluate``'s, whole stream) for each map; last, the whole per-frame chain (``Localizer`` on one thread over
+the aligned stream, ``yardstick.chain_ms``) on the one-folder and the drives map, alternated three times.
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ from vpr_edge.errors import one_line_errors
 from vpr_edge.evaluation import Source, Truth, evaluate
 from vpr_edge.evaluation.streams import KINDS, cut_into_drives
 from vpr_edge.evaluation.truth import load_csv
+from vpr_edge.evaluation.yardstick import chain_ms
 from vpr_edge.evaluation.metrics import correct_candidates
 from vpr_edge.map import load_map
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
@@ -82,7 +84,7 @@ def measure(folder: Path, n_drives: int, kinds: list[str], tolerance: int, after
         cells = []
         mapped = (truth >= 0).any(axis=1)
         for name, path in maps.items():
-            gt = folder / f"{kind}.csv" if name == "one folder" else folder / "drives" / f"{kind}.csv"
+            gt = folder / f"{kind}.csv" if name.startswith("one folder") else folder / "drives" / f"{kind}.csv"
             report = evaluate(Source(map=path, queries=folder / kind, threads=1), Truth(gt=gt), stream,
                               tolerance).reports["stream"]
             right = correct_candidates(route_places(path, bounds)[report.refs], truth, tolerance)[:, 0]
@@ -90,6 +92,13 @@ def measure(folder: Path, n_drives: int, kinds: list[str], tolerance: int, after
             after_joins = sum(int((bad & mapped)[j:j + after].sum()) for j in at)
             cells.append(f"{right[mapped].mean():.3f} / {after_joins} / {report.match_ms:.2f}")
         lines.append(f"| {kind} | {len(at)} | " + " | ".join(cells) + " |")
+    runs: dict[str, list[float]] = {"one folder": [], "drives": []}
+    for _ in range(3):
+        for name in runs:
+            runs[name].append(chain_ms(maps[name], folder / "aligned"))
+    one, many = (float(np.median(v)) for v in runs.values())
+    lines += ["", f"Whole chain, one thread, aligned stream (median of 3, alternated): one folder {one:.2f} ms a "
+              f"frame, drives {many:.2f} ms a frame ({many / one:.2f}x)."]
     return lines + [""]
 
 

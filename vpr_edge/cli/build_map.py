@@ -105,6 +105,10 @@ def build_map_cmd(
     append: bool = typer.Option(False, "--append", help="Add each DRIVE as a drive of its own to the map at "
                                 "--out, described and encoded as its own (its places copied, not re-encoded; "
                                 "the map is replaced atomically); the map grows without refitting."),
+    ray: Optional[str] = typer.Option(None, "--ray", metavar="ADDRESS", help="Describe and encode the "
+                                      "references on a Ray cluster (the ray extra): local starts one on this "
+                                      "machine, auto or HOST:PORT joins a running one; workers need the package "
+                                      "and the same paths to the frames and the model. The same map as without."),
     batch_size: int = typer.Option(8, min=1, help="Images per model run."),
     threads: int = typer.Option(0, min=0, help=THREADS_HELP),
 ) -> None:
@@ -120,7 +124,7 @@ def build_map_cmd(
                                save_codebook=output_path(save_codebook) if save_codebook else None,
                                storage=_value(storage), positions=tuple(positions or ()),
                                timestamps=tuple(timestamps or ()), topic=topic,
-                               positions_topic=positions_topic, append=append, batch_size=batch_size, threads=threads,
+                               positions_topic=positions_topic, append=append, batch_size=batch_size, threads=threads, ray=ray,
                                inputs=GivenConventions(input_size, mean, std, bgr, _value(layout)))
         plan = plan_map(refs, output_path(out), options)
         with typer.progressbar(length=len(plan.files), label="extracting", file=sys.stderr,

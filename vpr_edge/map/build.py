@@ -3,7 +3,7 @@ sample of them, encode every reference as it is described, optionally train an S
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +20,10 @@ from vpr_edge.map.front import front_end_meta
 from vpr_edge.map.model import PlaceMap, Svm
 
 Progress = Callable[[int], None]
+# encodes the references files[order] in batches elsewhere (``map.fleet.encode_on_ray``): (files, order, front,
+# encoder, batch_size, progress) -> (indices (b,), encodings (b, D)) pairs
+EncodeElsewhere = Callable[[Sequence[Path], np.ndarray, FrontEnd, Encoder, int, "Progress | None"],
+                           Iterable[tuple[np.ndarray, np.ndarray]]]
 
 
 def described(files: Sequence[Path], order: np.ndarray, front: FrontEnd, batch_size: int,
@@ -139,14 +143,17 @@ def _meta(front: FrontEnd, encoder: Encoder, fitted: bool, settings: FitSettings
 
 def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = DEFAULT_ENCODING,
               encoder: Encoder | None = None, settings: FitSettings = FitSettings(), batch_size: int = 8,
-              svm: bool = False, storage: str = DEFAULT_STORAGE, progress: Progress | None = None) -> PlaceMap:
+              svm: bool = False, storage: str = DEFAULT_STORAGE, progress: Progress | None = None,
+              elsewhere: EncodeElsewhere | None = None) -> PlaceMap:
     """Describe every reference image in ``files`` (in that order; see ``list_images``) with ``front`` and
     make the map, encodings kept as ``storage`` (``index.encodings.STORAGES``). Each image is described once: unless
     ``encoder`` is given, the codebook is first fitted on a random subset of the references (``_fit_pool``;
     all of them on small routes), then every other reference is encoded as it is extracted, so that memory
     and disk hold only the stored encodings, whatever the route's length (with ``svm`` also their float32
     copy, to train on). bow with tf-idf needs every reference's words to fit and goes through
-    ``map_from_local``. Raises VprError on an unreadable image or an encoder that does not fit the front end."""
+    ``map_from_local``. With ``elsewhere`` the references outside the fit sample are described and encoded by
+    it (a Ray cluster: ``map.fleet``) in the same batches. Raises VprError on an unreadable image or an encoder
+    that does not fit the front end."""
     if not files:
         raise VprError("no reference images given")
     names, refs_folder = [f.name for f in files], str(Path(files[0]).parent)
@@ -169,8 +176,12 @@ def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = DEFAULT_EN
             store.put(pool[i:i + 32], encoder.transform(local[i:i + 32], None if mask is None else mask[i:i + 32]))
         del local, mask
     rest = np.setdiff1d(np.arange(len(files)), pool)
-    for idx, x, m in described(files, rest, front, batch_size, progress):
-        store.put(idx, encoder.transform(x, m))
+    if elsewhere is not None:
+        for idx, encoded in elsewhere(files, rest, front, encoder, batch_size, progress):
+            store.put(idx, encoded)
+    else:
+        for idx, x, m in described(files, rest, front, batch_size, progress):
+            store.put(idx, encoder.transform(x, m))
     classifier = _svm(store.floats, storage, settings.seed) if svm else None
     meta = _meta(front, encoder, fitted, settings, n_real, refs_folder)
     return PlaceMap(store.encodings(), names, encoder, meta, classifier)

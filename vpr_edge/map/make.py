@@ -7,6 +7,7 @@ import os
 import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,7 @@ from vpr_edge.index.encodings import DEFAULT_STORAGE
 from vpr_edge.encoders.flat import Flatten
 from vpr_edge.features.descriptors import GivenDescriptors
 from vpr_edge.frames.descriptors import is_descriptor_file, read_descriptors
+from vpr_edge.map.fleet import check_ray, encode_on_ray
 from vpr_edge.map.drives import Drives, check_unique, drive_name, spans_of
 from vpr_edge.map.build import Progress, build_map, check_codebook_fits, map_from_descriptors
 from vpr_edge.map.front import map_front_end
@@ -65,6 +67,7 @@ class BuildOptions:
     inputs: GivenConventions = GivenConventions()   # a model without vpr_edge metadata: its input conventions
     batch_size: int = 8
     threads: int = 0
+    ray: str | None = None     # describe and encode on this Ray cluster (local, auto, HOST:PORT, ray://HOST:PORT)
 
     def __post_init__(self) -> None:   # one value given as such: one drive's
         for key in ("positions", "timestamps"):
@@ -279,6 +282,8 @@ def _plan_descriptors(specs: list[tuple[str, Path]], out: Path, o: BuildOptions,
                                  ("--timestamps", o.timestamps or None), ("--svm", o.svm or None),
                                  ("--alpha", o.alpha), *_fit_options(o).items()) if v is not None]
     image_only += o.inputs.options()
+    if o.ray is not None:
+        image_only.append(f"--ray {o.ray} (descriptor files need no per-frame work)")
     if o.encoding not in (None, "none"):
         image_only.append(f"--encoding {o.encoding}")
     if "exif" in o.positions:
@@ -371,6 +376,11 @@ def plan_map(refs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], ou
     _warn_inapplicable(enc_name, o)
     if (given is None and base is None and ENCODERS[enc_name].needs_fit) or o.svm:
         require_sklearn()
+    if o.ray is not None:
+        if enc_name == "bow" and o.tfidf and given is None:
+            raise VprError(f"--ray {o.ray}: --tfidf needs every reference's words at once to fit; build it "
+                           f"without --ray, or give --codebook")
+        check_ray(o.ray)
     if enc_name == "none" and front.n_local is None:
         raise VprError(f"encoding none needs a front end with a fixed grid of descriptors; {front.name} detects "
                        f"keypoints (a varying number per image): choose bow, vlad, fv or ifv")
@@ -439,8 +449,9 @@ def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
             place_map = map_from_descriptors([d.descriptors for d in plan.drives], names,
                                              [str(d.source) for d in plan.drives], plan.storage)
         else:
+            elsewhere = None if o.ray is None else partial(encode_on_ray, o.ray)
             place_map = build_map(plan.files, plan.front, plan.encoding, plan.given, plan.settings, o.batch_size,
-                                  o.svm, plan.storage, progress=progress)
+                                  o.svm, plan.storage, progress=progress, elsewhere=elsewhere)
     finally:
         if plan.scratch is not None:
             plan.scratch.cleanup()

@@ -133,7 +133,8 @@ class RoadMatcher:
         # trajectories across drives: state entries whose predecessor in map order is another drive's (cut),
         # and what the junctions carry from their sources' ends into their targets (fed)
         self._cut = self.graph.cuts(grid, self.n_speeds)
-        self._src, self._tgt = self.graph.feeds(grid, self.n_speeds)
+        self._feeds()
+        self._joins = bool(len(self._cut[1]) or self._src_cols is not None)
         self._gap = -(-self.n_speeds // grid) + 1   # windows closer than this are searched as one
         self._win: Intervals | None = None   # references searched locally ([lo, hi) intervals); None = all
         self.check, self.span, self.hold = max(1, int(check)), max(0, int(span)), hold
@@ -199,7 +200,7 @@ class RoadMatcher:
             else:                        # before the route's start: nothing
                 new[v, :-k] = 0.0
                 new[v, -k:] = m[v, : max(0, w + k)]   # nothing when the step is longer than the columns
-        if fed is not None:
+        if self._joins:
             self._join(new, a, b, fed)
         new[1:] *= self.decay
         new[0] *= stop_decay
@@ -221,30 +222,49 @@ class RoadMatcher:
         for v in range(self.n_speeds - 2, -1, -1):
             np.maximum(m[v], m[v + 1] - self.turn, out=m[v])
 
-    def _fed(self) -> np.ndarray | None:
-        """What each junction carries into the next frame, from the state as it is: (junctions, k, speeds),
-        the best speed-penalised state k columns back from the junction's end over its sources (None: a map
-        without junctions)."""
-        sj, sk, sc = self._src
+    def _feeds(self) -> None:
+        """Precompute what ``_fed`` gathers and ``_join`` scatters: the junctions' source columns grouped by
+        (junction, k) (``_src_cols``, ``_src_groups``; None: no junction) and the target entries (speed, column,
+        group), sorted by column."""
+        (sj, sk, sc), (tj, tv, tk, tc) = self.graph.feeds(self.grid, self.n_speeds)
+        self._src_cols: np.ndarray | None = None
+        self._tgt = (np.zeros(0, np.int64),) * 3
         if not len(sc):
-            return None
-        cols, inverse = np.unique(sc, return_inverse=True)
-        hs = self.h[:, cols]
-        self._speed_max(hs)
-        out = np.zeros((len(self.graph.junctions), self.n_speeds, self.n_speeds), np.float32)
-        np.maximum.at(out, (sj, sk), hs[:, inverse].T)
-        return out
+            return
+        gid = sj * self.n_speeds + sk
+        order = np.argsort(gid, kind="stable")
+        self._src_cols, g = sc[order], gid[order]
+        speeds = np.arange(self.n_speeds)
+        self._turns = (self.turn * np.abs(speeds[:, None] - speeds[None, :])).astype(np.float32)   # (v, v')
+        self._src_groups = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
+        row_of = np.full(len(self.graph.junctions) * self.n_speeds, -1, np.int64)
+        row_of[g[self._src_groups]] = np.arange(len(self._src_groups))
+        row = row_of[tj * self.n_speeds + tk]
+        keep = row >= 0          # a (junction, k) with no source column (a drive shorter than the speeds reach)
+        self._tgt = (tv[keep], tc[keep], row[keep])
 
-    def _join(self, new: np.ndarray, a: int, b: int, fed: np.ndarray) -> None:
+    def _fed(self) -> np.ndarray | None:
+        """What the junctions carry into the next frame, from the state as it is: (speeds, groups), per
+        (junction, k) group the best speed-penalised state k columns back from the junction's end over its
+        sources (None: a map without junctions)."""
+        if self._src_cols is None:
+            return None
+        hs = (self.h[None, :, self._src_cols] - self._turns[:, :, None]).max(axis=1)   # few columns: at once
+        return np.maximum.reduceat(hs, self._src_groups, axis=1)
+
+    def _join(self, new: np.ndarray, a: int, b: int, fed: np.ndarray | None) -> None:
         """Columns [a, b) of the shifted state ``new``: predecessors across a drive's start dropped, those
         the junctions carry (``fed``) taken in."""
         cv, cc = self._cut
         lo, hi = np.searchsorted(cc, [a, b])
         new[cv[lo:hi], cc[lo:hi] - a] = 0.0
-        tj, tv, tk, tc = self._tgt
+        if fed is None:
+            return
+        tv, tc, row = self._tgt
         lo, hi = np.searchsorted(tc, [a, b])
-        if hi > lo:
-            np.maximum.at(new, (tv[lo:hi], tc[lo:hi] - a), fed[tj[lo:hi], tk[lo:hi], tv[lo:hi]])
+        if hi > lo:   # entries reaching one (speed, column) from several junctions: the best of them
+            v = tv[lo:hi]
+            np.maximum.at(new, (v, tc[lo:hi] - a), fed[v, row[lo:hi]])
 
     def stands(self, still: float | None) -> bool:
         """Whether a frame with motion cue ``still`` shows a standing camera (its view again) where the map's
@@ -285,7 +305,7 @@ class RoadMatcher:
         mean, std = float(probe.mean()), max(float(probe.std()), 1e-12)
         standing = self.stands(still)
         if not standing:   # a standing camera's view again says nothing new: the state stays
-            fed = None if self._cut[1].size == 0 and self._tgt[3].size == 0 else self._fed()
+            fed = self._fed()
             at = 0
             for lo, hi in wins:
                 z = self._z[lo * g:hi * g].reshape(hi - lo, g)

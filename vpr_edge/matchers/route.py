@@ -9,6 +9,7 @@ of places along the sequence and, across a junction within reach, along the next
 """
 from __future__ import annotations
 
+from bisect import bisect_right
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -39,6 +40,8 @@ class RouteGraph:
                 raise ValueError(f"a junction's places must lie in 0..{self.n_refs - 1}")
             fixed.append((s, t))
         object.__setattr__(self, "junctions", tuple(fixed))
+        object.__setattr__(self, "_firsts", [int(v) for v in starts])                       # for bisect
+        object.__setattr__(self, "_lasts", [int(v) - 1 for v in starts[1:]] + [self.n_refs - 1])
 
     @classmethod
     def line(cls, n_refs: int) -> "RouteGraph":
@@ -53,12 +56,12 @@ class RouteGraph:
     @property
     def ends(self) -> np.ndarray:
         """(S,) the last place of each sequence."""
-        return np.append(self.starts[1:], self.n_refs) - 1
+        return np.array(self._lasts, np.int64)
 
     def bounds(self, ref: int) -> tuple[int, int]:
         """(first, last) place of ``ref``'s sequence."""
-        k = int(np.searchsorted(self.starts, ref, side="right")) - 1
-        return int(self.starts[k]), int(self.ends[k])
+        k = bisect_right(self._firsts, ref) - 1
+        return self._firsts[k], self._lasts[k]
 
     def near(self, ref: int, w: int, gap: int = 0) -> Intervals:
         """The places within ``w`` steps of place ``ref`` along the route: its sequence within ``w`` either
