@@ -9,7 +9,8 @@ For each dataset: the map's places (OUT/ref) are cut into ``--drives`` drives wh
 (``streams.cut_into_drives``, OUT/drives/), given to build-map in a shuffled order; three maps are built: the
 one-folder map (OUT/map.folder.npz), the drives with the one-folder map's codebook (OUT/map.drives.npz: the
 same encodings, so only the handling of drives differs) and the drives with their own codebook fitted as
-build-map fits it (OUT/map.drives-fit.npz); beside them the one-folder map fitted with another seed
+build-map fits it (OUT/map.drives-fit.npz), the first half of the drives built with their own fit and the
+other half appended to it (OUT/map.drives-appended.npz: against the drives built at once); beside them the one-folder map fitted with another seed
 (OUT/map.folder-seed1.npz: how much a codebook's random sample alone moves the figures). Each is run with the ``stream`` mode by ``evaluate`` on every
 stream kind, and its answers are scored on the route (each answer's drive and name read back as the place of
 the one-folder route it is, so that ``--tolerance`` counts along the road across a join as in the one-folder
@@ -66,11 +67,15 @@ def measure(folder: Path, n_drives: int, kinds: list[str], tolerance: int, after
     order = cut_into_drives(folder, n_drives, seed)
     codebook = folder / "codebook.folder.npz"
     maps = {"one folder": folder / "map.folder.npz", "one folder, seed 1": folder / "map.folder-seed1.npz",
-            "drives": folder / "map.drives.npz", "drives, own fit": folder / "map.drives-fit.npz"}
+            "drives": folder / "map.drives.npz", "drives, own fit": folder / "map.drives-fit.npz",
+            "2 drives + 2 appended": folder / "map.drives-appended.npz"}
     write_map(plan_map(folder / "ref", maps["one folder"], BuildOptions(threads=1, save_codebook=codebook)))
     write_map(plan_map(folder / "ref", maps["one folder, seed 1"], BuildOptions(threads=1, seed=1)))
     write_map(plan_map(order, maps["drives"], BuildOptions(threads=1, codebook=codebook)))
     write_map(plan_map(order, maps["drives, own fit"], BuildOptions(threads=1)))
+    half = len(order) // 2
+    write_map(plan_map(order[:half], maps["2 drives + 2 appended"], BuildOptions(threads=1)))
+    write_map(plan_map(order[half:], maps["2 drives + 2 appended"], BuildOptions(threads=1, append=True)))
     n_refs = len(list((folder / "ref").iterdir()))
     bounds = np.linspace(0, n_refs, n_drives + 1).round().astype(int)
     stream = {"stream": get_matcher("stream")}
