@@ -18,6 +18,8 @@ map): R@1, and the frames wrong or lost in the ``--after`` frames after each joi
 in another drive than the last mapped frame's), summed over the joins; then the matcher's ms a frame
 (``evaluate``'s, whole stream) for each map; last, the whole per-frame chain (``Localizer`` on one thread over
 the aligned stream, ``yardstick.chain_ms``) on the one-folder and the drives map, alternated three times.
+With ``--append-seeds N`` it measures instead the drives built at once against half of them appended to the
+other half, each fitted with codebook seeds 0..N-1 (mean and range of R@1 per stream).
 """
 from __future__ import annotations
 
@@ -107,6 +109,37 @@ def measure(folder: Path, n_drives: int, kinds: list[str], tolerance: int, after
     return lines + [""]
 
 
+def append_spread(folder: Path, n_drives: int, kinds: list[str], tolerance: int, seeds: int) -> list[str]:
+    """R@1 of the drives built at once and of half of them with the other half appended, each with its own
+    codebook fitted with seeds 0..seeds-1: mean and range per stream (what a codebook's sample moves)."""
+    order = cut_into_drives(folder, n_drives, 0)
+    n_refs = len(list((folder / "ref").iterdir()))
+    bounds = np.linspace(0, n_refs, n_drives + 1).round().astype(int)
+    stream = {"stream": get_matcher("stream")}
+    r1: dict[str, dict[str, list[float]]] = {"at once": {k: [] for k in kinds}, "appended": {k: [] for k in kinds}}
+    for seed in range(seeds):
+        at_once, appended = folder / f"map.once-{seed}.npz", folder / f"map.appended-{seed}.npz"
+        write_map(plan_map(order, at_once, BuildOptions(threads=1, seed=seed)))
+        half = len(order) // 2
+        write_map(plan_map(order[:half], appended, BuildOptions(threads=1, seed=seed)))
+        write_map(plan_map(order[half:], appended, BuildOptions(threads=1, append=True)))
+        for name, path in (("at once", at_once), ("appended", appended)):
+            for kind in kinds:
+                truth = load_csv(folder / f"{kind}.csv")
+                report = evaluate(Source(map=path, queries=folder / kind, threads=1),
+                                  Truth(gt=folder / "drives" / f"{kind}.csv"), stream, tolerance).reports["stream"]
+                right = correct_candidates(route_places(path, bounds)[report.refs], truth, tolerance)[:, 0]
+                r1[name][kind].append(float(right[(truth >= 0).any(axis=1)].mean()))
+    lines = [f"{folder.name}: R@1 within ±{tolerance}, {n_drives} drives built at once against half of them "
+             f"appended to the other half, codebook seeds 0..{seeds - 1}: mean (min-max)", "",
+             "| stream | at once | appended | difference of the means |", "|---|---|---|---|"]
+    for kind in kinds:
+        a, b = np.array(r1["at once"][kind]), np.array(r1["appended"][kind])
+        lines.append(f"| {kind} | {a.mean():.3f} ({a.min():.3f}-{a.max():.3f}) | {b.mean():.3f} ({b.min():.3f}-"
+                     f"{b.max():.3f}) | {b.mean() - a.mean():+.3f} |")
+    return lines + [""]
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--streams", type=Path, nargs="+", required=True, help="derive_streams outputs")
@@ -115,12 +148,17 @@ def main() -> int:
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--after", type=int, default=15, help="frames after each join counted")
     p.add_argument("--seed", type=int, default=0, help="the drives' shuffled order")
+    p.add_argument("--append-seeds", type=int, default=0, help="instead: appended against built at once, over "
+                   "this many codebook seeds (append_spread)")
     a = p.parse_args()
     use_threads(1)
 
     def run() -> int:
         for folder in a.streams:
-            print("\n".join(measure(folder, a.drives, a.kinds.split(","), a.tolerance, a.after, a.seed)), flush=True)
+            kinds = a.kinds.split(",")
+            lines = append_spread(folder, a.drives, kinds, a.tolerance, a.append_seeds) if a.append_seeds else \
+                measure(folder, a.drives, kinds, a.tolerance, a.after, a.seed)
+            print("\n".join(lines), flush=True)
         return 0
     return one_line_errors("compare_drives", run)
 
