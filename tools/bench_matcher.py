@@ -32,6 +32,7 @@ import numpy as np
 
 from vpr_edge.index.coarse import CoarseSearch
 from vpr_edge.index.encodings import Encodings, STORAGES
+from vpr_edge.index.ivf import fit_ivf
 from vpr_edge.matchers import get_matcher, step
 from vpr_edge.files import read_npz, write_npz
 
@@ -68,6 +69,11 @@ def main() -> int:
                    "that moved) and make a stopped vehicle's frames near-repeats of the one before")
     p.add_argument("--stop-noise", type=float, default=0.01,
                    help="with --cue: noise of a stopped frame relative to the previous one (default 0.01)")
+    p.add_argument("--index", action="store_true", help="fit an index of the references (index.ivf, as build-map "
+                   "does on large maps) and give whole-route frames its candidates, as Localizer does")
+    p.add_argument("--walk", type=float, default=0.0, metavar="RHO", help="references along a route: each the "
+                   "one before times RHO (< 1) plus fresh noise (consecutive places alike, as a real route's are; "
+                   "0: independent random references)")
     p.add_argument("--checkpoints", default="1000,10000,100000")
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args()
@@ -77,6 +83,9 @@ def main() -> int:
     rng = np.random.default_rng(a.seed)
     route = np.random.default_rng([a.seed, 1])   # the route's speeds and detours: the same whatever --dim
     refs = rng.normal(size=(a.refs, a.dim)).astype(np.float32)
+    if a.walk:
+        for i in range(1, a.refs):   # a route: each place like the one before (unit variance kept)
+            refs[i] = a.walk * refs[i - 1] + np.sqrt(1.0 - a.walk ** 2) * refs[i]
     refs /= np.linalg.norm(refs, axis=1, keepdims=True)
     checkpoints = sorted(int(c) for c in a.checkpoints.split(",") if int(c) <= a.frames)
     matcher = get_matcher(a.matcher)
@@ -92,6 +101,11 @@ def main() -> int:
         stored = Encodings.from_arrays(read_npz(a.mmap, "bench references", 1, mmap=True)[0], a.storage)
         print(f"references memory-mapped from {a.mmap}, RSS {rss_mb():.1f} MB")
     coarse = CoarseSearch(stored) if a.coarse else None
+    index = None
+    if a.index:
+        t0 = time.perf_counter()
+        index = fit_ivf(stored, seed=a.seed)
+        print(f"index fitted in {time.perf_counter() - t0:.1f} s ({len(index.centroids)} lists)")
     if coarse is not None:
         t0 = time.perf_counter()
         coarse.signs
@@ -134,7 +148,8 @@ def main() -> int:
         local += getattr(dtw, "wanted", lambda: None)() is not None
         sim_s[0] = 0.0
         t0 = time.perf_counter()
-        ref, _ = step(dtw, similarity, cue(q) if cue is not None else None)
+        ref, _ = step(dtw, similarity, cue(q) if cue is not None else None,
+                      None if index is None else (lambda: index.candidates(stored, q)))
         t1 = time.perf_counter()
         previous = q
         t_sim += sim_s[0]

@@ -152,7 +152,8 @@ class Localizer:
         """Match one encoding (D,), with its motion cue (its likeness to the encoding of the last frame that
         moved, ``matchers.MotionCue``): only the similarities the matcher asks for are computed (a local search
         around a locked position reads a window of the map, not all of it; with ``coarse``, a whole-route
-        frame reads the signs and the best candidates)."""
+        frame reads the signs and the best candidates; on a map with an index, a whole-route frame searches
+        around the index's candidates instead, ``index.ivf``)."""
         self.query.check_unchanged()   # a memory-mapped map rewritten under us: stop before reading it
 
         def similarity(refs: np.ndarray | None) -> np.ndarray:
@@ -160,7 +161,10 @@ class Localizer:
                 return self._coarse.similarity(enc)
             return self.similarity(enc[None], refs)[0]
 
-        ref, score = step(self._online, similarity, self._cue(enc))
+        index = self.map.index
+        candidates = None if index is None or self.matcher.scores != "cosine" else \
+            (lambda: index.candidates(self.map.stored, enc))
+        ref, score = step(self._online, similarity, self._cue(enc), candidates)
         return ref, score, self._online.position()
 
     def _line(self, index: int, name: str, ref: int, score: float, stamp: float | None = None,

@@ -14,10 +14,12 @@ from vpr_edge.features import FRONT_ENDS
 from vpr_edge.features.conventions import GivenConventions
 from vpr_edge.features.resize import RESIZE
 from vpr_edge.encoders.base import DEFAULT_PCA_DIM
+from vpr_edge.errors import VprError
 from vpr_edge.files import output_path
 from vpr_edge.encoders.registry import DEFAULT_ENCODING
 from vpr_edge.features.registry import DEFAULT_FRONT_END
 from vpr_edge.index.encodings import DEFAULT_STORAGE
+from vpr_edge.index.ivf import IVF_MIN_REFS
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
 
 _FIT = FitSettings()
@@ -109,6 +111,10 @@ def build_map_cmd(
                                       "references on a Ray cluster (the ray extra): local starts one on this "
                                       "machine, auto or HOST:PORT joins a running one; workers need the package "
                                       "and the same paths to the frames and the model. The same map as without."),
+    index: Optional[str] = typer.Option(None, "--index", metavar="ivf|none", help="An index of the map's "
+                                        "places that whole-route searches go through (index.ivf: a few ms at a "
+                                        f"million places); default: ivf on maps of {IVF_MIN_REFS:,} places or "
+                                        "more."),
     batch_size: int = typer.Option(8, min=1, help="Images per model run."),
     threads: int = typer.Option(0, min=0, help=THREADS_HELP),
 ) -> None:
@@ -125,7 +131,10 @@ def build_map_cmd(
                                storage=_value(storage), positions=tuple(positions or ()),
                                timestamps=tuple(timestamps or ()), topic=topic,
                                positions_topic=positions_topic, append=append, batch_size=batch_size, threads=threads, ray=ray,
+                               index=index,
                                inputs=GivenConventions(input_size, mean, std, bgr, _value(layout)))
+        if index not in (None, "ivf", "none"):
+            raise VprError(f"--index {index}: choose ivf or none")
         plan = plan_map(refs, output_path(out), options)
         with typer.progressbar(length=len(plan.files), label="extracting", file=sys.stderr,
                                hidden=not sys.stderr.isatty()) as bar:

@@ -12,6 +12,7 @@ from vpr_edge.features.registry import MAP_FRONT_ENDS
 from vpr_edge.features.resize import RESIZE
 from vpr_edge.files import read_npz, write_npz
 from vpr_edge.index.encodings import DEFAULT_STORAGE, Encodings
+from vpr_edge.index.ivf import IvfIndex
 from vpr_edge.map.drives import Drives
 from vpr_edge.map.model import PlaceMap, Svm
 from vpr_edge.positions import Positions
@@ -35,6 +36,11 @@ def save_map(place_map: PlaceMap, path: str | os.PathLike[str], storage: str = D
         meta["positions"] = place_map.positions.meta()
     else:
         meta.pop("positions", None)
+    if place_map.index is not None:
+        arrays |= place_map.index.to_arrays()
+        meta["index"] = {"kind": "ivf", "lists": len(place_map.index.centroids)}
+    else:
+        meta.pop("index", None)
     if place_map.svm is not None:
         arrays |= {"svm_" + k: v for k, v in m.svm.weights.to_arrays().items()}
         arrays["svm_bias"] = place_map.svm.bias
@@ -48,7 +54,7 @@ _FIELDS: dict[str, tuple[type, ...]] = {
     "descriptor_dim": (int,), "features": (dict,), "features_fingerprint": (str,), "encoding": (dict,),
     "model": (dict,), "model_file": (str,), "model_path": (str,), "model_sha256": (str,), "codebook": (dict,),
     "svm": (dict,), "appended": (list,), "refs_folder": (str,), "alpha": (int, float), "positions": (dict,),
-    "drives": (list,),
+    "drives": (list,), "index": (dict,),
 }
 
 
@@ -131,4 +137,10 @@ def _assemble(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
         except (ValueError, KeyError) as e:
             raise VprError(f"{path}: map's positions are inconsistent ({e})") from None
     drives = None if meta.get("drives") is None else Drives.from_meta(meta["drives"], len(names), str(path))
-    return PlaceMap(stored, names, encoder, meta, svm, positions, drives)
+    index = None
+    if "index_order" in arrays:
+        try:
+            index = IvfIndex.from_arrays(arrays, len(names), stored.shape[1])
+        except (ValueError, KeyError) as e:
+            raise VprError(f"{path}: map's index is inconsistent ({e})") from None
+    return PlaceMap(stored, names, encoder, meta, svm, positions, drives, index)

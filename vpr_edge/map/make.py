@@ -27,6 +27,7 @@ from vpr_edge.index.encodings import DEFAULT_STORAGE
 from vpr_edge.encoders.flat import Flatten
 from vpr_edge.features.descriptors import GivenDescriptors
 from vpr_edge.frames.descriptors import is_descriptor_file, read_descriptors
+from vpr_edge.index.ivf import IVF_MIN_REFS, fit_ivf
 from vpr_edge.map.fleet import check_ray, encode_on_ray
 from vpr_edge.map.drives import Drives, check_unique, drive_name, spans_of
 from vpr_edge.map.build import Progress, build_map, check_codebook_fits, map_from_descriptors
@@ -68,6 +69,7 @@ class BuildOptions:
     batch_size: int = 8
     threads: int = 0
     ray: str | None = None     # describe and encode on this Ray cluster (local, auto, HOST:PORT, ray://HOST:PORT)
+    index: str | None = None   # ivf, none; None: ivf on maps of IVF_MIN_REFS places or more (index.ivf)
 
     def __post_init__(self) -> None:   # one value given as such: one drive's
         for key in ("positions", "timestamps"):
@@ -423,6 +425,12 @@ def _extract_bag(d: DrivePlan, folder: Path, o: BuildOptions, positions: str | N
         base.positions.check_frame(d.positions, str(d.source))
 
 
+def wants_index(given: str | None, n_refs: int) -> bool:
+    """Whether a map of ``n_refs`` places gets an index (``--index``: ivf, none; not given: at
+    ``IVF_MIN_REFS`` places or more)."""
+    return given == "ivf" or (given is None and n_refs >= IVF_MIN_REFS)
+
+
 def default_encoding(front: FrontEnd) -> str:
     """The encoding a new map of ``front`` gets: ``none`` for a global-descriptor model (its output is the
     place's vector), else ``DEFAULT_ENCODING``."""
@@ -466,6 +474,9 @@ def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
                 raise VprError(f"{plan.out}: replaced meanwhile by a map with another codebook or front end; "
                                f"nothing appended (run --append again)")
             place_map = base.repacked(plan.storage).extended(place_map)
+        if wants_index(o.index, len(place_map.names)):
+            place_map = place_map.repacked(plan.storage)
+            place_map = replace(place_map, index=fit_ivf(place_map.stored, seed=o.seed))
         save_map(place_map, plan.out, plan.storage)
     if o.save_codebook:
         place_map.encoder.save(o.save_codebook, {k: place_map.meta.get(k) for k in

@@ -12,6 +12,7 @@ import numpy as np
 from vpr_edge.encoders import Encoder
 from vpr_edge.errors import VprError, warn
 from vpr_edge.index.encodings import Encodings
+from vpr_edge.index.ivf import IvfIndex
 from vpr_edge.map.drives import Drives
 from vpr_edge.positions import Positions
 
@@ -38,7 +39,8 @@ class PlaceMap:
     encoder (``vpr_edge.encoders``), metadata (``features``: the front end's record; ``model_*`` for cnn;
     how the codebook was made), when built with ``--svm`` the per-place classifiers, when built with
     ``--positions`` where each reference place is (``positions.Positions``), and its ``drives``
-    (``map.drives.Drives``; not given: the references are one drive, named after their folder)."""
+    (``map.drives.Drives``; not given: the references are one drive, named after their folder), and on large
+    maps an index of whole-route candidates (``index.ivf.IvfIndex``)."""
 
     stored: Encodings
     names: list[str]
@@ -47,6 +49,7 @@ class PlaceMap:
     svm: Svm | None = None
     positions: Positions | None = None
     drives: Drives = None   # type: ignore[assignment]  # None -> one drive (set in __post_init__)
+    index: IvfIndex | None = None   # whole-route candidates (``index.ivf``), on large maps
 
     def __post_init__(self) -> None:
         if self.drives is None:
@@ -95,7 +98,8 @@ class PlaceMap:
             return e if e.storage == storage else Encodings.pack(e.dense(), storage)
 
         svm = None if self.svm is None else Svm(packed(self.svm.weights), self.svm.bias, self.svm.meta)
-        return PlaceMap(packed(self.stored), self.names, self.encoder, self.meta, svm, self.positions, self.drives)
+        return PlaceMap(packed(self.stored), self.names, self.encoder, self.meta, svm, self.positions, self.drives,
+                        self.index)
 
     def extended(self, more: "PlaceMap") -> "PlaceMap":
         """This map with ``more``'s drives after its own (``more`` encoded with this map's front end, encoder

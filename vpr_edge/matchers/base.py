@@ -107,11 +107,15 @@ def lead_with(refs: np.ndarray, cand: np.ndarray) -> np.ndarray:
 
 
 def step(matcher: OnlineMatcher, similarity: Callable[[np.ndarray | None], np.ndarray],
-         still: float | None = None) -> tuple[int, float]:
+         still: float | None = None, candidates: Callable[[], np.ndarray] | None = None) -> tuple[int, float]:
     """One frame: ``similarity(refs)`` gives the frame's similarities to the references ``refs`` (sorted int
     array; None = all, (R,)); ``refs`` is what the matcher's ``wanted()`` asks for, if it has one. ``still``:
-    the frame's motion cue (``stillness``), passed on."""
+    the frame's motion cue (``stillness``), passed on. ``candidates()``: the frame's most similar references
+    by an index (``index.ivf``; None: no index): where the matcher asks for the whole route and can search
+    around candidates (``around``), it gets those instead of every reference."""
     refs = matcher.wanted()
+    if refs is None and candidates is not None and hasattr(matcher, "around"):
+        refs = matcher.around(candidates())
     return matcher.update(similarity(refs), refs, still)
 
 

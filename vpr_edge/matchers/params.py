@@ -45,6 +45,10 @@ STREAM: dict[str, Param] = {
     "check": Param(100, "local search: every this many firmly locked frames, search the whole route ..."),
     "span": Param(5, "... for this many frames"),
     "hold": Param(2.0, "a lock is firm (local search allowed) at this many times the lock score"),
+    "seek": Param(8, "index search (maps with an index): on a whole-route frame, references either side of each "
+                     "of the index's candidates searched ..."),
+    "peaks": Param(8, "... beside the neighbourhoods (window/4 references either side) of this many best "
+                      "hypotheses held"),
     "stop_gain": Param(0.3, "without a motion cue: at speed 0, the share of a frame's positive evidence counted "
                             "(standing still is not new evidence)"),
     "stop_decay": Param(0.95, "without a motion cue: at speed 0, the decay of the trajectory score (a lock holds "

@@ -83,7 +83,7 @@ from __future__ import annotations
 import numpy as np
 
 from vpr_edge.matchers.motion import stands
-from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, minus, places
+from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, merge, minus, places
 
 
 class RoadMatcher:
@@ -93,7 +93,8 @@ class RoadMatcher:
 
     def __init__(self, n_refs: int, *, vmax: float, grid: int, decay: float, bias: float, turn: float,
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
-                 hold: float, stop_gain: float, stop_decay: float, still: float, still_memory: int,
+                 hold: float, seek: int, peaks: int, stop_gain: float, stop_decay: float, still: float,
+                 still_memory: int,
                  evidence: float, evidence_decay: float, route: np.ndarray | None = None,
                  graph: RouteGraph | None = None) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
@@ -136,7 +137,10 @@ class RoadMatcher:
         self._feeds()
         self._joins = bool(len(self._cut[1]) or self._src_cols is not None)
         self._gap = -(-self.n_speeds // grid) + 1   # windows closer than this are searched as one
-        self._win: Intervals | None = None   # references searched locally ([lo, hi) intervals); None = all
+        self._win: Intervals | None = None   # references the next frame searches ([lo, hi) intervals); None = all
+        self._live: Intervals | None = None  # where the state may be non-zero (None: anywhere)
+        self.seek, self.peaks = max(0, int(seek)), max(1, int(peaks))
+        self._kept: Intervals = []           # the neighbourhoods of the best hypotheses (``around``)
         self.check, self.span, self.hold = max(1, int(check)), max(0, int(span)), hold
         self._held = 0                               # frames since the local search began
         # float32: the per-frame passes over (speeds x positions) are memory-bound; halving the bytes halved
@@ -214,6 +218,52 @@ class RoadMatcher:
         new[0] += zs
         np.maximum(new, 0.0, out=new)
         self.h[:, a:b] = new
+
+    def _advance_many(self, wins: Intervals, gain: float, stop_decay: float, fed: np.ndarray | None) -> None:
+        """``_advance`` over several windows at once (a search around many candidates): their columns gathered
+        into one compact array, each window after n_speeds - 1 empty columns (nothing comes from outside the
+        windows, where the state is 0), one pass of the recursion, the result scattered back: a fixed number
+        of array operations whatever the number of windows."""
+        g, pad = self.grid, self.n_speeds - 1
+        cols = np.concatenate([np.r_[np.full(pad, -1, np.int64), np.arange(lo * g, hi * g)] for lo, hi in wins])
+        real = cols >= 0
+        at, pos = cols[real], np.flatnonzero(real)
+        m = np.zeros((self.n_speeds, len(cols)), np.float32)
+        m[:, pos] = self.h[:, at]
+        self._speed_max(m)
+        new = np.zeros_like(m)
+        new[0] = m[0]
+        for v in range(1, self.n_speeds):   # a trajectory at speed v came from v grid steps behind
+            new[v, v:] = m[v, :-v]
+        if self._joins:
+            self._join_at(new, at, pos, fed)
+        new[1:] *= self.decay
+        new[0] *= stop_decay
+        np.maximum(new, 0.0, out=new)
+        z = np.zeros(len(cols), np.float32)
+        z[pos] = self._z[at]
+        new[1:] += z
+        new[0] += gain * np.maximum(z, 0.0) + np.minimum(z, 0.0)
+        np.maximum(new, 0.0, out=new)
+        self.h[:, at] = new[:, pos]
+
+    def _join_at(self, new: np.ndarray, at: np.ndarray, pos: np.ndarray, fed: np.ndarray | None) -> None:
+        """``_join`` on a compact array whose entries ``pos`` hold the state columns ``at`` (sorted)."""
+        def place(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            i = np.minimum(np.searchsorted(at, c), len(at) - 1)
+            ok = at[i] == c
+            return ok, pos[i[ok]]
+
+        cv, cc = self._cut
+        ok, where = place(cc)
+        new[cv[ok], where] = 0.0
+        if fed is None:
+            return
+        tv, tc, row = self._tgt
+        ok, where = place(tc)
+        if ok.any():
+            v = tv[ok]
+            np.maximum.at(new, (v, where), fed[v, row[ok]])
 
     def _speed_max(self, m: np.ndarray) -> None:
         """In place over (speeds, columns): each entry the max over speeds v' of itself - turn * |v - v'|."""
@@ -313,8 +363,10 @@ class RoadMatcher:
                 z -= self.bias
                 at += hi - lo
             gain, decay = self._stop_rule(still)
-            for lo, hi in wins:
-                self._advance(lo * g, hi * g, gain, decay, fed)
+            if len(wins) == 1:
+                self._advance(wins[0][0] * g, wins[0][1] * g, gain, decay, fed)
+            else:
+                self._advance_many(wins, gain, decay, fed)
         ref, best, col, stopped, per_ref = -1, -1.0, 0, False, []
         for lo, hi in wins:
             h = self.h[:, lo * g:hi * g]
@@ -327,6 +379,8 @@ class RoadMatcher:
         self._position = col / g
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
         where = None if self._win is None else places(wins)
+        self._live = self._win
+        self._kept = self._peaks(values, where)
         rival = max_outside(values, where, self.graph.near(ref, self.rival_window))
         # how far the answer stands out of its frame's row, averaged; a standing frame may raise it, not lower it
         first, last = self.graph.bounds(ref)
@@ -354,11 +408,40 @@ class RoadMatcher:
         if not self._held or self._held % self.check >= self.check - self.span:
             self._win = None
             return
+        self._search(self.graph.near(ref, self.window, self._gap))
+
+    def _search(self, win: Intervals) -> None:
+        """Search ``win`` next frame; the state outside it is dropped (set to 0)."""
         g = self.grid
-        win = self.graph.near(ref, self.window, self._gap)
-        for lo, hi in minus(self._win or [(0, self.n_refs)], win):
+        for lo, hi in minus(self._live or [(0, self.n_refs)], win):
             self.h[:, lo * g:hi * g] = 0.0
-        self._win = win
+        self._live = self._win = win
+
+    def around(self, candidates: np.ndarray) -> np.ndarray:
+        """What the next ``update`` needs when ``wanted()`` asked for the whole route and an index answered
+        with ``candidates`` (places, e.g. a frame's most similar references by ``index.ivf``): the places
+        within ``seek`` of each candidate along the route and the neighbourhoods of the best hypotheses held
+        (``peaks`` of them, ``window``/4 places either side), then the probe. Hypotheses elsewhere are
+        dropped: the state lives around candidates, not over every place."""
+        near = [iv for c in np.unique(np.asarray(candidates, np.int64)) for iv in self.graph.near(int(c), self.seek)]
+        self._search(merge(near + self._kept, self._gap))
+        return np.concatenate([places(self._win), self._probe])
+
+    def _peaks(self, values: np.ndarray, where: np.ndarray | None) -> Intervals:
+        """The neighbourhoods (``window``/4 places along the route) of the ``peaks`` best hypotheses: the
+        places whose best trajectory is highest (over ``values``, one per place of ``where``; None: every
+        place), positive, each more than two neighbourhoods from a better one."""
+        reach = max(self.seek, self.window // 4)
+        k = min(len(values), 4 * self.peaks)
+        top = np.argpartition(-values, k - 1)[:k]
+        chosen: list[int] = []
+        for i in top[np.argsort(-values[top], kind="stable")]:
+            if values[i] <= 0.0 or len(chosen) == self.peaks:
+                break
+            p = int(i) if where is None else int(where[i])
+            if all(abs(p - c) > 2 * reach for c in chosen):
+                chosen.append(p)
+        return [iv for p in chosen for iv in self.graph.near(p, reach)]
 
     def ranking(self) -> np.ndarray:
         """Best trajectory score ending at each reference (R,)."""
@@ -374,5 +457,6 @@ class RoadMatcher:
         self._weight[:] = self.memory
         self._seen[:] = 0
         self._t = 0
-        self._win = None
+        self._win = self._live = None
+        self._kept = []
         self._held = 0
