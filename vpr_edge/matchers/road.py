@@ -179,7 +179,6 @@ class RoadMatcher:
         run, weight = self._mean[lo:lo + len(s)], self._weight[lo:lo + len(s)]
         out = z - run
         if not self._stopped:   # frames of a stopped vehicle repeat one place: they say nothing of hubs
-            self._t += 1
             seen = self._seen[lo:lo + len(s)]
             weight *= (1.0 - 1.0 / self.memory) ** (self._t - seen)
             weight += 1.0
@@ -357,6 +356,7 @@ class RoadMatcher:
         if not standing:   # a standing camera's view again says nothing new: the state stays
             fed = self._fed()
             at = 0
+            self._t += not self._stopped   # frames counted for the means (``_normalise``), once a frame
             for lo, hi in wins:
                 z = self._z[lo * g:hi * g].reshape(hi - lo, g)
                 z[:] = self._normalise(part[at:at + hi - lo], lo, mean, std)[:, None]

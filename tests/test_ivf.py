@@ -1,0 +1,145 @@
+"""The IVF index against an exhaustive search; the stream matcher searching around candidates against the
+dense matcher; several windows in one compact pass against one pass each; build-map / localize with an index."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from vpr_edge.cli import app
+from vpr_edge.files import read_npz, write_npz
+from vpr_edge.index.encodings import Encodings
+from vpr_edge.index.ivf import IvfIndex, fit_ivf
+from vpr_edge.map import MAP_SCHEMA, load_map
+from vpr_edge.matchers import MATCHERS, step
+from vpr_edge.matchers.road import RoadMatcher
+
+
+def invoke(*args: object) -> tuple[int, str, str]:
+    res = CliRunner().invoke(app, [str(a) for a in args])
+    return res.exit_code, res.stdout, res.stderr
+
+
+def route(n: int, dim: int, rho: float = 0.9, seed: int = 0) -> np.ndarray:
+    """Unit references along a route: each place like the one before."""
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(n, dim)).astype(np.float32)
+    for i in range(1, n):
+        x[i] = rho * x[i - 1] + np.sqrt(1 - rho ** 2) * x[i]
+    return x / np.linalg.norm(x, axis=1, keepdims=True)
+
+
+def test_index_lists_every_place_once_and_finds_what_an_exhaustive_search_finds() -> None:
+    refs = route(3000, 32)
+    stored = Encodings.pack(refs, "int8")
+    index = fit_ivf(stored, lists=40)
+    assert np.array_equal(np.sort(index.order), np.arange(3000)) and index.offsets[-1] == 3000
+    rng = np.random.default_rng(1)
+    queries = refs[::97] + 0.05 * rng.normal(size=(len(refs[::97]), 32)).astype(np.float32)
+    exact = stored.similarity(queries)
+    for q, row in zip(queries, exact):
+        every = index.candidates(stored, q, k=10, nprobe=40)   # every list: the exhaustive answer
+        np.testing.assert_array_equal(np.sort(row[every]), np.sort(np.sort(row)[-10:]))
+    found = [int(np.argmax(row)) in index.candidates(stored, q) for q, row in zip(queries, exact)]
+    assert np.mean(found) >= 0.9
+
+
+def test_index_from_arrays_refuses_what_does_not_fit() -> None:
+    index = fit_ivf(Encodings.pack(route(200, 8), "float32"), lists=5)
+    arrays = index.to_arrays()
+    IvfIndex.from_arrays(arrays, 200, 8)
+    for bad in ({"index_order": arrays["index_order"][:-1]}, {"index_order": arrays["index_order"] + 500},
+                {"index_centroids": arrays["index_centroids"][:, :4]}):
+        with pytest.raises(ValueError):
+            IvfIndex.from_arrays(arrays | bad, 200, 8)
+
+
+class OnePassEach(RoadMatcher):
+    """The road matcher with its windows advanced one pass each (the plain form of ``_advance_many``)."""
+
+    def _advance_many(self, wins, gain, stop_decay, fed) -> None:
+        for lo, hi in wins:
+            self._advance(lo * self.grid, hi * self.grid, gain, stop_decay, fed)
+
+
+def test_compact_pass_equals_one_pass_per_window() -> None:
+    rng = np.random.default_rng(2)
+    sim = rng.normal(size=(60, 500))
+    params = MATCHERS["stream"].params | {"window": 0}
+    a, b = RoadMatcher(500, **params), OnePassEach(500, **params)
+    for row in sim:
+        cands = rng.choice(500, 12, replace=False)
+        for m in (a, b):
+            refs = m.around(cands)
+            m.update(row[refs], refs)
+        np.testing.assert_allclose(a.h, b.h, atol=1e-5)
+
+
+def planted(n_refs: int, frames: int, noise: float, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """References along a route, a vehicle driving part of it at changing speeds with a detour: (refs,
+    query encodings, true places (-1 off the map))."""
+    refs = route(n_refs, 64, seed=seed)
+    rng = np.random.default_rng(seed + 1)
+    pos, truth, queries = 100.0, [], []
+    for t in range(frames):
+        speed = [1.0, 2.0, 0.5, 1.5][(t // 60) % 4]
+        if 200 <= t < 240:   # off the map
+            truth.append(-1)
+            queries.append(rng.normal(size=64))
+            continue
+        pos += speed
+        truth.append(int(pos))
+        queries.append(refs[int(pos)] + noise * rng.normal(size=64) / 8)
+    q = np.asarray(queries, np.float32)
+    return refs, q / np.linalg.norm(q, axis=1, keepdims=True), np.asarray(truth)
+
+
+def test_searching_around_candidates_answers_as_the_dense_matcher() -> None:
+    refs, queries, truth = planted(5000, 400, noise=1.0, seed=3)
+    stored = Encodings.pack(refs, "int8")
+    index = fit_ivf(stored, lists=70)
+    answers = {}
+    for name in ("dense", "index"):
+        m = MATCHERS["stream"].stream(len(refs))
+        out = []
+        for q in queries:
+            cands = None if name == "dense" else (lambda q=q: index.candidates(stored, q))
+            out.append(step(m, lambda idx, q=q: stored.similarity(q[None], idx)[0], None, cands))
+        answers[name] = np.array(out)
+    mapped = truth >= 0
+    for name, res in answers.items():
+        right = (np.abs(res[:, 0] - truth) <= 2) & (res[:, 1] >= 1.0)
+        assert right[mapped][20:].mean() > 0.9, name
+        assert (res[~mapped, 1] < 1.0).mean() > 0.7, name
+    same = np.abs(answers["dense"][:, 0] - answers["index"][:, 0]) <= 2
+    assert same[mapped].mean() > 0.95
+
+
+def test_build_map_indexes_and_localize_uses_it(tmp_path: Path) -> None:
+    refs, queries, truth = planted(3000, 300, noise=1.0, seed=4)
+    np.save(tmp_path / "refs.npy", refs)
+    np.save(tmp_path / "stream.npy", queries)
+    indexed, plain = tmp_path / "i.npz", tmp_path / "p.npz"
+    assert invoke("build-map", tmp_path / "refs.npy", "-o", indexed, "--index", "ivf")[0] == 0
+    assert invoke("build-map", tmp_path / "refs.npy", "-o", plain)[0] == 0
+    assert load_map(indexed).index is not None and load_map(plain).index is None
+    assert json.loads(invoke("info", indexed)[1])["index"]["kind"] == "ivf"
+    lines = {}
+    for m in (indexed, plain):
+        code, out, err = invoke("localize", "-m", m, "-s", tmp_path / "stream.npy", "--format", "jsonl")
+        assert code == 0, err
+        lines[m] = [json.loads(x) for x in out.splitlines()]
+    for m, got in lines.items():
+        right = [x["ref_index"] is not None and abs(x["ref_index"] - t) <= 2 for x, t in zip(got, truth) if t >= 0]
+        assert np.mean(right[20:]) > 0.9, m
+    # an index that does not fit its map: one line naming the map
+    arrays, meta = read_npz(indexed, "map", MAP_SCHEMA)
+    arrays = {k: np.array(v) for k, v in arrays.items()} | {"index_order": np.zeros(5, np.int32)}
+    write_npz(tmp_path / "bad.npz", arrays, meta)
+    code, _, err = invoke("localize", "-m", tmp_path / "bad.npz", "-s", tmp_path / "stream.npy")
+    assert code == 2 and err.count("\n") == 1 and "bad.npz" in err and "index" in err
+    code, _, err = invoke("build-map", tmp_path / "refs.npy", "-o", tmp_path / "x.npz", "--index", "hnsw")
+    assert code == 2 and err.count("\n") == 1 and "--index hnsw" in err and not (tmp_path / "x.npz").exists()
