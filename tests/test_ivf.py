@@ -135,6 +135,10 @@ def test_build_map_indexes_and_localize_uses_it(tmp_path: Path) -> None:
     for m, got in lines.items():
         right = [x["ref_index"] is not None and abs(x["ref_index"] - t) <= 2 for x, t in zip(got, truth) if t >= 0]
         assert np.mean(right[20:]) > 0.9, m
+    # appended drives keep a small map's index (rebuilt over every place)
+    np.save(tmp_path / "more.npy", refs[:50])
+    assert invoke("build-map", tmp_path / "more.npy", "-o", indexed, "--append")[0] == 0
+    assert len(load_map(indexed).index) == 3050
     # an index that does not fit its map: one line naming the map
     arrays, meta = read_npz(indexed, "map", MAP_SCHEMA)
     arrays = {k: np.array(v) for k, v in arrays.items()} | {"index_order": np.zeros(5, np.int32)}

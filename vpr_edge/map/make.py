@@ -474,7 +474,8 @@ def write_map(plan: MapPlan, progress: Progress | None = None) -> str:
                 raise VprError(f"{plan.out}: replaced meanwhile by a map with another codebook or front end; "
                                f"nothing appended (run --append again)")
             place_map = base.repacked(plan.storage).extended(place_map)
-        if wants_index(o.index, len(place_map.names)):
+        kept = "ivf" if plan.base is not None and plan.base.index is not None else None   # an indexed map stays so
+        if wants_index(o.index or kept, len(place_map.names)):
             place_map = place_map.repacked(plan.storage)
             place_map = replace(place_map, index=fit_ivf(place_map.stored, seed=o.seed))
         save_map(place_map, plan.out, plan.storage)
