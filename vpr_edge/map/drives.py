@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -140,9 +141,7 @@ class Drives:
                 items.append(Drive(d["name"], d["first"], d["count"], d.get("source"),
                                    None if span is None else (float(span[0]), float(span[1]))))
             drives = cls(tuple(items))
-        except VprError as e:
-            raise VprError(f"{where}: map's drives are inconsistent ({e})") from None
-        except (TypeError, KeyError, ValueError, AttributeError) as e:
+        except (VprError, TypeError, KeyError, ValueError, AttributeError) as e:
             raise VprError(f"{where}: map's drives are inconsistent ({e})") from None
         if drives.n_refs != n_refs:
             raise VprError(f"{where}: map's drives cover {drives.n_refs} places, the map has {n_refs}")
@@ -218,8 +217,6 @@ def spans_of(stamps: Sequence[float] | None) -> tuple[float, float] | None:
 
 def drive_name(path: str, given: str | None = None) -> str:
     """A drive's name: ``given``, else its folder's or file's name without the suffix."""
-    from pathlib import Path
-
     if given is not None:
         return given
     p = Path(path)

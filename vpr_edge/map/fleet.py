@@ -57,24 +57,19 @@ def _connect(address: str):
     return ray
 
 
-def _encode_shard(paths: Sequence[str], batches: Sequence[np.ndarray], front_name: str, front_spec: dict,
+def _encode_shard(paths: Sequence[str], order: np.ndarray, batch_size: int, front_name: str, front_spec: dict,
                   model: str | None, encoder_spec: dict, encoder_arrays: dict, input_dim: int
                   ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """On a worker: the shard's ``batches`` (indices into ``paths``) described by the front end the records
-    give and encoded: [(indices (b,), encodings (b, D) float32)]."""
+    """On a worker: the images ``paths[order]``, in the build's batches of ``batch_size``, described by the
+    front end the records give (``build.described``) and encoded: [(indices (b,), encodings (b, D) float32)]."""
     from vpr_edge.encoders import encoder_from_arrays
     from vpr_edge.features import make_front_end
-    from vpr_edge.features.base import check_finite
-    from vpr_edge.frames.images import load_image
+    from vpr_edge.map.build import described
 
     front = make_front_end(front_name, Path(model) if model else None, 1, spec=front_spec)
     encoder = encoder_from_arrays(encoder_spec, encoder_arrays, input_dim, "the build's codebook")
-    out = []
-    for idx in batches:
-        x, m = front.local([load_image(Path(paths[j])) for j in idx])
-        check_finite(x, [paths[j] for j in idx], front.name)
-        out.append((idx, encoder.transform(x, m)))
-    return out
+    return [(idx, encoder.transform(x, m))
+            for idx, x, m in described([Path(p) for p in paths], order, front, batch_size)]
 
 
 def encode_on_ray(address: str, files: Sequence[Path], order: np.ndarray, front: FrontEnd, encoder: Encoder,
@@ -87,13 +82,13 @@ def encode_on_ray(address: str, files: Sequence[Path], order: np.ndarray, front:
 
     paths = [str(Path(f).resolve()) for f in files]
     model = front.identity().get("model_path")
-    batches = [order[i:i + batch_size] for i in range(0, len(order), batch_size)]
+    shard = SHARD_BATCHES * batch_size   # whole batches a shard: the plain build's batches
     task = ray.remote(max_retries=1)(_encode_shard)
     shared = ray.put(paths)
     spec = {"name": encoder.name, "params": encoder.params()}
     arrays = ray.put(encoder.to_arrays())
-    pending = {task.remote(shared, batches[i:i + SHARD_BATCHES], front.name, front.describe(), model, spec, arrays,
-                           encoder.input_dim): i for i in range(0, len(batches), SHARD_BATCHES)}
+    pending = {task.remote(shared, order[i:i + shard], batch_size, front.name, front.describe(), model, spec,
+                           arrays, encoder.input_dim): i for i in range(0, len(order), shard)}
     try:
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)

@@ -231,11 +231,15 @@ def _folder_positions(files: list[Path], positions: str | None, timestamps: Path
     return None, None
 
 
-def _check_names(specs: list[tuple[str, Path]], base: PlaceMap | None, out: Path) -> None:
-    """VprError for two drives of one name among those given, or beside the appended map's."""
+def _checked_base(specs: list[tuple[str, Path]], out: Path, o: BuildOptions) -> PlaceMap | None:
+    """After the outputs are checked: the map ``--append`` extends (None without it), and VprError for two
+    drives of one name among those given, or beside the appended map's."""
     check_unique([n for n, _ in specs], "the drives given")
-    if base is not None:
-        check_unique(base.drives.names + [n for n, _ in specs], f"{out} and the appended drives")
+    if not o.append:
+        return None
+    base = load_map(out, mmap=True)
+    check_unique(base.drives.names + [n for n, _ in specs], f"{out} and the appended drives")
+    return base
 
 
 def _check_drive_positions(base: PlaceMap | None, drives: list[DrivePlan], given: list[bool], out: Path) -> None:
@@ -275,7 +279,7 @@ def _fit_settings(o: BuildOptions) -> FitSettings:
                        o.fit_iterations or d.iterations, o.seed, bool(o.tfidf))
 
 
-def _plan_descriptors(specs: list[tuple[str, Path]], out: Path, o: BuildOptions, base: PlaceMap | None) -> MapPlan:
+def _plan_descriptors(specs: list[tuple[str, Path]], out: Path, o: BuildOptions) -> MapPlan:
     """``plan_map`` for descriptor files (``.npy``, hloc ``.h5``): the places are their vectors, described and
     encoded elsewhere, so the options of the image pipeline are refused; positions match the files' names."""
     image_only = [k for k, v in (("--features", o.features), ("--model", o.model), ("--resize", o.resize),
@@ -293,8 +297,8 @@ def _plan_descriptors(specs: list[tuple[str, Path]], out: Path, o: BuildOptions,
     if image_only:
         raise VprError(f"{specs[0][1]}: global descriptors are described and encoded already; drop "
                        f"{', '.join(image_only)}")
-    _check_names(specs, base, out)
     _check_outputs([p for _, p in specs], out, o)
+    base = _checked_base(specs, out, o)
     drives = []
     for (name, path), (positions, _) in zip(specs, _per_drive(o, len(specs))):
         values, names = read_descriptors(path)
@@ -326,20 +330,18 @@ def plan_map(refs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], ou
     specs = [(drive_name(str(p), n), p) for n, p in map(parse_drive, given_refs)]
     kinds = {is_descriptor_file(p) for _, p in specs}
     if len(kinds) > 1:
-        raise VprError(f"{specs[0][1]}, {specs[1][1]}: the drives of a map are all descriptor files or all images "
+        vectors = next(p for _, p in specs if is_descriptor_file(p))
+        images = next(p for _, p in specs if not is_descriptor_file(p))
+        raise VprError(f"{images}, {vectors}: the drives of a map are all descriptor files or all images "
                        f"(folders, videos, bags), not both")
-    base = None
-    if o.append:
-        check_writable(out)
-        base = load_map(out, mmap=True)
     if kinds == {True}:
-        return _plan_descriptors(specs, out, o, base)
+        return _plan_descriptors(specs, out, o)
     per = _per_drive(o, len(specs))
     bags, gpxs = [is_bag(p) for _, p in specs], [pos is not None and pos.lower().endswith(".gpx") for pos, _ in per]
     for (_, path), (pos, ts), bag, gpx in zip(specs, per, bags, gpxs):
         _check_options(path, out, o, pos, ts, bag, gpx)
-    _check_names(specs, base, out)
     _check_outputs([p for _, p in specs], out, o)
+    base = _checked_base(specs, out, o)
     drives = [DrivePlan(name, path, [] if bag else list_images(path)) for (name, path), bag in zip(specs, bags)]
     if any(gpxs):
         require_gpxpy(next(pos for pos, _ in per if pos))

@@ -82,6 +82,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from collections.abc import Callable
+
 from vpr_edge.matchers.motion import stands
 from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, merge, minus, places
 
@@ -140,7 +142,7 @@ class RoadMatcher:
         self._win: Intervals | None = None   # references the next frame searches ([lo, hi) intervals); None = all
         self._live: Intervals | None = None  # where the state may be non-zero (None: anywhere)
         self.seek, self.peaks = max(0, int(seek)), max(1, int(peaks))
-        self._kept: Intervals = []           # the neighbourhoods of the best hypotheses (``around``)
+        self._last: tuple[np.ndarray, np.ndarray | None] = (np.zeros(0, np.float32), None)   # (``_peaks``)
         self.check, self.span, self.hold = max(1, int(check)), max(0, int(span)), hold
         self._held = 0                               # frames since the local search began
         # float32: the per-frame passes over (speeds x positions) are memory-bound; halving the bytes halved
@@ -204,11 +206,22 @@ class RoadMatcher:
                 new[v, :-k] = 0.0
                 new[v, -k:] = m[v, : max(0, w + k)]   # nothing when the step is longer than the columns
         if self._joins:
-            self._join(new, a, b, fed)
+            def locate(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                ok = (c >= a) & (c < b)
+                return ok, c[ok] - a
+            self._join(new, locate, fed)
+        self._decay_and_add(new, self._z[a:b], gain, stop_decay, self._zs[:, :w])
+        self.h[:, a:b] = new
+
+    def _decay_and_add(self, new: np.ndarray, z: np.ndarray, gain: float, stop_decay: float,
+                     scratch: np.ndarray) -> None:
+        """In place on the shifted state ``new`` (speeds, columns): decayed (speed 0 by ``stop_decay``),
+        floored at 0, plus the frame's ``z`` (speed 0: ``gain`` of a positive z), floored at 0 (``scratch``:
+        (2, columns) float32)."""
         new[1:] *= self.decay
         new[0] *= stop_decay
         np.maximum(new, 0.0, out=new)
-        z, zs, neg = self._z[a:b], self._zs[0, :w], self._zs[1, :w]
+        zs, neg = scratch
         new[1:] += z
         np.maximum(z, 0.0, out=zs)
         zs *= gain
@@ -216,7 +229,6 @@ class RoadMatcher:
         zs += neg
         new[0] += zs
         np.maximum(new, 0.0, out=new)
-        self.h[:, a:b] = new
 
     def _advance_many(self, wins: Intervals, gain: float, stop_decay: float, fed: np.ndarray | None) -> None:
         """``_advance`` over several windows at once (a search around many candidates): their columns gathered
@@ -235,34 +247,15 @@ class RoadMatcher:
         for v in range(1, self.n_speeds):   # a trajectory at speed v came from v grid steps behind
             new[v, v:] = m[v, :-v]
         if self._joins:
-            self._join_at(new, at, pos, fed)
-        new[1:] *= self.decay
-        new[0] *= stop_decay
-        np.maximum(new, 0.0, out=new)
+            def locate(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                i = np.minimum(np.searchsorted(at, c), len(at) - 1)
+                ok = at[i] == c
+                return ok, pos[i[ok]]
+            self._join(new, locate, fed)
         z = np.zeros(len(cols), np.float32)
         z[pos] = self._z[at]
-        new[1:] += z
-        new[0] += gain * np.maximum(z, 0.0) + np.minimum(z, 0.0)
-        np.maximum(new, 0.0, out=new)
+        self._decay_and_add(new, z, gain, stop_decay, np.empty((2, len(cols)), np.float32))
         self.h[:, at] = new[:, pos]
-
-    def _join_at(self, new: np.ndarray, at: np.ndarray, pos: np.ndarray, fed: np.ndarray | None) -> None:
-        """``_join`` on a compact array whose entries ``pos`` hold the state columns ``at`` (sorted)."""
-        def place(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            i = np.minimum(np.searchsorted(at, c), len(at) - 1)
-            ok = at[i] == c
-            return ok, pos[i[ok]]
-
-        cv, cc = self._cut
-        ok, where = place(cc)
-        new[cv[ok], where] = 0.0
-        if fed is None:
-            return
-        tv, tc, row = self._tgt
-        ok, where = place(tc)
-        if ok.any():
-            v = tv[ok]
-            np.maximum.at(new, (v, where), fed[v, row[ok]])
 
     def _speed_max(self, m: np.ndarray) -> None:
         """In place over (speeds, columns): each entry the max over speeds v' of itself - turn * |v - v'|."""
@@ -301,19 +294,21 @@ class RoadMatcher:
         hs = (self.h[None, :, self._src_cols] - self._turns[:, :, None]).max(axis=1)   # few columns: at once
         return np.maximum.reduceat(hs, self._src_groups, axis=1)
 
-    def _join(self, new: np.ndarray, a: int, b: int, fed: np.ndarray | None) -> None:
-        """Columns [a, b) of the shifted state ``new``: predecessors across a drive's start dropped, those
-        the junctions carry (``fed``) taken in."""
+    def _join(self, new: np.ndarray, locate: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+              fed: np.ndarray | None) -> None:
+        """The shifted state ``new``: predecessors across a drive's start dropped, those the junctions carry
+        (``fed``) taken in. ``locate(columns)``: which of these state columns ``new`` holds (a mask) and where
+        (their positions in it)."""
         cv, cc = self._cut
-        lo, hi = np.searchsorted(cc, [a, b])
-        new[cv[lo:hi], cc[lo:hi] - a] = 0.0
+        ok, where = locate(cc)
+        new[cv[ok], where] = 0.0
         if fed is None:
             return
         tv, tc, row = self._tgt
-        lo, hi = np.searchsorted(tc, [a, b])
-        if hi > lo:   # entries reaching one (speed, column) from several junctions: the best of them
-            v = tv[lo:hi]
-            np.maximum.at(new, (v, tc[lo:hi] - a), fed[v, row[lo:hi]])
+        ok, where = locate(tc)
+        if ok.any():   # entries reaching one (speed, column) from several junctions: the best of them
+            v = tv[ok]
+            np.maximum.at(new, (v, where), fed[v, row[ok]])
 
     def stands(self, still: float | None) -> bool:
         """Whether a frame with motion cue ``still`` shows a standing camera (its view again) where the map's
@@ -340,7 +335,8 @@ class RoadMatcher:
         ``base.MotionCue``; None: none)."""
         s = np.asarray(sim_row, np.float64)
         wins = self._win if self._win is not None else [(0, self.n_refs)]
-        n_win = sum(hi - lo for lo, hi in wins)
+        where = None if self._win is None else places(wins)   # the places searched (None: all, in order)
+        n_win = self.n_refs if where is None else len(where)
         if refs is not None:
             if self._win is None or len(refs) != n_win + len(self._probe) or len(s) != len(refs):
                 raise ValueError("similarities must cover the references wanted() named")
@@ -348,7 +344,7 @@ class RoadMatcher:
         elif s.shape != (self.n_refs,):
             raise ValueError(f"similarity row must have shape ({self.n_refs},), got {s.shape}")
         else:
-            part = s if self._win is None else s[places(wins)]
+            part = s if where is None else s[where]
             probe = s[self._probe] if self._win is not None else s
         g = self.grid
         mean, std = float(probe.mean()), max(float(probe.std()), 1e-12)
@@ -378,9 +374,8 @@ class RoadMatcher:
         self._stopped = stopped                    # the best trajectory has speed 0
         self._position = col / g
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
-        where = None if self._win is None else places(wins)
         self._live = self._win
-        self._kept = self._peaks(values, where)
+        self._last = (values, where)   # for ``around``'s hypotheses held
         rival = max_outside(values, where, self.graph.near(ref, self.rival_window))
         # how far the answer stands out of its frame's row, averaged; a standing frame may raise it, not lower it
         first, last = self.graph.bounds(ref)
@@ -424,13 +419,15 @@ class RoadMatcher:
         (``peaks`` of them, ``window``/4 places either side), then the probe. Hypotheses elsewhere are
         dropped: the state lives around candidates, not over every place."""
         near = [iv for c in np.unique(np.asarray(candidates, np.int64)) for iv in self.graph.near(int(c), self.seek)]
-        self._search(merge(near + self._kept, self._gap))
+        self._search(merge(near + self._peaks(*self._last), self._gap))
         return np.concatenate([places(self._win), self._probe])
 
     def _peaks(self, values: np.ndarray, where: np.ndarray | None) -> Intervals:
         """The neighbourhoods (``window``/4 places along the route) of the ``peaks`` best hypotheses: the
         places whose best trajectory is highest (over ``values``, one per place of ``where``; None: every
         place), positive, each more than two neighbourhoods from a better one."""
+        if not len(values):
+            return []
         reach = max(self.seek, self.window // 4)
         k = min(len(values), 4 * self.peaks)
         top = np.argpartition(-values, k - 1)[:k]
@@ -458,5 +455,5 @@ class RoadMatcher:
         self._seen[:] = 0
         self._t = 0
         self._win = self._live = None
-        self._kept = []
+        self._last = (np.zeros(0, np.float32), None)
         self._held = 0
