@@ -60,6 +60,8 @@ def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> 
     ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "gem"], "--front gem: expected NAME=MODEL"),
     ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "gem={tmp}/no.onnx"], "model file not found"),
     ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "default"], "not a tools/derive_streams.py folder"),
+    ("compare_drives.py", ["--streams", "{tmp}"], "ref: not a folder"),
+    ("bench_fleet.py", ["--refs", "{tmp}/none"], "none: not a folder"),
 ])
 def test_new_tools_refuse_bad_input_in_one_line(tmp_path: Path, name: str, args: list[str], needle: str) -> None:
     """One line on stderr naming the problem, exit 2, before any work (nothing written)."""
@@ -159,6 +161,7 @@ def test_coarse_check_compares_exact_and_coarse(tmp_path: Path, small_refs: Path
     (["--kinds", "speed2,warp"], "--kinds: unknown warp"),
     (["--repeat-noise", "-1"], "--repeat-noise must be >= 0"),
     (["--map-places", "999"], "--map-places must be in 1..24"),
+    (["--drives", "25"], "--drives must be in 1..16"),
 ])
 @pytest.mark.slow
 def test_derive_streams_checks_before_writing(tmp_path: Path, small_refs: Path, small_queries: Path,

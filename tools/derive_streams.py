@@ -27,7 +27,7 @@ import argparse
 from pathlib import Path
 
 from vpr_edge.errors import one_line_errors
-from vpr_edge.evaluation.streams import KINDS, cut_into_drives, derive_streams
+from vpr_edge.evaluation.streams import KINDS, derive_streams, drive_order
 
 
 def main() -> int:
@@ -49,13 +49,13 @@ def main() -> int:
 
 def _run(a: argparse.Namespace) -> int:
     """The work of ``main`` (``evaluation.streams.derive_streams``: inputs checked first)."""
-    counts = derive_streams(a.dataset, a.out, a.kinds.split(","), a.map_places, a.seed, a.repeat_noise)
+    counts = derive_streams(a.dataset, a.out, a.kinds.split(","), a.map_places, a.seed, a.repeat_noise, a.drives)
     n_mapped = counts.pop("map places")
     for kind, frames in counts.items():
         print(f"{kind:12s} {frames:6d} frames")
     print(f"map places: {n_mapped} (folder {a.out / 'ref'})")
     if a.drives:
-        print("drives, shuffled:", " ".join(cut_into_drives(a.out, a.drives, a.seed)))
+        print("drives, shuffled:", " ".join(drive_order(a.out, a.drives, a.seed)))
     return 0
 
 

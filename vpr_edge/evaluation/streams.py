@@ -151,11 +151,13 @@ def write_stream(out: str | os.PathLike[str], sources: Sequence[Path], places: n
 
 
 def derive_streams(dataset: str | os.PathLike[str], out: str | os.PathLike[str], kinds: Sequence[str] = KINDS,
-                   map_places: int | None = None, seed: int = 0, repeat_noise: float = 0.0) -> dict[str, int]:
+                   map_places: int | None = None, seed: int = 0, repeat_noise: float = 0.0,
+                   drives: int = 0) -> dict[str, int]:
     """The ``derive_streams`` command: from a frame-aligned pair (``dataset``/ref, ``dataset``/query) write
     ``out``/ref (the map's first ``map_places`` places; default two thirds) and per kind ``out``/KIND with
     ``out``/KIND.csv (``derive_stream``, ``write_stream``; camera-stops with ``CAMERA`` exposures). Inputs are
-    checked first (VprError). Returns frames per kind and, under "map places", the map's size."""
+    checked first (VprError). With ``drives`` the map is also cut into that many drives (``cut_into_drives``,
+    seeded). Returns frames per kind and, under "map places", the map's size."""
     dataset, out = Path(dataset), Path(out)
     refs, queries = list_images(dataset / "ref"), list_images(dataset / "query")
     if len(refs) != len(queries):
@@ -168,6 +170,8 @@ def derive_streams(dataset: str | os.PathLike[str], out: str | os.PathLike[str],
         raise VprError(f"--kinds: unknown {', '.join(unknown)}; choose from {', '.join(KINDS)}")
     if repeat_noise < 0:
         raise VprError(f"--repeat-noise must be >= 0, got {repeat_noise}")
+    if drives and not 1 <= drives <= n_mapped:
+        raise VprError(f"--drives must be in 1..{n_mapped}, got {drives}")
     write_stream(out / "ref", refs, np.arange(n_mapped), n_mapped, with_truth=False)
     counts = {}
     for kind in kinds:
@@ -175,6 +179,8 @@ def derive_streams(dataset: str | os.PathLike[str], out: str | os.PathLike[str],
         write_stream(out / kind, queries, places, n_mapped, repeat_noise=repeat_noise, seed=seed,
                      exposure=CAMERA if kind == "camera-stops" else None)
         counts[kind] = len(places)
+    if drives:
+        cut_into_drives(out, drives, seed)
     return counts | {"map places": n_mapped}
 
 
@@ -212,5 +218,9 @@ def cut_into_drives(out: str | os.PathLike[str], n_drives: int, seed: int = 0) -
                                         for _, row in rows[1:]]
         with atomic_output(root / truth.name) as tmp:
             tmp.write_text("\n".join(lines) + "\n")
-    order = np.random.default_rng(seed).permutation(n_drives)
-    return [str(root / str(k)) for k in order]
+    return drive_order(out, n_drives, seed)
+
+
+def drive_order(out: str | os.PathLike[str], n_drives: int, seed: int = 0) -> list[str]:
+    """The folders of ``cut_into_drives``' drives in the shuffled order (seeded) they are given in."""
+    return [str(Path(out) / DRIVES_FOLDER / str(k)) for k in np.random.default_rng(seed).permutation(n_drives)]
