@@ -253,3 +253,21 @@ def test_descriptor_npy_files(tmp_path: Path, dtype: str, shape: list, fill: flo
         assert str(path) in str(e) and "\n" not in str(e)
         return
     assert values.ndim == 2 and values.dtype.kind == "f" and np.isfinite(values).all() and len(names) == len(values)
+
+
+@pytest.mark.parametrize("bit", [0x1, 0x20, 0x40])   # encrypted, compressed patched data, strong encryption
+def test_map_whose_archive_flags_read_as_unsupported_is_one_line(valid_map: tuple[dict, dict], tmp_path: Path,
+                                                                  bit: int) -> None:
+    arrays, meta = valid_map
+    path = tmp_path / "m.npz"
+    write_npz(path, arrays, meta)
+    data = bytearray(path.read_bytes())
+    for sig, at in ((b"PK\x03\x04", 6), (b"PK\x01\x02", 8)):   # each member's local and central flag bits
+        i = data.find(sig)
+        while i >= 0:
+            data[i + at] |= bit
+            i = data.find(sig, i + 4)
+    path.write_bytes(bytes(data))
+    with pytest.raises(VprError) as e:
+        _load_and_use(path)
+    assert str(e.value).startswith(f"{path}: ") and "\n" not in str(e.value)

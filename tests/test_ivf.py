@@ -58,11 +58,18 @@ def test_index_from_arrays_refuses_what_does_not_fit() -> None:
 
 
 class OnePassEach(RoadMatcher):
-    """The road matcher with its windows advanced one pass each (the plain form of ``_advance_many``)."""
+    """The road matcher with its windows advanced one pass each over the whole-route state (the plain form of
+    ``_advance_many``, which holds the state compact over the windows)."""
 
-    def _advance_many(self, wins, gain, stop_decay, fed) -> None:
+    def _advance_many(self, wins, z, gain, stop_decay, fed) -> None:
+        self._densify()
+        at = 0
         for lo, hi in wins:
-            self._advance(lo * self.grid, hi * self.grid, gain, stop_decay, fed)
+            n = (hi - lo) * self.grid
+            self._advance(lo * self.grid, hi * self.grid, z[at:at + n], gain, stop_decay, fed)
+            at += n
+        cols = self._state_cols(wins)
+        self._hold(wins, cols, self._full[:, cols])
 
 
 def test_compact_pass_equals_one_pass_per_window() -> None:

@@ -47,6 +47,15 @@ def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> 
     assert f"motion cue {'on' if mapped else 'off'}" in out
 
 
+def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
+    out = tool("bench_scale.py", "--work", str(tmp_path), "--places", "3000", "--frames", "300", "--dim", "32",
+               "--noise", "0.7", "--checkpoints", "100,300")
+    assert "build-map:" in out and "x the yardstick" in out and "after 300 frames: RssAnon" in out
+    r_at_1 = float(out.split("R@1 +-2 over mapped frames ")[1].split(";")[0])
+    lost = float(out.split("off-map frames lost ")[1].split(";")[0])
+    assert r_at_1 > 0.5 and lost > 0.5                       # the hard stream is followed, its detours lost
+
+
 @pytest.mark.parametrize("name, args, needle", [
     ("lost_tradeoff.py", ["--streams", "{tmp}", "--locks", "x"], "--locks 'x': want positive numbers"),
     ("lost_tradeoff.py", ["--streams", "{tmp}", "--locks", "0,6"], "--locks '0,6': want positive numbers"),
@@ -57,6 +66,7 @@ def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> 
      "evidence_decay must be in [0, 1)"),
     ("results.py", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--quick"], "not a dataset folder with ref/"),
     ("bench_matcher.py", ["--stop-noise", "-1"], "--stop-noise must be >= 0"),
+    ("bench_scale.py", ["--work", "{tmp}", "--places", "5"], "need --places >= 10"),
     ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "gem"], "--front gem: expected NAME=MODEL"),
     ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "gem={tmp}/no.onnx"], "model file not found"),
     ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "default"], "not a tools/derive_streams.py folder"),

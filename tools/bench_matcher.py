@@ -32,7 +32,7 @@ import numpy as np
 
 from vpr_edge.index.coarse import CoarseSearch
 from vpr_edge.index.encodings import Encodings, STORAGES
-from vpr_edge.index.ivf import fit_ivf
+from vpr_edge.index.ivf import SequenceQuery, fit_ivf
 from vpr_edge.matchers import get_matcher, step
 from vpr_edge.files import read_npz, write_npz
 
@@ -121,6 +121,7 @@ def main() -> int:
     sim_s = [0.0]
     previous: np.ndarray | None = None   # the last query (a standing camera's next frame repeats it)
     cue = matcher.motion_cue() if a.cue else None
+    seq = SequenceQuery(matcher.params.get("seek_frames", 1))   # what the index is asked, as Localizer asks it
 
     def similarity(idx: np.ndarray | None) -> np.ndarray:
         t0 = time.perf_counter()
@@ -148,8 +149,9 @@ def main() -> int:
         local += getattr(dtw, "wanted", lambda: None)() is not None
         sim_s[0] = 0.0
         t0 = time.perf_counter()
+        seq.push(q)
         ref, _ = step(dtw, similarity, cue(q) if cue is not None else None,
-                      None if index is None else (lambda: index.candidates(stored, q)))
+                      None if index is None else (lambda: index.candidates(stored, seq.query())))
         t1 = time.perf_counter()
         previous = q
         t_sim += sim_s[0]

@@ -24,6 +24,7 @@ from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.frames.images import MIN_SIDE, Frame
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
+from vpr_edge.index.ivf import SequenceQuery
 from vpr_edge.map import MapQuery, PlaceMap
 from vpr_edge.matchers import Matcher, get_matcher, is_lost, step
 from vpr_edge.matchers.route import RouteGraph
@@ -116,6 +117,7 @@ class Localizer:
         self._lock = threading.Lock()
         self._count = 0
         self._cue = self.matcher.motion_cue()   # each frame's likeness to the last that moved
+        self._seq = SequenceQuery(self.matcher.params.get("seek_frames", 1))   # what the index is asked
 
     @property
     def map(self) -> PlaceMap:
@@ -162,8 +164,9 @@ class Localizer:
             return self.similarity(enc[None], refs)[0]
 
         index = self.map.index
+        self._seq.push(enc)
         candidates = None if index is None or self.matcher.scores != "cosine" else \
-            (lambda: index.candidates(self.map.stored, enc))
+            (lambda: index.candidates(self.map.stored, self._seq.query()))
         ref, score = step(self._online, similarity, self._cue(enc), candidates)
         return ref, score, self._online.position()
 
@@ -233,3 +236,4 @@ class Localizer:
                 self._online.reset()
             self._count = 0
             self._cue.reset()
+            self._seq.reset()

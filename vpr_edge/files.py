@@ -310,7 +310,8 @@ def read_npz(path: str | os.PathLike[str], kind: str, schema: int | tuple[int, .
             raise VprError(f"{path}: not a vpr-edge {kind} (holds pickled objects, which vpr-edge never "
                            f"loads)") from None
         raise VprError(f"{path}: not a vpr-edge {kind} (corrupt archive: {str(e).splitlines()[0][:80]})") from None
-    except (zipfile.BadZipFile, OSError, EOFError) as e:
+    except (zipfile.BadZipFile, OSError, EOFError, NotImplementedError, RuntimeError) as e:
+        # damaged flag bits read as encryption or features zipfile does not implement: corrupt here too
         raise VprError(f"{path}: not a vpr-edge {kind} (truncated or corrupt archive: "
                        f"{str(e).splitlines()[0][:80]})") from None
     if META_KEY not in arrays:

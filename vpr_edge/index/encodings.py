@@ -140,14 +140,20 @@ class Encodings:
         ``rows`` (int array) only (B, len(rows)); a block of references at a time (about
         BLOCK_BYTES of float32 scratch), from the stored values."""
         q = np.atleast_2d(np.asarray(queries, np.float32))
-        if rows is not None:
-            out = q @ self.take(rows).astype(np.float32).T
+        r, d = self.shape
+        rows_per_block = max(1, BLOCK_BYTES // (4 * d))
+        if rows is not None:   # a block at a time: no float32 copy of many rows (a large fresh allocation stalls)
+            rows = np.asarray(rows, np.int64).reshape(-1)
+            out = np.empty((len(q), len(rows)), np.float32)
+            scratch = np.empty((min(len(rows), rows_per_block), d), np.float32)
+            for i in range(0, len(rows), rows_per_block):
+                block = self.take(rows[i:i + rows_per_block])
+                np.copyto(scratch[:len(block)], block, casting="unsafe")
+                out[:, i:i + len(block)] = q @ scratch[:len(block)].T
             return out * self.scale[rows] if self.scale is not None else out
         if self.storage == "float32" and not isinstance(self.values, np.memmap):
             return q @ self.values.T
-        r, d = self.shape
         out = np.empty((len(q), r), np.float32)
-        rows_per_block = max(1, BLOCK_BYTES // (4 * d))
         scratch = np.empty((min(r, rows_per_block), d), np.float32)
         for i, block in self.blocks(rows_per_block):
             np.copyto(scratch[:len(block)], block, casting="unsafe")

@@ -81,6 +81,28 @@ class IvfIndex:
         return rows[top[np.argsort(-sims[top], kind="stable")]]
 
 
+class SequenceQuery:
+    """What a stream asks the index: the mean of its last ``frames`` encodings (a sequence descriptor). A
+    frame's own encoding may be far from its place's among a million; consecutive frames show alike places
+    with independent noise, so their mean is nearer (what it buys: docs/results.md, "An index for
+    whole-route searches")."""
+
+    def __init__(self, frames: int) -> None:
+        self.frames = max(1, int(frames))
+        self._recent: list[np.ndarray] = []
+
+    def push(self, encoding: np.ndarray) -> None:
+        """Add a frame's encoding (D,)."""
+        self._recent = (self._recent + [np.asarray(encoding, np.float32)])[-self.frames:]
+
+    def query(self) -> np.ndarray:
+        """The mean of the recent encodings (D,) float32 (the last frame's alone when ``frames`` is 1)."""
+        return self._recent[-1] if len(self._recent) == 1 else np.mean(self._recent, axis=0, dtype=np.float32)
+
+    def reset(self) -> None:
+        self._recent = []
+
+
 def fit_ivf(stored: Encodings, lists: int | None = None, seed: int = 0, block: int = 8192) -> IvfIndex:
     """The index of ``stored`` (R, D): ``lists`` centroids (default ``lists_for(R)``) fitted by k-means on a
     sample of ``SAMPLE_PER_LIST`` rows a list (at most ``MAX_SAMPLE``), then every row assigned, ``block`` rows

@@ -48,7 +48,9 @@ STREAM: dict[str, Param] = {
     "seek": Param(8, "index search (maps with an index): on a whole-route frame, references either side of each "
                      "of the index's candidates searched ..."),
     "peaks": Param(8, "... beside the neighbourhoods (window/4 references either side) of this many best "
-                      "hypotheses held"),
+                      "hypotheses held; the index is asked with ..."),
+    "seek_frames": Param(4, "... the mean of the encodings of the last this many frames (this one included): "
+                            "their noise averages out, the places they show are alike"),
     "stop_gain": Param(0.3, "without a motion cue: at speed 0, the share of a frame's positive evidence counted "
                             "(standing still is not new evidence)"),
     "stop_decay": Param(0.95, "without a motion cue: at speed 0, the decay of the trajectory score (a lock holds "

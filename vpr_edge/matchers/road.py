@@ -85,7 +85,7 @@ import numpy as np
 from collections.abc import Callable
 
 from vpr_edge.matchers.motion import stands
-from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, merge, minus, places
+from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, merge, places
 
 
 class RoadMatcher:
@@ -95,7 +95,7 @@ class RoadMatcher:
 
     def __init__(self, n_refs: int, *, vmax: float, grid: int, decay: float, bias: float, turn: float,
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
-                 hold: float, seek: int, peaks: int, stop_gain: float, stop_decay: float, still: float,
+                 hold: float, seek: int, peaks: int, seek_frames: int, stop_gain: float, stop_decay: float, still: float,
                  still_memory: int,
                  evidence: float, evidence_decay: float, route: np.ndarray | None = None,
                  graph: RouteGraph | None = None) -> None:
@@ -140,26 +140,31 @@ class RoadMatcher:
         self._joins = bool(len(self._cut[1]) or self._src_cols is not None)
         self._gap = -(-self.n_speeds // grid) + 1   # windows closer than this are searched as one
         self._win: Intervals | None = None   # references the next frame searches ([lo, hi) intervals); None = all
-        self._live: Intervals | None = None  # where the state may be non-zero (None: anywhere)
-        self.seek, self.peaks = max(0, int(seek)), max(1, int(peaks))
+        self.seek, self.peaks, self.seek_frames = max(0, int(seek)), max(1, int(peaks)), max(1, int(seek_frames))
         self._last: tuple[np.ndarray, np.ndarray | None] = (np.zeros(0, np.float32), None)   # (``_peaks``)
         self.check, self.span, self.hold = max(1, int(check)), max(0, int(span)), hold
         self._held = 0                               # frames since the local search began
+        # the state H, held where it may be non-zero: over the whole route (``_full``, (speeds, positions); a
+        # frame that searches everything) or compact over the intervals a local or index search keeps
+        # (``_kept``; ``_cols``, their state columns; ``_vals``, (speeds, columns)), so that on a large map
+        # searched around candidates it costs memory for the candidates' neighbourhoods, not for every place.
         # float32: the per-frame passes over (speeds x positions) are memory-bound; halving the bytes halved
         # the time at 100,000 references (tools/bench_matcher.py)
-        self.h = np.zeros((self.n_speeds, n_refs * grid), np.float32)
-        self._m = np.empty_like(self.h)   # buffers reused every frame
-        self._new = np.empty_like(self.h)
-        self._z = np.empty(n_refs * grid, np.float32)
-        self._zs = np.empty((2, n_refs * grid), np.float32)   # speed 0's share of z (and scratch)
+        self._full: np.ndarray | None = None   # made at the first whole-route frame, kept (with its buffers)
+        self._kept: Intervals | None = []      # None: the state is ``_full``
+        self._cols = np.zeros(0, np.int64)
+        self._vals = np.zeros((self.n_speeds, 0), np.float32)
         self._mean = np.zeros(n_refs)     # running mean z per reference
         self._stopped = False
         self._position: float | None = None   # the last answer on the reference grid (``position``)
         # per reference, the decayed number of frames in its mean (starts as if `memory` frames of mean 0) and
-        # the frame count when it was last seen: a reference outside a local search's window is not updated,
-        # and when seen again its old mean weighs as much as its age allows (an EMA over time, not over updates)
+        # the frame count when it was last seen (-1: never): a reference outside a local search's window is not
+        # updated, and when seen again its old mean weighs as much as its age allows (an EMA over time, not over
+        # updates); the prior does not age: a reference first seen late (a large map searched around an
+        # index's candidates) starts from it as one seen at the first frame does, so that its first sighting
+        # does not become its whole mean and cancel the next frame's evidence there
         self._weight = np.full(n_refs, float(memory))
-        self._seen = np.zeros(n_refs, np.int64)
+        self._seen = np.full(n_refs, -1, np.int64)
         self._t = 0                       # frames counted for the means (not those of a stopped vehicle)
 
     def position(self) -> float | None:
@@ -182,21 +187,66 @@ class RoadMatcher:
         out = z - run
         if not self._stopped:   # frames of a stopped vehicle repeat one place: they say nothing of hubs
             seen = self._seen[lo:lo + len(s)]
-            weight *= (1.0 - 1.0 / self.memory) ** (self._t - seen)
+            weight *= (1.0 - 1.0 / self.memory) ** np.where(seen < 0, 1, self._t - seen)
             weight += 1.0
             seen[:] = self._t
             run += (z - run) / weight
         return out
 
-    def _advance(self, a: int, b: int, gain: float, stop_decay: float, fed: np.ndarray | None) -> None:
-        """One frame of the recursion on state columns [a, b) (z already in ``self._z[a:b]``): the max over
+    @property
+    def h(self) -> np.ndarray:
+        """The state H over every position, (speeds, n_refs * grid) float32 (zero where nothing is held; a copy
+        unless the state is held whole)."""
+        if self._kept is None:
+            return self._full
+        out = np.zeros((self.n_speeds, self.n_refs * self.grid), np.float32)
+        out[:, self._cols] = self._vals
+        return out
+
+    def _take(self, cols: np.ndarray) -> np.ndarray:
+        """The state at state columns ``cols`` (int array), (speeds, len(cols)); 0 where nothing is held."""
+        if self._kept is None:
+            return self._full[:, cols]
+        out = np.zeros((self.n_speeds, len(cols)), np.float32)
+        if len(self._cols) and len(cols):
+            i = np.minimum(np.searchsorted(self._cols, cols), len(self._cols) - 1)
+            ok = self._cols[i] == cols
+            out[:, ok] = self._vals[:, i[ok]]
+        return out
+
+    def _hold(self, win: Intervals, cols: np.ndarray, vals: np.ndarray) -> None:
+        """Hold the state compact: ``vals`` (speeds, len(cols)) at the state columns ``cols`` of ``win``."""
+        self._kept, self._cols, self._vals = list(win), cols, np.ascontiguousarray(vals, np.float32)
+
+    def _densify(self) -> None:
+        """Hold the state over the whole route (``_full``, made once, with the whole-route pass's buffers)."""
+        if self._kept is None:
+            return
+        if self._full is None:
+            shape = (self.n_speeds, self.n_refs * self.grid)
+            self._full = np.zeros(shape, np.float32)
+            self._m, self._new = np.empty(shape, np.float32), np.empty(shape, np.float32)   # reused every frame
+            self._zs = np.empty((2, shape[1]), np.float32)   # speed 0's share of z (and scratch)
+            self._zbuf = np.empty(shape[1], np.float32)
+        else:
+            self._full.fill(0.0)
+        self._full[:, self._cols] = self._vals
+        self._kept = None
+
+    def _state_cols(self, win: Intervals) -> np.ndarray:
+        g = self.grid
+        return np.concatenate([np.arange(lo * g, hi * g) for lo, hi in win]) if win else np.zeros(0, np.int64)
+
+    def _advance(self, a: int, b: int, z: np.ndarray, gain: float, stop_decay: float,
+                 fed: np.ndarray | None) -> None:
+        """One frame of the recursion on the whole state's columns [a, b), ``z`` its frame's: the max over
         v' of H(v', p) - turn * |v - v'| (forward and backward passes over speeds), shifted v grid steps
         ahead, decayed, plus z (at speed 0: decayed by ``stop_decay``, plus ``gain`` of a positive z),
         floored at 0. Columns left of ``a`` feed it as predecessors, except across a drive's start, where
         the junctions into it do (``fed``: what each junction carries, ``_fed``)."""
         a0 = max(0, a - (self.n_speeds - 1))
         m, new, w = self._m[:, : b - a0], self._new[:, : b - a], b - a
-        np.copyto(m, self.h[:, a0:b])
+        np.copyto(m, self._full[:, a0:b])
         self._speed_max(m)
         for v in range(self.n_speeds):   # a trajectory at speed v came from v grid steps behind
             k = a - v - a0
@@ -210,8 +260,8 @@ class RoadMatcher:
                 ok = (c >= a) & (c < b)
                 return ok, c[ok] - a
             self._join(new, locate, fed)
-        self._decay_and_add(new, self._z[a:b], gain, stop_decay, self._zs[:, :w])
-        self.h[:, a:b] = new
+        self._decay_and_add(new, z, gain, stop_decay, self._zs[:, :w])
+        self._full[:, a:b] = new
 
     def _decay_and_add(self, new: np.ndarray, z: np.ndarray, gain: float, stop_decay: float,
                      scratch: np.ndarray) -> None:
@@ -230,17 +280,19 @@ class RoadMatcher:
         new[0] += zs
         np.maximum(new, 0.0, out=new)
 
-    def _advance_many(self, wins: Intervals, gain: float, stop_decay: float, fed: np.ndarray | None) -> None:
-        """``_advance`` over several windows at once (a search around many candidates): their columns gathered
-        into one compact array, each window after n_speeds - 1 empty columns (nothing comes from outside the
-        windows, where the state is 0), one pass of the recursion, the result scattered back: a fixed number
-        of array operations whatever the number of windows."""
+    def _advance_many(self, wins: Intervals, z: np.ndarray, gain: float, stop_decay: float,
+                      fed: np.ndarray | None) -> None:
+        """``_advance`` over the windows of a local or index search (``z``: the frame's over their state
+        columns, in order): their columns gathered into one compact array, each window after n_speeds - 1
+        empty columns (nothing comes from outside the windows, where the state is 0), one pass of the
+        recursion, the result held compact over the windows: a fixed number of array operations whatever the
+        number of windows, memory for the windows only."""
         g, pad = self.grid, self.n_speeds - 1
         cols = np.concatenate([np.r_[np.full(pad, -1, np.int64), np.arange(lo * g, hi * g)] for lo, hi in wins])
         real = cols >= 0
         at, pos = cols[real], np.flatnonzero(real)
         m = np.zeros((self.n_speeds, len(cols)), np.float32)
-        m[:, pos] = self.h[:, at]
+        m[:, pos] = self._take(at)
         self._speed_max(m)
         new = np.zeros_like(m)
         new[0] = m[0]
@@ -252,10 +304,10 @@ class RoadMatcher:
                 ok = at[i] == c
                 return ok, pos[i[ok]]
             self._join(new, locate, fed)
-        z = np.zeros(len(cols), np.float32)
-        z[pos] = self._z[at]
-        self._decay_and_add(new, z, gain, stop_decay, np.empty((2, len(cols)), np.float32))
-        self.h[:, at] = new[:, pos]
+        zp = np.zeros(len(cols), np.float32)
+        zp[pos] = z
+        self._decay_and_add(new, zp, gain, stop_decay, np.empty((2, len(cols)), np.float32))
+        self._hold(wins, at, new[:, pos])
 
     def _speed_max(self, m: np.ndarray) -> None:
         """In place over (speeds, columns): each entry the max over speeds v' of itself - turn * |v - v'|."""
@@ -291,7 +343,7 @@ class RoadMatcher:
         sources (None: a map without junctions)."""
         if self._src_cols is None:
             return None
-        hs = (self.h[None, :, self._src_cols] - self._turns[:, :, None]).max(axis=1)   # few columns: at once
+        hs = (self._take(self._src_cols)[None] - self._turns[:, :, None]).max(axis=1)   # few columns: at once
         return np.maximum.reduceat(hs, self._src_groups, axis=1)
 
     def _join(self, new: np.ndarray, locate: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
@@ -353,19 +405,31 @@ class RoadMatcher:
             fed = self._fed()
             at = 0
             self._t += not self._stopped   # frames counted for the means (``_normalise``), once a frame
-            for lo, hi in wins:
-                z = self._z[lo * g:hi * g].reshape(hi - lo, g)
-                z[:] = self._normalise(part[at:at + hi - lo], lo, mean, std)[:, None]
-                z -= self.bias
-                at += hi - lo
-            gain, decay = self._stop_rule(still)
-            if len(wins) == 1:
-                self._advance(wins[0][0] * g, wins[0][1] * g, gain, decay, fed)
+            if self._win is None:   # the whole route: its buffers
+                self._densify()
+                z = self._zbuf.reshape(n_win, g)
             else:
-                self._advance_many(wins, gain, decay, fed)
+                z = np.empty((n_win, g), np.float32)
+            for lo, hi in wins:
+                z[at:at + hi - lo] = self._normalise(part[at:at + hi - lo], lo, mean, std)[:, None]
+                at += hi - lo
+            z = z.reshape(-1)
+            z -= self.bias
+            gain, decay = self._stop_rule(still)
+            if self._win is None:
+                self._advance(0, self.n_refs * g, z, gain, decay, fed)
+            else:
+                self._advance_many(wins, z, gain, decay, fed)
+        elif self._win is None:
+            self._densify()
         ref, best, col, stopped, per_ref = -1, -1.0, 0, False, []
-        for lo, hi in wins:
-            h = self.h[:, lo * g:hi * g]
+        off = 0
+        for lo, hi in wins:   # the state is held over exactly these windows, in order
+            if self._kept is None:
+                h = self._full[:, lo * g:hi * g]
+            else:
+                h = self._vals[:, off:off + (hi - lo) * g]
+                off += (hi - lo) * g
             flat = int(np.argmax(h))
             if float(h.flat[flat]) > best:
                 best, ref = float(h.flat[flat]), lo + (flat % h.shape[1]) // g
@@ -374,7 +438,6 @@ class RoadMatcher:
         self._stopped = stopped                    # the best trajectory has speed 0
         self._position = col / g
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
-        self._live = self._win
         self._last = (values, where)   # for ``around``'s hypotheses held
         rival = max_outside(values, where, self.graph.near(ref, self.rival_window))
         # how far the answer stands out of its frame's row, averaged; a standing frame may raise it, not lower it
@@ -406,11 +469,10 @@ class RoadMatcher:
         self._search(self.graph.near(ref, self.window, self._gap))
 
     def _search(self, win: Intervals) -> None:
-        """Search ``win`` next frame; the state outside it is dropped (set to 0)."""
-        g = self.grid
-        for lo, hi in minus(self._live or [(0, self.n_refs)], win):
-            self.h[:, lo * g:hi * g] = 0.0
-        self._live = self._win = win
+        """Search ``win`` next frame; the state outside it is dropped (0), the rest held compact."""
+        cols = self._state_cols(win)
+        self._hold(win, cols, self._take(cols))
+        self._win = win
 
     def around(self, candidates: np.ndarray) -> np.ndarray:
         """What the next ``update`` needs when ``wanted()`` asked for the whole route and an index answered
@@ -441,19 +503,23 @@ class RoadMatcher:
         return [iv for p in chosen for iv in self.graph.near(p, reach)]
 
     def ranking(self) -> np.ndarray:
-        """Best trajectory score ending at each reference (R,)."""
-        return self.h.max(axis=0).reshape(self.n_refs, self.grid).max(axis=1)
+        """Best trajectory score ending at each reference (R,) (0 where nothing is held)."""
+        if self._kept is None:
+            return self._full.max(axis=0).reshape(self.n_refs, self.grid).max(axis=1)
+        out = np.zeros(self.n_refs, np.float32)
+        out[self._cols[::self.grid] // self.grid] = self._vals.max(axis=0).reshape(-1, self.grid).max(axis=1)
+        return out
 
     def reset(self) -> None:
         """Forget the stream."""
         self._position = None
         self._evidence = None
-        self.h[:] = 0.0
+        self._hold([], np.zeros(0, np.int64), np.zeros((self.n_speeds, 0), np.float32))
         self._mean[:] = 0.0
         self._stopped = False
         self._weight[:] = self.memory
-        self._seen[:] = 0
+        self._seen[:] = -1
         self._t = 0
-        self._win = self._live = None
+        self._win = None
         self._last = (np.zeros(0, np.float32), None)
         self._held = 0

@@ -1,0 +1,178 @@
+#!/usr/bin/env python3
+"""A country-scale route end to end: build-map and localize over descriptor files, timed and scored.
+
+    python tools/bench_scale.py --work out/scale --places 1000000 --frames 10000
+
+Writes (once; kept and reused while their sizes match) a synthetic route of --places unit descriptors of --dim
+dims and a hard stream over it (``evaluation.synthetic``: cold start, speed changes, two detours off the map,
+the second re-entering far away, a long stop of new exposures; a frame alone right about 1 time in 4), then:
+
+1. ``vpr-edge build-map ROUTE.npy -o MAP`` as a command: wall time and peak RSS (its index included);
+2. ``vpr-edge localize --threads 1 --map MAP --stream QUERIES.npy -o OUT.csv`` as a command: wall time (start-up
+   included) a frame, its RssAnon / RssFile sampled every 0.2 s (max and last);
+3. the same stream through ``Localizer.push_encoding`` in this process, each frame timed: p50 / p99 / max ms and
+   RssAnon at checkpoints (flat or not);
+4. the yardstick (one fp32 inference of the 320x240 model, one thread) measured after them, every time printed
+   beside it as a ratio;
+5. the localize output scored against the ground truth: R@1 within +-2 over mapped frames, answers given
+   right, mapped frames answered right, off-map frames reported lost, frames from leaving the map to the first
+   lost one and from each re-entry to the first right answer.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from vpr_edge.evaluation.metrics import answered_shares, transition_delays
+from vpr_edge.evaluation.synthetic import plan_stream, write_route, write_stream
+from vpr_edge.evaluation.truth import load_csv
+from vpr_edge.evaluation.yardstick import yardstick_ms
+
+
+def status_mb(pid: int | str, field: str) -> float:
+    """``field`` (RssAnon, RssFile, VmRSS) of process ``pid`` ("self") in MB; NaN when it has gone."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return float("nan")
+
+
+def run_command(args: list[str]) -> dict:
+    """Run ``python -m vpr_edge ARGS``: wall seconds, peak RSS (MB, from wait4) and RssAnon / RssFile sampled
+    every 0.2 s (max, last). Exits with the command's message if it fails."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "vpr_edge", *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    samples: list[tuple[float, float]] = []
+    done = threading.Event()
+
+    def sample() -> None:
+        while not done.wait(0.2):
+            anon, file = status_mb(proc.pid, "RssAnon"), status_mb(proc.pid, "RssFile")
+            if anon == anon:
+                samples.append((anon, file))
+
+    watcher = threading.Thread(target=sample, daemon=True)
+    watcher.start()
+    err = proc.stderr.read() if proc.stderr else ""
+    _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    wall = time.perf_counter() - t0
+    done.set()
+    watcher.join()
+    if proc.returncode != 0:
+        raise SystemExit(f"bench_scale: vpr-edge {' '.join(args[:1])} failed: {err.strip()}")
+    anon = [a for a, _ in samples] or [float("nan")]
+    file = [f for _, f in samples] or [float("nan")]
+    return {"wall_s": wall, "peak_rss_mb": usage.ru_maxrss / 1024, "anon_max_mb": max(anon),
+            "anon_last_mb": anon[-1], "file_max_mb": max(file)}
+
+
+def per_frame(map_path: Path, queries: Path, checkpoints: list[int]) -> tuple[np.ndarray, list[tuple]]:
+    """Each frame of ``queries`` through ``Localizer.push_encoding`` (one thread): (ms a frame (Q,), [(frame,
+    RssAnon MB, RssFile MB) at each checkpoint])."""
+    from vpr_edge.api import Localizer
+
+    loc = Localizer(map_path, threads=1)
+    q = np.load(queries, mmap_mode="r", allow_pickle=False)
+    ms = np.empty(len(q))
+    marks = []
+    for t in range(len(q)):
+        enc = np.asarray(q[t], np.float32)
+        t0 = time.perf_counter()
+        loc.push_encoding(enc)
+        ms[t] = 1e3 * (time.perf_counter() - t0)
+        if t + 1 in checkpoints:
+            marks.append((t + 1, status_mb("self", "RssAnon"), status_mb("self", "RssFile")))
+    return ms, marks
+
+
+def score(results: Path, truth_csv: Path, tolerance: int = 2) -> dict:
+    """The localize output against the ground truth (module docstring, step 5)."""
+    truth = load_csv(truth_csv)[:, 0]
+    ref = np.full(len(truth), -10 ** 9, np.int64)
+    lost = np.ones(len(truth), bool)
+    with open(results, newline="") as f:
+        for row in csv.DictReader(f):
+            i = int(row["frame_index"])
+            lost[i] = row["lost"] in ("1", "True", "true")
+            if row["ref_index"]:
+                ref[i] = int(row["ref_index"])
+    mapped = truth >= 0
+    right = mapped & (np.abs(ref - truth) <= tolerance)
+    answered_right, mapped_right = answered_shares(right, lost, mapped)
+    relock, exits = transition_delays(mapped, right & ~lost, lost)
+    return {"r_at_1": float(right[mapped].mean()), "answered_right": answered_right, "mapped_right": mapped_right,
+            "offmap_lost": float(lost[~mapped].mean()) if (~mapped).any() else float("nan"),
+            "exit_frames": exits.tolist(), "relock_frames": relock.tolist()}
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--work", type=Path, required=True, help="folder for the route, stream, map and output")
+    p.add_argument("--places", type=int, default=1_000_000)
+    p.add_argument("--frames", type=int, default=10_000)
+    p.add_argument("--dim", type=int, default=512)
+    p.add_argument("--noise", type=float, default=5.5, help="each frame's noise relative to a unit descriptor "
+                   "(5.5: a frame alone right about 1 time in 4 on a million 512-dim places)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--checkpoints", default="1000,5000,10000,50000,100000")
+    p.add_argument("--skip-build", action="store_true", help="use the map already in --work")
+    a = p.parse_args()
+    if a.places < 10 or a.frames < 100 or a.dim < 2 or not a.noise >= 0:
+        print("bench_scale: error: need --places >= 10, --frames >= 100, --dim >= 2, --noise >= 0", file=sys.stderr)
+        return 2
+    a.work.mkdir(parents=True, exist_ok=True)
+    route = a.work / f"route_{a.places}x{a.dim}_s{a.seed}.npy"
+    queries = a.work / f"stream_{a.places}x{a.dim}_{a.frames}_n{a.noise:g}_s{a.seed}.npy"
+    truth = queries.with_suffix(".csv")
+    map_path = route.with_suffix(".map.npz")
+    out = queries.with_suffix(".results.csv")
+    if not route.exists():
+        t0 = time.perf_counter()
+        write_route(route, a.places, a.dim, seed=a.seed)
+        print(f"route written in {time.perf_counter() - t0:.1f} s: {route}")
+    if not queries.exists() or not truth.exists():
+        write_stream(route, plan_stream(a.places, a.frames, a.seed), queries, truth, noise=a.noise, seed=a.seed)
+    print(f"route {a.places} places x {a.dim} dims, stream {a.frames} frames, noise {a.noise:g}")
+    if not (a.skip_build and map_path.exists()):
+        built = run_command(["build-map", str(route), "-o", str(map_path)])
+        print(f"build-map: {built['wall_s']:.1f} s wall, peak RSS {built['peak_rss_mb']:.0f} MB, RssAnon max "
+              f"{built['anon_max_mb']:.0f} MB; map {map_path.stat().st_size / 1e6:.0f} MB", flush=True)
+    located = run_command(["localize", "--map", str(map_path), "--stream", str(queries), "--threads", "1",
+                           "-o", str(out)])
+    checkpoints = sorted(int(c) for c in a.checkpoints.split(","))
+    ms, marks = per_frame(map_path, queries, checkpoints)
+    yard = yardstick_ms()
+    cmd_ms = 1e3 * located["wall_s"] / a.frames
+    print(f"yardstick (one fp32 inference, 320x240, one thread): {yard:.2f} ms")
+    print(f"localize --threads 1, whole command: {located['wall_s']:.1f} s = {cmd_ms:.2f} ms a frame "
+          f"({cmd_ms / yard:.2f}x the yardstick); RssAnon max {located['anon_max_mb']:.0f} MB, last "
+          f"{located['anon_last_mb']:.0f} MB; RssFile max {located['file_max_mb']:.0f} MB; peak RSS "
+          f"{located['peak_rss_mb']:.0f} MB")
+    p50, p99, top = np.percentile(ms, 50), np.percentile(ms, 99), ms.max()
+    print(f"a frame's match (push_encoding): mean {ms.mean():.2f}, p50 {p50:.2f}, p99 {p99:.2f}, max {top:.1f} ms "
+          f"({ms.mean() / yard:.2f}x / {p50 / yard:.2f}x / {p99 / yard:.2f}x / {top / yard:.2f}x the yardstick)")
+    for frame, anon, file in marks:
+        print(f"  after {frame} frames: RssAnon {anon:.0f} MB, RssFile {file:.0f} MB")
+    s = score(out, truth)
+    print(f"R@1 +-2 over mapped frames {s['r_at_1']:.3f}; answers given right {s['answered_right']:.3f}; mapped "
+          f"frames answered right {s['mapped_right']:.3f}; off-map frames lost {s['offmap_lost']:.3f}; first lost "
+          f"frame after leaving {s['exit_frames']}; first right answer after (re-)entering {s['relock_frames']}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
