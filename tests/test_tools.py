@@ -65,6 +65,7 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("lost_tradeoff.py", ["--streams", "{tmp}", "--vary", "evidence_decay", "--values", "2"],
      "evidence_decay must be in [0, 1)"),
     ("results.py", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--quick"], "not a dataset folder with ref/"),
+    ("results.py", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--sections", "nope"], "no section 'nope'"),
     ("bench_matcher.py", ["--stop-noise", "-1"], "--stop-noise must be >= 0"),
     ("bench_scale.py", ["--work", "{tmp}", "--places", "5"], "need --places >= 10"),
     ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "gem"], "--front gem: expected NAME=MODEL"),
@@ -273,3 +274,23 @@ def test_compare_front_ends_reports_each_front_end(tmp_path: Path, small_refs: P
     assert "| default |" in out and "| gem |" in out
     assert "gem: 116 bytes a place" in out and "x the yardstick" in out
     assert (tmp_path / "ds" / "map.gem.npz").is_file()
+
+
+def test_every_results_section_has_its_markers_in_results_md() -> None:
+    import importlib.util
+    import re
+
+    spec = importlib.util.spec_from_file_location("results_tool", ROOT / "tools" / "results.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["results_tool"] = module   # its dataclasses look their module up
+    try:
+        spec.loader.exec_module(module)
+    finally:
+        del sys.modules["results_tool"]
+    text = (ROOT / "docs" / "results.md").read_text()
+    names = [s.name for s in module.SECTIONS]
+    assert len(set(names)) == len(names)
+    assert set(re.findall(r"<!-- generated: ([\w-]+) -->", text)) == set(names)
+    for name in names:
+        assert text.count(f"<!-- generated: {name} -->\n") == text.count(f"<!-- end of generated: {name} -->") == 1
+        assert (ROOT / "tools" / next(s.tool for s in module.SECTIONS if s.name == name)).is_file()

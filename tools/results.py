@@ -11,11 +11,14 @@ at tolerance 2 and 1. Then the speed yardstick: one fp32 inference of the 320x24
 (``evaluation.yardstick``) beside the default chain's time per frame once started (``Localizer.run``, one
 thread, over each dataset's aligned stream), both in this run: the ratio is the figure.
 
-``--quick`` is all of that (minutes on 2 cores); the full run (no ``--quick``) is the same today: the other
-tables of docs/results.md keep the command each was measured with. OUT gets results.json (every figure, the
-commit and the machine) and results.md (the tables). ``--write-docs`` also copies results.json to
-docs/generated/results.json and rewrites from it the README's results table and docs/results.md's
-answered-right table (a test checks that both hold exactly the tables that file gives).
+``--quick`` is all of that (minutes on 2 cores). The full run (no ``--quick``) then runs every tool of
+``SECTIONS`` on those streams and maps, each the tool that makes one of docs/results.md's tables, and keeps
+what each printed (OUT/sections/NAME.md, headed by the command, the commit and the machine; ``--sections``
+runs some of them only). OUT gets results.json (every figure, the commit and the machine) and results.md (the
+tables). ``--write-docs`` also copies results.json to docs/generated/results.json and rewrites from it the
+README's results table and docs/results.md's answered-right table (a test checks that both hold exactly the
+tables that file gives), and puts each section run between its markers in docs/results.md
+(``<!-- generated: NAME -->`` ... ``<!-- end of generated: NAME -->``).
 """
 from __future__ import annotations
 
@@ -24,7 +27,11 @@ import datetime
 import json
 import os
 import platform
+import shlex
 import subprocess
+import sys
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +48,62 @@ ROOT = Path(__file__).resolve().parent.parent
 DATASETS = ("corridor", "nordland-dev")
 MODES = ("stream", "seqslam-online")
 TOLERANCES = (2, 1)
+
+
+@dataclass(frozen=True)
+class Section:
+    """A table of docs/results.md and the tool that makes it: ``tools/TOOL ARGS``, where ``{corridor}`` and
+    ``{nordland-dev}`` stand for the run's derived-stream folders (each with its default map.npz) and
+    ``{out}`` for OUT."""
+
+    name: str
+    tool: str
+    args: tuple[str, ...]
+
+
+SECTIONS = (
+    Section("lost-line", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "evidence",
+                                              "--values=-99,1,1.25,1.5,1.75,2")),
+    Section("lost-lock", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "lock",
+                                              "--values=5,6,6.5,7,7.5,8")),
+    Section("lost-still", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "still",
+                                               "--values=0.3,0.4,0.5,0.6,0.7")),
+    Section("calibration", "calibration_check.py", ("--streams", "{corridor}", "{nordland-dev}", "--modes",
+                                                    "stream,single")),
+    Section("evaluating-corridor", "eval_streams.py", ("--streams", "{corridor}")),
+    Section("evaluating-nordland-dev", "eval_streams.py", ("--streams", "{nordland-dev}")),
+    Section("e2e-nordland-dev", "bench_e2e.py", ("--streams", "{nordland-dev}", "--config", "default=", "--config",
+                                                 "default-int8=|--precision int8", "--out", "{out}/e2e-nordland-dev")),
+    Section("e2e-corridor", "bench_e2e.py", ("--streams", "{corridor}", "--config", "default=", "--config",
+                                             "default-int8=|--precision int8", "--out", "{out}/e2e-corridor")),
+    Section("drives", "compare_drives.py", ("--streams", "{nordland-dev}", "{corridor}", "--drives", "4")),
+    Section("scale", "bench_scale.py", ("--work", "{out}/scale")),
+)
+
+
+def run_section(section: Section, out: Path, doc: dict) -> str:
+    """Run one section's tool (one BLAS / OpenMP thread, as the timings assume): its output, headed by the
+    command, the commit and the machine. Raises VprError naming the tool if it fails."""
+    places = {"{corridor}": str(out / "corridor"), "{nordland-dev}": str(out / "nordland-dev"), "{out}": str(out)}
+    args = [places.get(a, a.replace("{out}", str(out))) for a in section.args]
+    shown = " ".join(["python", f"tools/{section.tool}", *[shlex.quote(places_back(a, out)) for a in args]])
+    env = os.environ | {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / section.tool), *args], capture_output=True,
+                          text=True, env=env)
+    if proc.returncode != 0:
+        last = (proc.stderr.strip().splitlines() or ["no message"])[-1]
+        raise VprError(f"tools/{section.tool} (section {section.name}) failed: {last}")
+    took = time.perf_counter() - t0
+    doc.setdefault("sections", {})[section.name] = {"command": shown, "seconds": round(took, 1)}
+    head = (f"Made by `{shown}` at commit {doc['commit']}{' (with local changes)' if doc['dirty'] else ''} on "
+            f"{doc['machine']['cpu']} ({doc['machine']['cores']} cores), {doc['date']}, in {took:.0f} s:")
+    return head + "\n\n" + proc.stdout.strip() + "\n"
+
+
+def places_back(arg: str, out: Path) -> str:
+    """A path under OUT written as the docs name it (out/...)."""
+    return "out/" + str(Path(arg).relative_to(out)) if arg.startswith(str(out)) else arg
 
 
 def machine() -> dict:
@@ -125,6 +188,28 @@ def markdown(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def replace_between(text: str, start: str, end: str, body: str, where: Path) -> str:
+    """``text`` with what lies between the markers ``start`` and ``end`` replaced by ``body``."""
+    if start not in text or end not in text:
+        raise VprError(f"{where}: the markers {start.strip()} ... {end.strip()} are missing")
+    head, rest = text.split(start, 1)
+    _, tail = rest.split(end, 1)
+    return head + start + body + end + tail
+
+
+def write_sections(made: dict[str, str]) -> None:
+    """docs/results.md with each section run put between its markers."""
+    from vpr_edge.files import atomic_output
+
+    path = ROOT / "docs" / "results.md"
+    text = path.read_text()
+    for name, body in made.items():
+        text = replace_between(text, f"<!-- generated: {name} -->\n", f"<!-- end of generated: {name} -->", body,
+                               path)
+    with atomic_output(path) as tmp:
+        tmp.write_text(text)
+
+
 def write_docs(doc: dict) -> None:
     """docs/generated/results.json, and the README's results table rewritten from it."""
     from vpr_edge.files import atomic_output
@@ -135,14 +220,10 @@ def write_docs(doc: dict) -> None:
         tmp.write_text(json.dumps(doc, indent=1) + "\n")
     for doc_file, table in ((ROOT / "README.md", readme_table(doc)),
                             (ROOT / "docs" / "results.md", answers_table(doc))):
-        text = doc_file.read_text()
-        start, end = "<!-- results table: tools/results.py -->\n", "<!-- end of results table -->"
-        if start not in text or end not in text:
-            raise VprError(f"{doc_file}: the results table's markers are missing")
-        head, rest = text.split(start)
-        _, tail = rest.split(end)
+        text = replace_between(doc_file.read_text(), "<!-- results table: tools/results.py -->\n",
+                               "<!-- end of results table -->", table + "\n", doc_file)
         with atomic_output(doc_file) as tmp:
-            tmp.write_text(head + start + table + "\n" + end + tail)
+            tmp.write_text(text)
 
 
 def main() -> int:
@@ -151,20 +232,36 @@ def main() -> int:
                    help="the folder holding corridor/ and nordland-dev/")
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--quick", action="store_true", help="the derived streams' accuracy and the speed yardstick")
+    p.add_argument("--sections", default=",".join(s.name for s in SECTIONS),
+                   help="the full run's sections to run (comma-separated; default: all)")
     p.add_argument("--write-docs", action="store_true",
                    help="copy results.json to docs/generated/ and rewrite the README's results table from it")
     a = p.parse_args()
 
     def run() -> int:
+        known = {s.name: s for s in SECTIONS}   # everything checked before any work
+        chosen = [n for n in a.sections.split(",") if n]
+        unknown = [n for n in chosen if n not in known]
+        if unknown:
+            raise VprError(f"--sections: no section {unknown[0]!r} (sections: {', '.join(known)})")
         missing = [str(a.datasets / d) for d in DATASETS if not (a.datasets / d / "ref").is_dir()]
-        if missing:   # checked before any work
+        if missing:
             raise VprError(f"{missing[0]}: not a dataset folder with ref/ and query/ (--datasets names their parent)")
         a.out.mkdir(parents=True, exist_ok=True)
         doc = measure(a.datasets, a.out)
+        made: dict[str, str] = {}
+        if not a.quick:
+            doc["tool"] = "tools/results.py"
+            (a.out / "sections").mkdir(exist_ok=True)
+            for name in chosen:
+                made[name] = run_section(known[name], a.out, doc)
+                (a.out / "sections" / f"{name}.md").write_text(made[name])
+                print(f"section {name}: made", flush=True)
         (a.out / "results.json").write_text(json.dumps(doc, indent=1) + "\n")
         (a.out / "results.md").write_text(markdown(doc))
         if a.write_docs:
             write_docs(doc)
+            write_sections(made)
         print(markdown(doc))
         return 0
     return one_line_errors("results", run)

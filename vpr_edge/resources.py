@@ -11,7 +11,7 @@ from pathlib import Path
 from vpr_edge.errors import VprError
 
 LARGE_MODEL_FILE = "efficientnet_lite0_stage5_320x240.onnx"
-# the same tap exported at a quarter of the pixels, for small cameras (docs/results.md, "Input size")
+# the same tap exported at a quarter of the pixels, for small cameras (docs/results.md, "The default")
 SMALL_MODEL_FILE = "efficientnet_lite0_stage5_160x120.onnx"
 # the bundled fp32 models by input (width, height); each has an int8 form beside it (int8_form)
 MODEL_FILES = {(160, 120): SMALL_MODEL_FILE, (320, 240): LARGE_MODEL_FILE}

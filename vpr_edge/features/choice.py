@@ -1,6 +1,6 @@
 """Which model a cnn front end runs: the bundled input size that suits the camera (build-map), and the
 model's int8 form where the CPU has int8 dot-product instructions (every command that describes frames).
-Measurements behind both policies: docs/results.md, "One default"."""
+Measurements behind both policies: docs/results.md, "The default"."""
 from __future__ import annotations
 
 import platform
@@ -12,7 +12,7 @@ from vpr_edge.resources import MODEL_FILES, bundled_model, int8_form
 
 PRECISIONS = ("fp32", "int8", "auto")
 # fp32 by default: it meets the time budget on its own, and the int8 form costs Corridor's streams up to
-# 0.06 R@1 (docs/results.md, "One default"); auto takes int8 where the CPU has int8 dot products.
+# 0.06 R@1 (docs/results.md, "The default"); auto takes int8 where the CPU has int8 dot products.
 DEFAULT_PRECISION = "fp32"
 
 
