@@ -77,6 +77,10 @@ SECTIONS = (
     Section("e2e-corridor", "bench_e2e.py", ("--streams", "{corridor}", "--config", "default=", "--config",
                                              "default-int8=|--precision int8", "--out", "{out}/e2e-corridor")),
     Section("drives", "compare_drives.py", ("--streams", "{nordland-dev}", "{corridor}", "--drives", "4")),
+    Section("drives-append", "compare_drives.py", ("--streams", "{nordland-dev}", "{corridor}", "--kinds",
+                                                   "aligned,speed2,speed3,variable", "--append-seeds", "4")),
+    Section("fleet", "bench_fleet.py", ("--refs", "{nordland-dev}/ref")),
+    Section("fleet-codebook-given", "bench_fleet.py", ("--refs", "{nordland-dev}/ref", "--codebook-first")),
     Section("scale", "bench_scale.py", ("--work", "{out}/scale")),
 )
 
@@ -85,7 +89,9 @@ def run_section(section: Section, out: Path, doc: dict) -> str:
     """Run one section's tool (one BLAS / OpenMP thread, as the timings assume): its output, headed by the
     command, the commit and the machine. Raises VprError naming the tool if it fails."""
     places = {"{corridor}": str(out / "corridor"), "{nordland-dev}": str(out / "nordland-dev"), "{out}": str(out)}
-    args = [places.get(a, a.replace("{out}", str(out))) for a in section.args]
+    args = list(section.args)
+    for key, value in places.items():
+        args = [a.replace(key, value) for a in args]
     shown = " ".join(["python", f"tools/{section.tool}", *[shlex.quote(places_back(a, out)) for a in args]])
     env = os.environ | {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     t0 = time.perf_counter()
@@ -127,7 +133,7 @@ def commit() -> dict:
         except (OSError, subprocess.CalledProcessError):
             return None
     return {"commit": git("rev-parse", "--short", "HEAD"),
-            "dirty": bool(git("status", "--porcelain", "--", "vpr_edge"))}
+            "dirty": bool(git("status", "--porcelain", "--", "vpr_edge", "tools"))}
 
 
 def figures(report) -> dict:
