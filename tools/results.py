@@ -59,6 +59,13 @@ class Section:
     name: str
     tool: str
     args: tuple[str, ...]
+    setup: tuple[tuple[str, ...], ...] = ()   # ``python ARGS`` run first (e.g. exporting a model), same places
+
+
+def _gem(tap: str) -> tuple[str, ...]:
+    """Export the bundled Lite0 cut at ``tap`` with GeM pooling, 160x120, to OUT/models (needs the export extra)."""
+    return ("-m", "vpr_edge_export.onnx_export", "--architecture", "gem", "--backbone", "efficientnet_lite0",
+            "--tap", tap, "--width", "160", "--height", "120", "--out", f"{{out}}/models/lite0_{tap}_gem_160x120.onnx")
 
 
 SECTIONS = (
@@ -72,10 +79,25 @@ SECTIONS = (
                                                     "stream,single")),
     Section("evaluating-corridor", "eval_streams.py", ("--streams", "{corridor}")),
     Section("evaluating-nordland-dev", "eval_streams.py", ("--streams", "{nordland-dev}")),
+    Section("size-nordland-dev", "size_sweep.py", ("--streams", "{nordland-dev}", "--kinds", "all", "--tolerance", "2",
+                                                   "--storages", "int8", "--seeds", "0,1,2", "--modes", "stream",
+                                                   "--configs", "0x128,31x32,62x16,24x41,16x62,12x82,20x49",
+                                                   "--out", "{out}/size/nordland-dev")),
+    Section("size-corridor", "size_sweep.py", ("--streams", "{corridor}", "--kinds", "all", "--tolerance", "2",
+                                               "--storages", "int8", "--seeds", "0,1,2", "--modes", "stream",
+                                               "--configs", "0x128,31x32,62x16,24x41,16x62,12x82,20x49",
+                                               "--out", "{out}/size/corridor")),
+    Section("size-corridor-1", "size_sweep.py", ("--streams", "{corridor}", "--kinds", "all", "--tolerance", "1",
+                                                 "--storages", "int8", "--seeds", "0,1,2", "--modes", "stream",
+                                                 "--configs", "0x128,24x41", "--out", "{out}/size/corridor-1")),
     Section("e2e-nordland-dev", "bench_e2e.py", ("--streams", "{nordland-dev}", "--config", "default=", "--config",
                                                  "default-int8=|--precision int8", "--out", "{out}/e2e-nordland-dev")),
     Section("e2e-corridor", "bench_e2e.py", ("--streams", "{corridor}", "--config", "default=", "--config",
                                              "default-int8=|--precision int8", "--out", "{out}/e2e-corridor")),
+    Section("front-ends", "compare_front_ends.py", ("--streams", "{nordland-dev}", "{corridor}", "--front", "default",
+                                                    "--front", "gem={out}/models/lite0_stage5_gem_160x120.onnx",
+                                                    "--front", "head-gem={out}/models/lite0_head_gem_160x120.onnx"),
+            setup=(_gem("stage5"), _gem("head"))),
     Section("drives", "compare_drives.py", ("--streams", "{nordland-dev}", "{corridor}", "--drives", "4")),
     Section("drives-append", "compare_drives.py", ("--streams", "{nordland-dev}", "{corridor}", "--kinds",
                                                    "aligned,speed2,speed3,variable", "--append-seeds", "4")),
@@ -89,12 +111,25 @@ def run_section(section: Section, out: Path, doc: dict) -> str:
     """Run one section's tool (one BLAS / OpenMP thread, as the timings assume): its output, headed by the
     command, the commit and the machine. Raises VprError naming the tool if it fails."""
     places = {"{corridor}": str(out / "corridor"), "{nordland-dev}": str(out / "nordland-dev"), "{out}": str(out)}
-    args = list(section.args)
-    for key, value in places.items():
-        args = [a.replace(key, value) for a in args]
+    def placed(items: tuple[str, ...]) -> list[str]:
+        out_args = list(items)
+        for key, value in places.items():
+            out_args = [a.replace(key, value) for a in out_args]
+        return out_args
+
+    args = placed(section.args)
     shown = " ".join(["python", f"tools/{section.tool}", *[shlex.quote(places_back(a, out)) for a in args]])
     env = os.environ | {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     t0 = time.perf_counter()
+    for step in section.setup:
+        first = placed(step)
+        for a in first:
+            if a.startswith(str(out)) and a.endswith(".onnx"):
+                Path(a).parent.mkdir(parents=True, exist_ok=True)
+        done = subprocess.run([sys.executable, *first], capture_output=True, text=True, env=env)
+        if done.returncode != 0:
+            last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+            raise VprError(f"section {section.name}: python {' '.join(step[:2])} failed: {last}")
     proc = subprocess.run([sys.executable, str(ROOT / "tools" / section.tool), *args], capture_output=True,
                           text=True, env=env)
     if proc.returncode != 0:
@@ -102,6 +137,8 @@ def run_section(section: Section, out: Path, doc: dict) -> str:
         raise VprError(f"tools/{section.tool} (section {section.name}) failed: {last}")
     took = time.perf_counter() - t0
     doc.setdefault("sections", {})[section.name] = {"command": shown, "seconds": round(took, 1)}
+    for step in reversed(section.setup):
+        shown = " ".join(["python", *[shlex.quote(places_back(a, out)) for a in placed(step)]]) + "`, then `" + shown
     head = (f"Made by `{shown}` at commit {doc['commit']}{' (with local changes)' if doc['dirty'] else ''} on "
             f"{doc['machine']['cpu']} ({doc['machine']['cores']} cores), {doc['date']}, in {took:.0f} s:")
     return head + "\n\n" + proc.stdout.strip() + "\n"
@@ -109,7 +146,7 @@ def run_section(section: Section, out: Path, doc: dict) -> str:
 
 def places_back(arg: str, out: Path) -> str:
     """A path under OUT written as the docs name it (out/...)."""
-    return "out/" + str(Path(arg).relative_to(out)) if arg.startswith(str(out)) else arg
+    return arg.replace(str(out), "out")
 
 
 def machine() -> dict:

@@ -9,7 +9,8 @@ default bundled model, 160x120 (or --model; cached in OUT/local/, re-extracted w
 (``--configs`` entries ``PCA_DIMxCOMPONENTS``, PCA 0 = none) fitted on the references by
 ``map_from_local`` (the function behind ``build-map``) and a storage (how the map keeps the references:
 float32, int8 with a row scale, or sign bits). Each stream is scored by ``evaluate_mode`` (the function
-behind ``vpr-edge evaluate``) with the single and stream matchers. Prints a Markdown table (also OUT/size.md,
+behind ``vpr-edge evaluate``) with the single and stream matchers, each given the map's route and every
+frame's motion cue from its encodings as ``evaluate`` gives them. Prints a Markdown table (also OUT/size.md,
 OUT/size.json): dims, bytes per place, a 100,000-place map's size, fit seconds, then R@1 / AUC per stream
 and mode.
 """
@@ -120,10 +121,11 @@ def main() -> int:
                 row = {"encoding": a.encoding, "alpha": a.alpha, "whiten": not a.no_whiten, "pca": pca, "components": comps, "fit": fit, "seed": seed, "storage": storage,
                        "dim": pm.encoder.dim,
                        "bytes": place_bytes(pm.encoder.dim, storage), "fit_s": round(fit_s, 1)}
+                matchers = {m: get_matcher(m).on_route(pm.stored.in_order()) for m in modes}   # as evaluate runs them
                 for k, (_, truth) in queries.items():
                     sim = stored_similarity(ref_enc, q_enc[k], storage)
-                    for mode in modes:
-                        r = evaluate_mode(get_matcher(mode), sim, truth, a.tolerance)
+                    for mode, matcher in matchers.items():
+                        r = evaluate_mode(matcher, sim, truth, a.tolerance, still=matcher.cue(q_enc[k]))
                         row[f"{k} {mode}"] = (round(r.recall[1], 3), round(r.auc, 3))
                 rows.append(row)
                 print(json.dumps(row), file=sys.stderr, flush=True)
@@ -138,6 +140,18 @@ def main() -> int:
                      f"{r['dim']:,} | "
                      f"{r['bytes']:,} | {r['bytes'] * 100_000 / 1e6:,.0f} MB | {r['fit_s']} | "
                      + " | ".join(f"{r[c][0]:.3f} / {r[c][1]:.3f}" for c in cols) + " |")
+    lines += ["", "Means over the seeds and streams, per mode:", "",
+              "| PCA | components | storage | bytes/place | " + " | ".join(f"{m} R@1 / AUC" for m in modes) + " |",
+              "|---" * (4 + len(modes)) + "|"]
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r["pca"], r["components"], r["storage"]), []).append(r)
+    for (pca, comps, storage), rs in groups.items():
+        means = []
+        for m in modes:
+            cells = [r[f"{k} {m}"] for r in rs for k in kinds]
+            means.append(f"{np.mean([c[0] for c in cells]):.3f} / {np.mean([c[1] for c in cells]):.3f}")
+        lines.append(f"| {pca or 'none'} | {comps} | {storage} | {rs[0]['bytes']:,} | " + " | ".join(means) + " |")
     (a.out / "size.md").write_text("\n".join(lines) + "\n")
     (a.out / "size.json").write_text(json.dumps(rows, indent=1) + "\n")
     print("\n".join(lines))
