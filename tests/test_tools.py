@@ -138,7 +138,8 @@ def test_size_sweep_reports_each_configuration(tmp_path: Path, small_refs: Path,
     (streams / "aligned.csv").write_text("query,references\n" + "".join(f"{i},{i}\n" for i in range(n)))
     out = tool("size_sweep.py", "--streams", str(streams), "--kinds", "aligned", "--configs", "0x4,8x2",
                "--storages", "int8,bits", "--modes", "single", "--out", str(tmp_path / "out"), "--threads", "1")
-    rows = [line.split("|")[1:-1] for line in out.splitlines() if line.startswith("| ") and "PCA" not in line]
+    table, means = out.split("Means over the seeds and streams")
+    rows = [line.split("|")[1:-1] for line in table.splitlines() if line.startswith("| ") and "PCA" not in line]
     assert [(r[0].strip(), r[1].strip(), r[4].strip()) for r in rows] == [
         ("none", "4", "int8"), ("none", "4", "bits"), ("8", "2", "int8"), ("8", "2", "bits")]
     assert [r[6].strip() for r in rows] == ["900", "112", "36", "4"]      # bytes per place: D + 4, D / 8
@@ -146,6 +147,8 @@ def test_size_sweep_reports_each_configuration(tmp_path: Path, small_refs: Path,
     r1 = [float(r[-1].split("/")[0]) for r in rows]
     assert min(r1[:2]) >= 0.7 and all(0.0 <= v <= 1.0 for v in r1)      # the sample's queries are found
     assert r1[0] > r1[2]                                                   # 896 dims beat 32
+    mean_rows = [line.split("|")[1:-1] for line in means.splitlines() if line.startswith("| ") and "PCA" not in line]
+    assert [float(r[-1].split("/")[0]) for r in mean_rows] == r1            # one seed, one stream: the rows
     assert (tmp_path / "out" / "size.json").exists() and (tmp_path / "out" / "local" / "ref" / "local.npy").exists()
 
 
