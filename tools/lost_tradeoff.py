@@ -69,13 +69,16 @@ def _locks(text: str, vary: str = "lock") -> list[float]:
 
 def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, inputs checked first: --locks, --param, each folder's map and streams."""
-    numeric = [k for k, p in STREAM.items() if isinstance(p.default, float)]
+    numeric = [k for k, p in STREAM.items() if isinstance(p.default, (int, float)) and not isinstance(p.default, bool)]
     if a.vary not in numeric:
         raise VprError(f"--vary {a.vary!r}: not a numeric stream parameter ({', '.join(numeric)})")
     locks = _locks(a.locks, a.vary)
+    kind = type(STREAM[a.vary].default)   # an int parameter (e.g. still_memory) takes whole values
+    if kind is int and any(x != int(x) for x in locks):
+        raise VprError(f"--values: {a.vary} takes whole numbers")
     try:
         fixed = get_matcher("stream").parse_params(a.param)
-        get_matcher("stream").parse_params([f"{a.vary}={x}" for x in locks])
+        get_matcher("stream").parse_params([f"{a.vary}={kind(x)}" for x in locks])
     except ValueError as e:
         raise VprError(str(e)) from None
     for folder in a.streams:
@@ -85,7 +88,7 @@ def _run(a: argparse.Namespace) -> int:
             raise VprError(f"{folder}: not a derive_streams folder with its map ({missing[0]} is missing)")
     default = float(STREAM[a.vary].default)
     locks = sorted(set(locks) | {default})
-    modes = {f"{a.vary}={x:g}": get_matcher("stream").with_params(**fixed | {a.vary: x}) for x in locks}
+    modes = {f"{a.vary}={x:g}": get_matcher("stream").with_params(**fixed | {a.vary: kind(x)}) for x in locks}
     print(f"stream matcher{''.join(f' {k}={v}' for k, v in fixed.items())}, tolerance {a.tolerance}; "
           "worst stream in brackets\n")
     print(f"| dataset | `{a.vary}` | detour unmapped lost | exit frames | re-lock frames | min answered right "

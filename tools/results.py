@@ -60,6 +60,7 @@ class Section:
     tool: str
     args: tuple[str, ...]
     setup: tuple[tuple[str, ...], ...] = ()   # ``python ARGS`` run first (e.g. exporting a model), same places
+    fenced: bool = False                      # the tool prints plain text, not Markdown: kept as a code block
 
 
 def _gem(tap: str) -> tuple[str, ...]:
@@ -68,6 +69,9 @@ def _gem(tap: str) -> tuple[str, ...]:
             "--tap", tap, "--width", "160", "--height", "120", "--out", f"{{out}}/models/lite0_{tap}_gem_160x120.onnx")
 
 
+_INDEX_BENCH = ("--refs", "100000", "--frames", "5000", "--dim", "512", "--storage", "int8", "--walk", "0.9",
+                "--noise", "1.0", "--cue", "--checkpoints", "5000")
+
 SECTIONS = (
     Section("lost-line", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "evidence",
                                               "--values=-99,1,1.25,1.5,1.75,2")),
@@ -75,6 +79,8 @@ SECTIONS = (
                                               "--values=5,6,6.5,7,7.5,8")),
     Section("lost-still", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "still",
                                                "--values=0.3,0.4,0.5,0.6,0.7")),
+    Section("lost-still-memory", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary",
+                                                      "still_memory", "--values=10,30,100")),
     Section("calibration", "calibration_check.py", ("--streams", "{corridor}", "{nordland-dev}", "--modes",
                                                     "stream,single")),
     Section("evaluating-corridor", "eval_streams.py", ("--streams", "{corridor}")),
@@ -104,6 +110,8 @@ SECTIONS = (
     Section("fleet", "bench_fleet.py", ("--refs", "{nordland-dev}/ref")),
     Section("fleet-codebook-given", "bench_fleet.py", ("--refs", "{nordland-dev}/ref", "--codebook-first")),
     Section("scale", "bench_scale.py", ("--work", "{out}/scale")),
+    Section("index-100k-whole", "bench_matcher.py", _INDEX_BENCH, fenced=True),
+    Section("index-100k", "bench_matcher.py", (*_INDEX_BENCH, "--index"), fenced=True),
 )
 
 
@@ -141,7 +149,8 @@ def run_section(section: Section, out: Path, doc: dict) -> str:
         shown = " ".join(["python", *[shlex.quote(places_back(a, out)) for a in placed(step)]]) + "`, then `" + shown
     head = (f"Made by `{shown}` at commit {doc['commit']}{' (with local changes)' if doc['dirty'] else ''} on "
             f"{doc['machine']['cpu']} ({doc['machine']['cores']} cores), {doc['date']}, in {took:.0f} s:")
-    return head + "\n\n" + proc.stdout.strip() + "\n"
+    text = proc.stdout.strip()
+    return head + "\n\n" + (f"```\n{text}\n```" if section.fenced else text) + "\n"
 
 
 def places_back(arg: str, out: Path) -> str:
