@@ -50,9 +50,12 @@ def test_bench_matcher_reports_each_checkpoint(mapped: bool, tmp_path: Path) -> 
 def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     out = tool("bench_scale.py", "--work", str(tmp_path), "--places", "3000", "--frames", "300", "--dim", "32",
                "--noise", "0.7", "--checkpoints", "100,300")
-    assert "build-map:" in out and "x the yardstick" in out and "after 300 frames: RssAnon" in out
-    r_at_1 = float(out.split("R@1 +-2 over mapped frames ")[1].split(";")[0])
-    lost = float(out.split("off-map frames lost ")[1].split(";")[0])
+    rows = {r.split(" | ")[0].strip("| "): r.split(" | ")[1] for r in out.splitlines() if r.startswith("| ")}
+    assert "x the yardstick" in rows["a frame's match (`push_encoding`), mean / p50 / p99 / max"]
+    assert any(k.startswith("`build-map ROUTE.npy`") for k in rows)
+    assert rows["RssAnon in process after 100 / 300 frames"].endswith(" MB")
+    r_at_1 = float(rows["R@1 +-2 over mapped frames; answers given right; mapped frames answered right"].split(";")[0])
+    lost = float(rows["off-map frames reported lost; first lost frame after leaving"].split(";")[0])
     assert r_at_1 > 0.5 and lost > 0.5                       # the hard stream is followed, its detours lost
 
 

@@ -143,34 +143,47 @@ def main() -> int:
     if not route.exists():
         t0 = time.perf_counter()
         write_route(route, a.places, a.dim, seed=a.seed)
-        print(f"route written in {time.perf_counter() - t0:.1f} s: {route}")
+        print(f"route written in {time.perf_counter() - t0:.1f} s: {route}", file=sys.stderr)
     if not queries.exists() or not truth.exists():
         write_stream(route, plan_stream(a.places, a.frames, a.seed), queries, truth, noise=a.noise, seed=a.seed)
-    print(f"route {a.places} places x {a.dim} dims, stream {a.frames} frames, noise {a.noise:g}")
+    rows: list[tuple[str, str, str]] = []
     if not (a.skip_build and map_path.exists()):
         built = run_command(["build-map", str(route), "-o", str(map_path)])
-        print(f"build-map: {built['wall_s']:.1f} s wall, peak RSS {built['peak_rss_mb']:.0f} MB, RssAnon max "
-              f"{built['anon_max_mb']:.0f} MB; map {map_path.stat().st_size / 1e6:.0f} MB", flush=True)
+        rows += [("`build-map ROUTE.npy` (its index included), wall", f"{built['wall_s']:.1f} s", "<= 120 s"),
+                 ("`build-map` peak RSS / RssAnon max",
+                  f"{built['peak_rss_mb']:,.0f} MB / {built['anon_max_mb']:,.0f} MB "
+                  f"(a {map_path.stat().st_size / 1e6:,.0f} MB map)", "bounded (never the float32 matrix)")]
     located = run_command(["localize", "--map", str(map_path), "--stream", str(queries), "--threads", "1",
                            "-o", str(out)])
     checkpoints = sorted(int(c) for c in a.checkpoints.split(","))
     ms, marks = per_frame(map_path, queries, checkpoints)
     yard = yardstick_ms()
     cmd_ms = 1e3 * located["wall_s"] / a.frames
-    print(f"yardstick (one fp32 inference, 320x240, one thread): {yard:.2f} ms")
-    print(f"localize --threads 1, whole command: {located['wall_s']:.1f} s = {cmd_ms:.2f} ms a frame "
-          f"({cmd_ms / yard:.2f}x the yardstick); RssAnon max {located['anon_max_mb']:.0f} MB, last "
-          f"{located['anon_last_mb']:.0f} MB; RssFile max {located['file_max_mb']:.0f} MB; peak RSS "
-          f"{located['peak_rss_mb']:.0f} MB")
     p50, p99, top = np.percentile(ms, 50), np.percentile(ms, 99), ms.max()
-    print(f"a frame's match (push_encoding): mean {ms.mean():.2f}, p50 {p50:.2f}, p99 {p99:.2f}, max {top:.1f} ms "
-          f"({ms.mean() / yard:.2f}x / {p50 / yard:.2f}x / {p99 / yard:.2f}x / {top / yard:.2f}x the yardstick)")
-    for frame, anon, file in marks:
-        print(f"  after {frame} frames: RssAnon {anon:.0f} MB, RssFile {file:.0f} MB")
     s = score(out, truth)
-    print(f"R@1 +-2 over mapped frames {s['r_at_1']:.3f}; answers given right {s['answered_right']:.3f}; mapped "
-          f"frames answered right {s['mapped_right']:.3f}; off-map frames lost {s['offmap_lost']:.3f}; first lost "
-          f"frame after leaving {s['exit_frames']}; first right answer after (re-)entering {s['relock_frames']}")
+    rows += [
+        ("yardstick: one fp32 inference, 320x240, one thread", f"{yard:.2f} ms", ""),
+        (f"`localize --threads 1` over the {a.frames:,} frames, whole command (start-up included)",
+         f"{located['wall_s']:.1f} s: {cmd_ms:.2f} ms a frame, {cmd_ms / yard:.2f}x the yardstick", "<= 0.35x"),
+        ("`localize` RssAnon max / last; RssFile max (sampled every 0.2 s); peak RSS",
+         f"{located['anon_max_mb']:.0f} / {located['anon_last_mb']:.0f} MB; {located['file_max_mb']:.0f} MB; "
+         f"{located['peak_rss_mb']:,.0f} MB", "RssAnon <= 250 MB"),
+        ("a frame's match (`push_encoding`), mean / p50 / p99 / max",
+         f"{ms.mean():.2f} / {p50:.2f} / {p99:.2f} / {top:.1f} ms (max {top / yard:.2f}x the yardstick)",
+         "no frame over 3x"),
+        ("RssAnon in process after " + " / ".join(f"{f:,}" for f, _, _ in marks) + " frames",
+         " / ".join(f"{anon:.0f}" for _, anon, _ in marks) + " MB", "flat"),
+        ("R@1 +-2 over mapped frames; answers given right; mapped frames answered right",
+         f"{s['r_at_1']:.3f}; {s['answered_right']:.3f}; {s['mapped_right']:.3f}", ">= 0.95"),
+        ("off-map frames reported lost; first lost frame after leaving",
+         f"{s['offmap_lost']:.3f}; " + " and ".join(f"{x:.0f}" for x in s["exit_frames"]) + " frames", ">= 0.90"),
+        ("first right answer after the cold start / each re-entry",
+         " / ".join(f"{x:.0f}" for x in s["relock_frames"]) + " frames", "re-lock <= 10"),
+    ]
+    print(f"route of {a.places:,} places x {a.dim} dims, stream of {a.frames:,} frames, noise {a.noise:g}\n")
+    print("| | measured | target |\n|---|---|---|")
+    for what, measured, target in rows:
+        print(f"| {what} | {measured} | {target} |")
     return 0
 
 

@@ -110,6 +110,7 @@ SECTIONS = (
     Section("fleet", "bench_fleet.py", ("--refs", "{nordland-dev}/ref")),
     Section("fleet-codebook-given", "bench_fleet.py", ("--refs", "{nordland-dev}/ref", "--codebook-first")),
     Section("scale", "bench_scale.py", ("--work", "{out}/scale")),
+    Section("scale-100k-frames", "bench_scale.py", ("--work", "{out}/scale", "--skip-build", "--frames", "100000")),
     Section("index-100k-whole", "bench_matcher.py", _INDEX_BENCH, fenced=True),
     Section("index-100k", "bench_matcher.py", (*_INDEX_BENCH, "--index"), fenced=True),
 )
