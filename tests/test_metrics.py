@@ -154,7 +154,7 @@ def test_calibration_recovers_a_known_curve_and_its_error_elsewhere() -> None:
 
     rng = np.random.default_rng(11)
     s = rng.random(20_000)
-    curve = fit(s, rng.random(20_000) < s, tolerance=2)
+    curve = fit(s, rng.random(20_000) < s, tolerance=2, method="isotonic")
     grid = np.linspace(0.05, 0.95, 19)
     assert np.abs(np.array([curve(x) for x in grid]) - grid).max() < 0.06
     np.testing.assert_array_equal(curve.of(grid), [curve(x) for x in grid])     # the array form, the same values
@@ -163,3 +163,38 @@ def test_calibration_recovers_a_known_curve_and_its_error_elsewhere() -> None:
     assert reliability(conf, rng.random(20_000) < fresh)[0] < 0.02
     ece_elsewhere = reliability(conf, rng.random(20_000) < fresh ** 2)[0]
     assert ece_elsewhere == pytest.approx(1 / 6, abs=0.02)
+
+
+def test_logistic_calibration_against_scikit_learn_and_known_curves() -> None:
+    """Platt scaling: a known logistic curve is recovered; its coefficients are scikit-learn's logistic
+    regression with the same penalty on the slope; only the answers given are fitted; a score that says less
+    when higher gives a flat curve at the share right; every answer right (or none) a finite, flat one."""
+    from sklearn.linear_model import LogisticRegression
+
+    from vpr_edge.calibration import fit, logistic
+
+    rng = np.random.default_rng(5)
+    s = rng.uniform(0, 2, 30_000)
+    p = 1 / (1 + np.exp(-(4 * s - 3)))
+    ok = rng.random(len(s)) < p
+    a, b = logistic(s, ok)
+    assert a == pytest.approx(4, abs=0.2) and b == pytest.approx(-3, abs=0.2)
+    curve = fit(s, ok, tolerance=2)
+    assert np.abs(curve.of(s[:1000]) - p[:1000]).max() < 0.03 and (np.diff(curve.confidence) >= 0).all()
+    for ridge in (1e-3, 10.0):   # scikit-learn: 0.5 * |coef|^2 / C plus the log loss, the intercept free
+        a, b = logistic(s[:3000], ok[:3000], ridge=ridge)
+        ref = LogisticRegression(C=1 / ridge, tol=1e-12, max_iter=10_000).fit(s[:3000, None], ok[:3000])
+        assert a == pytest.approx(ref.coef_[0, 0], rel=1e-4) and b == pytest.approx(ref.intercept_[0], rel=1e-4)
+    # lost frames (answered False) do not move the fit
+    lost = rng.random(len(s)) < 0.3
+    given = fit(s, np.where(lost, ~ok, ok), 2, answered=~lost)
+    assert given.n == int((~lost).sum()) and np.abs(given.of(s[:1000]) - p[:1000]).max() < 0.05
+    # a higher score meaning less: flat at the share right; all right / none right: finite and flat
+    flat = fit(s, ~ok, 2)
+    assert np.ptp(flat.confidence) == 0 and flat.confidence[0] == pytest.approx((~ok).mean(), abs=1e-9)
+    for labels, want in ((np.ones(len(s), bool), 30_001 / 30_002), (np.zeros(len(s), bool), 1 / 30_002)):
+        c = fit(s, labels, 2)
+        assert np.ptp(c.confidence) == 0 and c.confidence[0] == pytest.approx(want)
+    assert fit(s, ok, 2, answered=np.zeros(len(s), bool)).n == 0
+    with pytest.raises(ValueError, match="calibration method 'nope'"):
+        fit(s, ok, 2, method="nope")

@@ -51,7 +51,8 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     out = tool("bench_scale.py", "--work", str(tmp_path), "--places", "3000", "--frames", "300", "--dim", "32",
                "--noise", "0.7", "--checkpoints", "100,300")
     rows = {r.split(" | ")[0].strip("| "): r.split(" | ")[1] for r in out.splitlines() if r.startswith("| ")}
-    assert "x the yardstick" in rows["a frame's match (`push_encoding`), mean / p50 / p99 / max"]
+    assert "x the yardstick" in rows["a frame's match (`push_encoding`), mean / p50 / p99 / max; max after the "
+                                     "first 10 frames"]
     assert any(k.startswith("`build-map ROUTE.npy`") for k in rows)
     assert rows["RssAnon in process after 100 / 300 frames"].endswith(" MB")
     r_at_1 = float(rows["R@1 +-2 over mapped frames; answers given right; mapped frames answered right"].split(";")[0])
@@ -228,10 +229,11 @@ def test_bench_e2e_and_calibration_check(tmp_path: Path, small_refs: Path, small
                 shutil.copytree(src, tmp_path / name / kind)
                 shutil.copy(streams / f"{src.name}.csv", tmp_path / name / f"{kind}.csv")
     text = tool("calibration_check.py", "--streams", str(tmp_path / "one"), str(tmp_path / "two"), "--modes",
-                "stream", "--write", str(tmp_path / "cal"))
+                "stream", "--fits", "logistic,isotonic", "--write", str(tmp_path / "cal"))
+    assert "stream, tolerance 2, logistic fit" in text and "stream, tolerance 2, isotonic fit" in text
     rows = [line.split("|") for line in text.splitlines() if line.startswith("| one") or line.startswith("| two")]
     ece = slice(3, 3 + len(KINDS) + 1)   # per stream and all
-    assert len(rows) == 4 and all(r[ece] == r2[ece] for r, r2 in zip(rows[::2], rows[1::2]))   # same ECEs
+    assert len(rows) == 8 and all(r[ece] == r2[ece] for r, r2 in zip(rows[::2], rows[1::2]))   # same ECEs
     assert json.loads((tmp_path / "cal" / "one.json").read_text())["kind"] == "calibration"
     text = tool("lost_tradeoff.py", "--streams", str(tmp_path / "one"), "--locks", "5,6")
     rows = [line.split("|")[1:-1] for line in text.splitlines() if line.startswith("| one")]

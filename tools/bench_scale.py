@@ -160,6 +160,7 @@ def main() -> int:
     yard = yardstick_ms()
     cmd_ms = 1e3 * located["wall_s"] / a.frames
     p50, p99, top = np.percentile(ms, 50), np.percentile(ms, 99), ms.max()
+    warm = ms[10:].max() if len(ms) > 10 else float("nan")   # past the first reads of a cold page cache
     s = score(out, truth)
     rows += [
         ("yardstick: one fp32 inference, 320x240, one thread", f"{yard:.2f} ms", ""),
@@ -168,9 +169,9 @@ def main() -> int:
         ("`localize` RssAnon max / last; RssFile max (sampled every 0.2 s); peak RSS",
          f"{located['anon_max_mb']:.0f} / {located['anon_last_mb']:.0f} MB; {located['file_max_mb']:.0f} MB; "
          f"{located['peak_rss_mb']:,.0f} MB", "RssAnon <= 250 MB"),
-        ("a frame's match (`push_encoding`), mean / p50 / p99 / max",
-         f"{ms.mean():.2f} / {p50:.2f} / {p99:.2f} / {top:.1f} ms (max {top / yard:.2f}x the yardstick)",
-         "no frame over 3x"),
+        ("a frame's match (`push_encoding`), mean / p50 / p99 / max; max after the first 10 frames",
+         f"{ms.mean():.2f} / {p50:.2f} / {p99:.2f} / {top:.1f} ms (frame {int(ms.argmax())}: {top / yard:.2f}x the "
+         f"yardstick); {warm:.1f} ms ({warm / yard:.2f}x)", "no frame over 3x"),
         ("RssAnon in process after " + " / ".join(f"{f:,}" for f, _, _ in marks) + " frames",
          " / ".join(f"{anon:.0f}" for _, anon, _ in marks) + " MB", "flat"),
         ("R@1 +-2 over mapped frames; answers given right; mapped frames answered right",

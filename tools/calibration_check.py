@@ -5,10 +5,11 @@
 
 For each mode, the answers of every derived stream of one dataset (``evaluate``, the function behind
 ``vpr-edge evaluate``, on STREAMS/KIND with the map STREAMS/map.npz and ground truth STREAMS/KIND.csv, so the
-stream mode gets its motion cue as ``localize`` does) are pooled and a calibration is fitted on them (``vpr_edge.calibration.fit``,
-what ``evaluate --save-calibration`` writes); it is then scored on every stream of the other dataset and of
-its own: the expected calibration error (``metrics.reliability``, 10 bins), the share of answered frames
-right and of mapped frames answered right at the mode's lost threshold. ``--write DIR`` keeps each fitted
+stream mode gets its motion cue as ``localize`` does) are pooled and a calibration is fitted on their answers given (``vpr_edge.calibration.fit``, what ``evaluate
+--save-calibration`` writes; each fit of ``--fits``); it is then scored on every stream of the other dataset
+and of its own: the expected calibration error over the answers given (``metrics.reliability``, 10 bins;
+a lost frame carries no confidence), the share of answered frames right and of mapped frames answered right
+at the mode's lost threshold. ``--write DIR`` keeps each fitted
 calibration as DIR/DS.json (for ``localize --calibration`` / ``evaluate --calibration``).
 """
 from __future__ import annotations
@@ -32,35 +33,42 @@ def main() -> int:
                    help="two derive_streams folders (DS = name), each with its map.npz")
     p.add_argument("--modes", default="stream,single")
     p.add_argument("--tolerance", type=int, default=2)
+    p.add_argument("--fits", default=calibration.DEFAULT_METHOD,
+                   help=f"calibration fits, comma-separated ({', '.join(calibration.METHODS)})")
     p.add_argument("--write", type=Path, default=None)
     a = p.parse_args()
+    fits = [f for f in a.fits.split(",") if f]
+    if not fits or any(f not in calibration.METHODS for f in fits):
+        p.error(f"--fits {a.fits!r}: choose from {', '.join(calibration.METHODS)}")
     modes = {m: get_matcher(m) for m in a.modes.split(",")}
     every = {}
     for folder in a.streams:
         for kind in KINDS:
             every[folder.name, kind] = evaluate(Source(map=folder / "map.npz", queries=folder / kind),
                                                 Truth(gt=folder / f"{kind}.csv"), modes, a.tolerance).reports
-    for mode in modes:
+    for mode, fit in ((m, f) for m in modes for f in fits):
         reports = {key: r[mode] for key, r in every.items()}
         curves = {}
         for folder in a.streams:
             mine = [r for (ds, _), r in reports.items() if ds == folder.name]
             curves[folder.name] = calibration.fit(np.concatenate([r.scores for r in mine]),
-                                                  np.concatenate([r.correct for r in mine]), a.tolerance)
+                                                  np.concatenate([r.correct for r in mine]), a.tolerance,
+                                                  np.concatenate([~r.lost for r in mine]), fit)
             if a.write:
                 a.write.mkdir(parents=True, exist_ok=True)
                 calibration.write(a.write / f"{folder.name}.json", {mode: curves[folder.name]},
-                                  f"{folder} (all derived streams)")
-        print(f"\n{mode}, tolerance {a.tolerance}: ECE of the confidence per stream, calibrated on each dataset\n")
+                                  f"{folder} (all derived streams)", fit)
+        print(f"\n{mode}, tolerance {a.tolerance}, {fit} fit: ECE of the confidence over the answers given per "
+              f"stream, calibrated on each dataset\n")
         print("| scored on | calibrated on | " + " | ".join(KINDS) + " | all | answered right | mapped right |")
         print("|---|---|" + "---|" * (len(KINDS) + 3))
         for folder in a.streams:
             mine = [reports[folder.name, k] for k in KINDS]
             for fitted in a.streams:
                 curve = curves[fitted.name]
-                eces = [metrics.reliability(curve.of(r.scores), r.correct)[0] for r in mine]
-                pooled = metrics.reliability(curve.of(np.concatenate([r.scores for r in mine])),
-                                             np.concatenate([r.correct for r in mine]))[0]
+                eces = [metrics.reliability(curve.of(r.scores[~r.lost]), r.correct[~r.lost])[0] for r in mine]
+                pooled = metrics.reliability(curve.of(np.concatenate([r.scores[~r.lost] for r in mine])),
+                                             np.concatenate([r.correct[~r.lost] for r in mine]))[0]
                 own = " (own)" if fitted == folder else ""
                 print(f"| {folder.name} | {fitted.name}{own} | " + " | ".join(f"{e:.3f}" for e in eces)
                       + f" | {pooled:.3f} | " + " / ".join(f"{r.answered_right:.3f}" for r in mine)

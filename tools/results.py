@@ -82,7 +82,7 @@ SECTIONS = (
     Section("lost-still-memory", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary",
                                                       "still_memory", "--values=10,30,100")),
     Section("calibration", "calibration_check.py", ("--streams", "{corridor}", "{nordland-dev}", "--modes",
-                                                    "stream,single")),
+                                                    "stream,single", "--fits", "logistic,isotonic")),
     Section("evaluating-corridor", "eval_streams.py", ("--streams", "{corridor}")),
     Section("evaluating-nordland-dev", "eval_streams.py", ("--streams", "{nordland-dev}")),
     Section("size-nordland-dev", "size_sweep.py", ("--streams", "{nordland-dev}", "--kinds", "all", "--tolerance", "2",

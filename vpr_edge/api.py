@@ -18,6 +18,9 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+# np.unique imports numpy.ma on its first call (numpy 2): imported with the chain, so that a vehicle's first
+# frame does not pay for it (15 ms, a whole-route frame's cost again)
+import numpy.ma  # noqa: F401
 
 from vpr_edge.errors import VprError, printable
 from vpr_edge.features import FrontEnd

@@ -5,9 +5,13 @@ measured on a labelled drive of the route (``evaluate --save-calibration``) and 
 Each mode's score means something of its own (a cosine, a path margin, a trajectory's evidence), so no
 threshold carries from one mode, or one route, to another. Calibration maps a mode's score to the share of
 answers with that score that were right (within the evaluation's tolerance; an answer for a place not in the
-map is wrong), fitted by isotonic regression (pool-adjacent-violators: the best non-decreasing fit in least
-squares), so a higher score never means a lower confidence. Between the fitted scores the confidence is
-interpolated linearly; beyond them it is the end value.
+map is wrong). Only answers given carry a confidence (a lost frame has none), so only they are fitted.
+Two fits (``METHODS``): ``logistic`` (Platt scaling, p = 1 / (1 + exp(-(a * score + b))) with a >= 0, two
+numbers, the default: it carries to another route better than a curve fitted to one route's every step,
+docs/results.md, "Confidence across datasets") and ``isotonic`` (pool-adjacent-violators: the best
+non-decreasing fit in least squares). Either way a higher score never means a lower confidence, and the
+file holds the curve as points: between them the confidence is interpolated linearly, beyond them it is the
+end value.
 """
 from __future__ import annotations
 
@@ -22,6 +26,10 @@ from vpr_edge.errors import VprError
 from vpr_edge.files import atomic_output
 
 CALIBRATION_SCHEMA = 1
+METHODS = ("logistic", "isotonic")
+DEFAULT_METHOD = "logistic"
+_POINTS = 129                   # a logistic fit written as this many points, evenly spaced in log-odds
+_LOGIT_SPAN = math.log(999)     # ... from confidence 0.001 to 0.999
 
 
 def isotonic(scores: np.ndarray, correct: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -65,14 +73,62 @@ class Curve:
         return np.interp(np.asarray(scores, np.float64), self.scores, self.confidence)
 
 
-def fit(scores: np.ndarray, correct: np.ndarray, tolerance: int) -> Curve:
-    x, y = isotonic(scores, correct)
-    return Curve(x, y, len(scores), tolerance)
+def logistic(scores: np.ndarray, correct: np.ndarray, ridge: float = 1e-3,
+             iterations: int = 100) -> tuple[float, float]:
+    """Platt scaling over answers (Q,): (a, b) maximising the likelihood of ``correct`` under p(score) =
+    1 / (1 + exp(-(a * score + b))), less ``ridge`` * a^2 / 2 (only so that answers split by the score stay
+    finite), by Newton's method. Every answer right (or none): a = 0 and p the share right with one right
+    and one wrong answer added (Laplace). a >= 0: where a higher score means worse, a = 0, b the log-odds."""
+    s = np.asarray(scores, np.float64)
+    ok = np.asarray(correct, bool)
+    share = (ok.sum() + 1) / (len(ok) + 2)
+    flat = (0.0, math.log(share / (1 - share)))
+    if ok.all() or not ok.any():
+        return flat
+    x = np.column_stack([s, np.ones_like(s)])
+    y = ok.astype(np.float64)
+    w = np.array([0.0, math.log(y.mean() / (1 - y.mean()))])
+    penalty = np.diag([ridge, 0.0])
+    for _ in range(iterations):
+        p = 1 / (1 + np.exp(-np.clip(x @ w, -50, 50)))
+        hess = (x * (p * (1 - p))[:, None]).T @ x + penalty + 1e-12 * np.eye(2)
+        step = np.linalg.solve(hess, x.T @ (y - p) - penalty @ w)
+        w += step
+        if np.abs(step).max() < 1e-10:
+            break
+    if not (np.isfinite(w).all() and w[0] >= 0):
+        return flat[0], math.log(y.mean() / (1 - y.mean()))
+    return float(w[0]), float(w[1])
 
 
-def write(path: str | os.PathLike[str], curves: dict[str, Curve], source: str) -> None:
-    """The calibration file: JSON with ``kind``, ``schema`` and per mode its curve, written atomically."""
-    doc = {"kind": "calibration", "schema": CALIBRATION_SCHEMA, "source": source,
+def fit(scores: np.ndarray, correct: np.ndarray, tolerance: int, answered: np.ndarray | None = None,
+        method: str = DEFAULT_METHOD) -> Curve:
+    """A mode's calibration from its answers' ``scores`` (Q,) and whether each was right (Q,) bool, fitted on
+    the ``answered`` (Q,) bool ones (None: all; the rest are lost frames, which carry no confidence) by
+    ``method`` (``METHODS``). No answer at all: the confidence is 0 everywhere."""
+    if method not in METHODS:
+        raise ValueError(f"calibration method {method!r}: expected one of {', '.join(METHODS)}")
+    keep = np.ones(len(scores), bool) if answered is None else np.asarray(answered, bool)
+    s, ok = np.asarray(scores, np.float64)[keep], np.asarray(correct, bool)[keep]
+    if len(s) == 0:
+        return Curve(np.zeros(1), np.zeros(1), 0, tolerance)
+    if method == "isotonic":
+        x, y = isotonic(s, ok)
+    else:
+        a, b = logistic(s, ok)
+        if a > 0:   # the logistic itself wherever it is between 0.001 and 0.999 (beyond: those values)
+            x = (np.linspace(-_LOGIT_SPAN, _LOGIT_SPAN, _POINTS) - b) / a
+        else:
+            x = np.array([float(np.median(s))])
+        y = 1 / (1 + np.exp(-np.clip(a * x + b, -50, 50)))
+    return Curve(x, y, len(s), tolerance)
+
+
+def write(path: str | os.PathLike[str], curves: dict[str, Curve], source: str,
+          method: str = DEFAULT_METHOD) -> None:
+    """The calibration file: JSON with ``kind``, ``schema``, the fit's ``method`` (for the reader; the curve is
+    all that is applied) and per mode its curve, written atomically."""
+    doc = {"kind": "calibration", "schema": CALIBRATION_SCHEMA, "source": source, "method": method,
            "modes": {name: {"scores": c.scores.round(6).tolist(), "confidence": c.confidence.round(6).tolist(),
                             "n": c.n, "tolerance": c.tolerance} for name, c in curves.items()}}
     with atomic_output(path) as tmp:

@@ -7,6 +7,7 @@ from typing import Optional
 
 import typer
 
+from vpr_edge.calibration import DEFAULT_METHOD, METHODS
 from vpr_edge.cli.common import (LIST_PARAMS, PARAM_HELP, PRECISION_HELP, THREADS_HELP, PrecisionOpt, app,
                                  param_options_for_all, user_errors)
 from vpr_edge.errors import VprError, printable, warn
@@ -23,6 +24,9 @@ from vpr_edge.threads import use_threads
 class FeaturesOpt(str, Enum):
     map = "map"
     pixels = "pixels"
+
+
+FitOpt = Enum("FitOpt", {m: m for m in METHODS}, type=str)   # the calibration fits, by name
 
 
 @app.command("evaluate")
@@ -74,7 +78,11 @@ def evaluate_cmd(
                                              "this PNG (plot extra)."),
     calibration_text: Optional[str] = typer.Option(None, "--save-calibration", help="Write each mode's "
                                                    "calibration here (score -> probability the answer is right, "
-                                                   "on these frames), for localize --calibration."),
+                                                   "on these frames' answers given), for localize "
+                                                   "--calibration."),
+    calibration_fit: FitOpt = typer.Option(DEFAULT_METHOD, "--calibration-fit", help="How --save-calibration "
+                                           "fits: logistic (Platt scaling, two numbers; carries to another "
+                                           "route better) or isotonic (a non-decreasing step curve)."),
     calibration_in: Optional[Path] = typer.Option(None, "--calibration", help="A calibration from another drive "
                                                   "or route (evaluate --save-calibration): score each mode's "
                                                   "confidence against these frames (ECE and the reliability "
@@ -155,8 +163,10 @@ def evaluate_cmd(
         if calibration_out:
             from vpr_edge import calibration
 
-            calibration.write(calibration_out, {n: calibration.fit(r.scores, r.correct, tolerance)
-                                                for n, r in result.reports.items()}, source.name)
+            calibration.write(calibration_out, {n: calibration.fit(r.scores, r.correct, tolerance, ~r.lost,
+                                                                   calibration_fit.value)
+                                                for n, r in result.reports.items()}, source.name,
+                              calibration_fit.value)
         if plot_out:
             report.plot(plot_out, result.reports, title)
         if matrix_out:

@@ -70,7 +70,8 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
                   drive: np.ndarray | None = None) -> ModeReport:
     """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics); with the
     references' ``positions``, the error in metres too; with a ``calibration`` (score -> probability right,
-    ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error. ``still`` (Q,): each
+    ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error over the answers
+    given. ``still`` (Q,): each
     frame's motion cue (``Matcher.cue`` of the query encodings; None: a bare similarity matrix). ``drive`` (R,):
     each reference's drive in a map of several (answers within ``tolerance`` count only in the truth's drive)."""
     t0 = time.perf_counter()
@@ -79,8 +80,9 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     threshold = matcher.lost_line(min_confidence)
     report = replace(score_result(result, truth, tolerance, threshold, ms, positions, drive),
                      settings=matcher.params | {"min_confidence": threshold})
-    if calibration is not None:
-        ece, table = metrics.reliability(calibration.of(report.scores), report.correct)
+    if calibration is not None:   # over the answers given: a lost frame carries no confidence
+        given = ~report.lost
+        ece, table = metrics.reliability(calibration.of(report.scores[given]), report.correct[given])
         report = replace(report, ece=ece, reliability=tuple(table))
     return report
 
