@@ -232,10 +232,12 @@ def test_evaluate_reports_lock_on_and_exit_delays() -> None:
 
 
 def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, stop_gain, stop_decay, still=0.0,
-               cues=None, route=None, evidence=None, evidence_decay=None):
+               cues=None, route=None, evidence=None, evidence_decay=None, unique=None):
     """RoadMatcher written as plain loops over states, from its docstring (``cues``: each frame's motion cue,
-    NaN = none; ``route``: the references where the map's drive stood; ``evidence``: None = the default)."""
+    NaN = none; ``route``: the references where the map's drive stood; ``evidence``, ``unique``: None = the
+    default; one drive)."""
     defaults = MATCHERS["stream"].params
+    unique = defaults["unique"] if unique is None else unique
     evidence = defaults["evidence"] if evidence is None else evidence
     evidence_decay = defaults["evidence_decay"] if evidence_decay is None else evidence_decay
     recent = None   # the answer's standing out of its rows, averaged over moving frames
@@ -277,7 +279,8 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, s
         else:   # a standing frame may raise the average, not lower it
             avg = evidence_decay * recent + (1 - evidence_decay) * here
             recent = max(recent, avg) if stands else avg
-        out.append((ref, float(best >= lock and recent >= evidence) + 1 - (rival + 1) / (best + 1)))
+        uniqueness = 1 - (rival + 1) / (best + 1)
+        out.append((ref, float(best >= lock and recent >= evidence and uniqueness >= unique) + uniqueness))
     return out
 
 
@@ -717,7 +720,7 @@ def test_road_matcher_reports_leaving_the_map_within_three_frames() -> None:
 
 
 def naive_road_local(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, window, probe, check, span,
-                     hold, stop_gain, stop_decay, evidence, evidence_decay, **_):
+                     hold, stop_gain, stop_decay, evidence, evidence_decay, unique, **_):
     """RoadMatcher's local search as plain loops, from its docstring (no motion cue): while firmly locked
     (H >= hold * lock, nothing beyond the window half as strong) the next frame reads only the references
     within ``window`` of the answer and the ``probe`` sample (which gives the frame's mean and spread), state
@@ -761,7 +764,9 @@ def naive_road_local(sim, vmax, grid, decay, bias, turn, memory, lock, rival_win
         rival = max([x for r, x in per_ref.items() if abs(r - ref) > rival_window], default=0.0)
         here = max((s[r] - mu) / sd for r in range(max(lo, ref - 1), min(hi, ref + 2)))
         recent = here if recent is None else evidence_decay * recent + (1 - evidence_decay) * here
-        out.append((ref, float(best >= lock and recent >= evidence) + 1 - (rival + 1) / (best + 1), win is not None))
+        uniqueness = 1 - (rival + 1) / (best + 1)
+        out.append((ref, float(best >= lock and recent >= evidence and uniqueness >= unique) + uniqueness,
+                    win is not None))
         far = max([x for r, x in per_ref.items() if abs(r - ref) > w], default=0.0)
         held = bool(w) and best >= hold * lock and far < 0.5 * best
         held_for = held_for + 1 if held else 0
@@ -794,3 +799,28 @@ def test_road_matcher_local_search_against_plain_loops() -> None:
     np.testing.assert_allclose(got.scores, [c for _, c, _ in want], atol=1e-5)
     local = np.array([x for _, _, x in want])
     assert local.mean() > 0.5 and (~local[20:]).any()          # mostly local, with whole-route checks
+
+
+def test_an_answer_with_a_rival_as_strong_along_its_drive_is_lost() -> None:
+    """A route whose second half repeats its first (one drive, a look-alike stretch): every answer has a rival
+    as strong half a route away, so under the default ``unique`` the frames are lost (a coin's toss is not
+    an answer) and with ``unique`` 0 they are given; the same repeat as a second drive (a road driven twice)
+    is no rival, and the answers are given and right on either drive."""
+    from vpr_edge.map.drives import Drives
+    from vpr_edge.matchers.route import RouteGraph
+
+    rng = np.random.default_rng(3)
+    half = rng.normal(0.0, 0.1, (60, 40))
+    truth = np.arange(60) % 40
+    half[np.arange(60), truth] += 1.0
+    sim = np.concatenate([half, half], axis=1)      # references 40..79 are 0..39 again
+    stream = MATCHERS["stream"]
+    assert stream.params["unique"] > 0
+    alone = stream.run(sim, k=1)
+    off = stream.with_params(unique=0.0).run(sim, k=1)
+    d = Drives.of(["a", "b"], [40, 40])
+    twice = replace(stream, graph=RouteGraph(d.n_refs, d.starts, tuple(d.junctions()))).run(sim, k=1)
+    late = slice(20, 40)                            # locked by then, before the route's end
+    assert (alone.scores[late] < 1.0).all()
+    for res in (off, twice):
+        assert (res.scores[late] >= 1.0).all() and ((res.refs[late] % 40) == truth[late]).all()

@@ -77,6 +77,8 @@ SECTIONS = (
                                               "--values=-99,1,1.25,1.5,1.75,2")),
     Section("lost-lock", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "lock",
                                               "--values=5,6,6.5,7,7.5,8")),
+    Section("lost-unique", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "unique",
+                                                "--values=0,0.01,0.02,0.03,0.04,0.05,0.1,0.2,0.3,0.4,0.5")),
     Section("lost-still", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "still",
                                                "--values=0.3,0.4,0.5,0.6,0.7")),
     Section("lost-still-memory", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary",

@@ -48,7 +48,8 @@ of them while the rest of that stop, the same place, went by).
 
 The answer is the position of the best state. Its score does two jobs, so it has two parts:
 
-    score = [H_best >= lock and E >= evidence] + uniqueness,   uniqueness = 1 - (H_rival + 1) / (H_best + 1)
+    score = [H_best >= lock and E >= evidence and uniqueness >= unique] + uniqueness,
+    uniqueness = 1 - (H_rival + 1) / (H_best + 1)
 
 H_best is about the summed excess of z over ``bias`` along the last ~1/(1 - decay) frames: below ``lock``
 no trajectory fits well enough and the frame is lost (the registry's min_confidence is 1.0: "locked").
@@ -60,9 +61,11 @@ raise E, never lower it). H remembers ~1/(1 - decay) frames, so alone it reports
 map lost only after that memory fades; E says so within a frame or two.
 H_rival is the best trajectory ending more than ``rival_window`` references away: like SeqSLAM's
 best/second-best ratio, uniqueness ranks frames by how unambiguous the answer is, which H alone does badly,
-while H decides lost better than uniqueness (docs/design.md, "Matching"). So locked frames rank above
-lost ones, each by uniqueness, and ``--min-confidence`` between 1 and 2 asks for a locked and unambiguous
-answer.
+while H decides lost better than uniqueness (docs/design.md, "Matching"). An answer whose uniqueness is below
+``unique`` (a trajectory elsewhere along the answer's drive nearly as strong: either could be the place) is
+lost too, so that the vehicle is told nothing rather than a coin's toss; a rival on another drive of a map of
+several does not count there, as that drive may be the same road driven again. So locked frames rank above lost ones, each by
+uniqueness, and ``--min-confidence`` between 1 and 2 asks for a more unambiguous answer still.
 
 The max over speeds with the speed penalty is a distance transform (two passes over the speeds), so a frame
 costs O(grid * speeds * R) vectorised work in preallocated buffers, and the state is (grid * speeds + 1) * R
@@ -97,7 +100,7 @@ class RoadMatcher:
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
                  hold: float, seek: int, peaks: int, seek_frames: int, stop_gain: float, stop_decay: float, still: float,
                  still_memory: int,
-                 evidence: float, evidence_decay: float, route: np.ndarray | None = None,
+                 evidence: float, evidence_decay: float, unique: float, route: np.ndarray | None = None,
                  graph: RouteGraph | None = None) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
         ``still_memory`` is the motion cue's, read where the cue is computed). ``route``: (n_refs,) bool, the
@@ -111,6 +114,8 @@ class RoadMatcher:
             raise ValueError(f"need stop_gain in [0, 1] and stop_decay in (0, 1), got {stop_gain}, {stop_decay}")
         if not 0.0 <= evidence_decay < 1.0:
             raise ValueError(f"evidence_decay must be in [0, 1), got {evidence_decay}")
+        if not 0.0 <= unique < 1.0:
+            raise ValueError(f"unique must be in [0, 1), got {unique}")
         if not 0.0 <= still <= 1.0:
             raise ValueError(f"still must be in [0, 1] (0: no motion cue), got {still}")
         if grid < 1 or vmax < 0 or memory < 1 or window < 0 or probe < 2:
@@ -119,7 +124,7 @@ class RoadMatcher:
         self.n_refs, self.grid, self.decay, self.bias = n_refs, grid, decay, bias
         self.turn, self.memory, self.lock, self.rival_window = turn, memory, lock, max(0, int(rival_window))
         self.stop_gain, self.stop_decay, self.still = stop_gain, stop_decay, still
-        self.evidence, self.evidence_decay = evidence, evidence_decay
+        self.evidence, self.evidence_decay, self.unique = evidence, evidence_decay, unique
         self._evidence: float | None = None   # the answer's recent standing out of its rows (``evidence``)
         if route is not None and np.shape(route) != (n_refs,):
             raise ValueError(f"route must flag each of the {n_refs} references, got shape {np.shape(route)}")
@@ -439,7 +444,8 @@ class RoadMatcher:
         self._position = col / g
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
         self._last = (values, where)   # for ``around``'s hypotheses held
-        rival = max_outside(values, where, self.graph.near(ref, self.rival_window))
+        near = self.graph.near(ref, self.rival_window)
+        rival = max_outside(values, where, near)
         # how far the answer stands out of its frame's row, averaged; a standing frame may raise it, not lower it
         first, last = self.graph.bounds(ref)
         at = int(np.searchsorted(where, ref)) if where is not None else ref
@@ -450,12 +456,18 @@ class RoadMatcher:
         else:
             recent = self.evidence_decay * self._evidence + (1.0 - self.evidence_decay) * here
             self._evidence = max(self._evidence, recent) if standing else recent
-        locked = best >= self.lock and self._evidence >= self.evidence
+        uniqueness = 1.0 - (rival + 1.0) / (best + 1.0)
+        # the floor asks for an answer unambiguous along its own drive: another drive may be the same road
+        # driven again, whose places are no rival to it
+        own = rival if (first, last) == (0, self.n_refs - 1) else max_outside(
+            values, where, merge([*near, (0, first), (last + 1, self.n_refs)]))
+        locked = best >= self.lock and self._evidence >= self.evidence and \
+            1.0 - (own + 1.0) / (best + 1.0) >= self.unique
         # firm lock: strong evidence, and no hypothesis beyond the window half as strong (seen in global frames)
         held = bool(self.window) and best >= self.hold * self.lock and \
             max_outside(values, where, self.graph.near(ref, self.window)) < 0.5 * best
         self._follow(ref, held)
-        return ref, float(locked) + 1.0 - (rival + 1.0) / (best + 1.0)
+        return ref, float(locked) + uniqueness
 
     def _follow(self, ref: int, held: bool) -> None:
         """Choose the next frame's search: the references within ``window`` of ``ref`` along the route
