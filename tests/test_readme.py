@@ -124,3 +124,20 @@ def test_readme_results_table_is_the_last_regenerated_one() -> None:
         text = (ROOT / name).read_text()
         block = text.split("<!-- results table: tools/results.py -->\n")[1].split("\n<!-- end of results table -->")[0]
         assert block == table, f"{name}: regenerate with: python tools/results.py --out out/results --quick --write-docs"
+
+
+def test_references_to_results_md_name_its_sections() -> None:
+    """Every ``docs/results.md, "SECTION"`` (or ``"SECTION" in docs/results.md``) in the code and the docs names a
+    heading that results.md has, so that a rewrite of results.md leaves no reader pointed at nothing."""
+    heads = [re.sub(r"^#+\s*", "", line).strip() for line in (ROOT / "docs" / "results.md").read_text().splitlines()
+             if line.startswith("#")]
+    sources = [*(ROOT / "vpr_edge").rglob("*.py"), *(ROOT / "vpr_edge_export").rglob("*.py"),
+               *(ROOT / "tools").glob("*.py"), *(ROOT / "docs").glob("*.md"), ROOT / "README.md"]
+    named = re.compile(r'results\.md\)?,?\s*"([A-Za-z][^"]{0,79})"|"([^"]{1,80})" in docs/results\.md')
+    wrong = []
+    for path in sources:
+        for m in named.finditer(path.read_text()):
+            name = re.sub(r"\s*\n\s*#?\s*", " ", m.group(1) or m.group(2)).strip()
+            if not any(h == name or h.startswith(name) for h in heads):
+                wrong.append(f"{path.relative_to(ROOT)}: {name!r}")
+    assert not wrong, wrong

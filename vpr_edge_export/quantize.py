@@ -8,7 +8,7 @@ activation ranges by MinMax over the calibration images, preprocessed exactly as
 U8U8 keeps the bundled tap's features closest to fp32's (x86 kernels without VNNI saturate the usual U8S8
 products); U8S8 with reduce_range in the QOperator format (``--weights int8 --format qoperator``) is the
 scheme that can run faster than fp32, at some accuracy; dynamic quantisation is not offered (slower and
-less accurate here). The figures: docs/results.md, "int8 models". The
+less accurate here). The figures: docs/results.md, "The default". The
 model's ``vpr_edge`` metadata is copied and marked (``quantization``: scheme, calibration images, source
 SHA-256), so maps record which model they were built with and refuse the other one; a codebook fitted with
 the source model is accepted. Written atomically. Needs the ``export`` extra (onnx).
@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
                         "dot-product kernels (ARM dotprod, x86 VNNI)")
     p.add_argument("--format", choices=tuple(FORMATS), default="qdq",
                    help="qdq: Q/DQ pairs fused by onnxruntime (default); qoperator: QLinearConv etc. in the "
-                        "graph (with --weights int8 the fastest here, docs/results.md 'int8 models')")
+                        "graph (with --weights int8 the fastest here, docs/results.md 'The default')")
     p.add_argument("--out", type=Path, required=True)
     a = p.parse_args(argv)
     return one_line_errors("quantize", lambda: _run(a))

@@ -79,8 +79,8 @@ def fit_gmm(x: np.ndarray, s: FitSettings) -> tuple[np.ndarray, np.ndarray, np.n
     scikit-learn's EM, started as its own ``k-means++`` start does (means at k-means++ seeds, equal weights,
     variances at the regularisation floor, so the first E-step assigns each descriptor to its nearest seed)
     but with the seeds drawn from ``INIT_SAMPLE`` descriptors; EM runs in float32 (every array given to it is
-    float32, or NumPy promotes the whole EM to float64), faster than float64 (docs/results.md, "Fitting the
-    codebook")."""
+    float32, or NumPy promotes the whole EM to float64), faster than float64 (docs/results.md, "Tried and not
+    taken")."""
     from sklearn.cluster import kmeans_plusplus
     from sklearn.exceptions import ConvergenceWarning
     from sklearn.mixture import GaussianMixture

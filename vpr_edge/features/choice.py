@@ -53,7 +53,7 @@ def _cpu_flags() -> set[str]:
 def int8_dot_product() -> str | None:
     """The CPU's int8 dot-product instructions, by name, or None: x86 AVX512-VNNI / AVX-VNNI, ARM dotprod
     (Linux's /proc/cpuinfo; elsewhere None, so fp32 is kept). Without them onnxruntime's int8 kernels are
-    no faster than fp32, or slower (docs/results.md, "int8 models")."""
+    no faster than fp32, or slower (docs/results.md, "The default")."""
     flags = _cpu_flags()
     for flag, name in (("avx512_vnni", "AVX512-VNNI"), ("avx_vnni", "AVX-VNNI"), ("asimddp", "ARM dotprod")):
         if flag in flags:

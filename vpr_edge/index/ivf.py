@@ -84,8 +84,8 @@ class IvfIndex:
 class SequenceQuery:
     """What a stream asks the index: the mean of its last ``frames`` encodings (a sequence descriptor). A
     frame's own encoding may be far from its place's among a million; consecutive frames show alike places
-    with independent noise, so their mean is nearer (what it buys: docs/results.md, "An index for
-    whole-route searches")."""
+    with independent noise, so their mean is nearer (what it buys: docs/results.md, "A million
+    places")."""
 
     def __init__(self, frames: int) -> None:
         self.frames = max(1, int(frames))
