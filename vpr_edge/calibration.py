@@ -87,7 +87,8 @@ def logistic(scores: np.ndarray, correct: np.ndarray, ridge: float = 1e-3,
         return flat
     x = np.column_stack([s, np.ones_like(s)])
     y = ok.astype(np.float64)
-    w = np.array([0.0, math.log(y.mean() / (1 - y.mean()))])
+    odds = math.log(y.mean() / (1 - y.mean()))
+    w = np.array([0.0, odds])
     penalty = np.diag([ridge, 0.0])
     for _ in range(iterations):
         p = 1 / (1 + np.exp(-np.clip(x @ w, -50, 50)))
@@ -97,7 +98,7 @@ def logistic(scores: np.ndarray, correct: np.ndarray, ridge: float = 1e-3,
         if np.abs(step).max() < 1e-10:
             break
     if not (np.isfinite(w).all() and w[0] >= 0):
-        return flat[0], math.log(y.mean() / (1 - y.mean()))
+        return 0.0, odds
     return float(w[0]), float(w[1])
 
 

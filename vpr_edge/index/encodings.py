@@ -140,26 +140,23 @@ class Encodings:
         ``rows`` (int array) only (B, len(rows)); a block of references at a time (about
         BLOCK_BYTES of float32 scratch), from the stored values."""
         q = np.atleast_2d(np.asarray(queries, np.float32))
-        r, d = self.shape
-        rows_per_block = max(1, BLOCK_BYTES // (4 * d))
-        if rows is not None:   # a block at a time: no float32 copy of many rows (a large fresh allocation stalls)
-            rows = np.asarray(rows, np.int64).reshape(-1)
-            out = np.empty((len(q), len(rows)), np.float32)
-            scratch = np.empty((min(len(rows), rows_per_block), d), np.float32)
-            for i in range(0, len(rows), rows_per_block):
-                block = self.take(rows[i:i + rows_per_block])
-                np.copyto(scratch[:len(block)], block, casting="unsafe")
-                out[:, i:i + len(block)] = q @ scratch[:len(block)].T
-            return out * self.scale[rows] if self.scale is not None else out
-        if self.storage == "float32" and not isinstance(self.values, np.memmap):
+        if rows is None and self.storage == "float32" and not isinstance(self.values, np.memmap):
             return q @ self.values.T
-        out = np.empty((len(q), r), np.float32)
-        scratch = np.empty((min(r, rows_per_block), d), np.float32)
-        for i, block in self.blocks(rows_per_block):
+        r, d = self.shape
+        step = max(1, BLOCK_BYTES // (4 * d))
+        picked = None if rows is None else np.asarray(rows, np.int64).reshape(-1)
+        n = r if picked is None else len(picked)
+        # a block at a time, through one float32 scratch: no float32 copy of many rows (a large fresh
+        # allocation stalls), and a pass over a memory-mapped map keeps no more than a block mapped
+        blocks = self.blocks(step) if picked is None else \
+            ((i, self.take(picked[i:i + step])) for i in range(0, n, step))
+        out = np.empty((len(q), n), np.float32)
+        scratch = np.empty((min(n, step), d), np.float32)
+        for i, block in blocks:
             np.copyto(scratch[:len(block)], block, casting="unsafe")
             out[:, i:i + len(block)] = q @ scratch[:len(block)].T
         if self.scale is not None:
-            out *= self.scale
+            out *= self.scale if picked is None else self.scale[picked]
         return out
 
 

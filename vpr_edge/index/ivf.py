@@ -13,6 +13,8 @@ bytes a place (8 MB + 4 MB at a million 512-dim places), stored in the map file.
 """
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 
 from vpr_edge.errors import VprError
@@ -89,18 +91,18 @@ class SequenceQuery:
 
     def __init__(self, frames: int) -> None:
         self.frames = max(1, int(frames))
-        self._recent: list[np.ndarray] = []
+        self._recent: deque[np.ndarray] = deque(maxlen=self.frames)
 
     def push(self, encoding: np.ndarray) -> None:
         """Add a frame's encoding (D,)."""
-        self._recent = (self._recent + [np.asarray(encoding, np.float32)])[-self.frames:]
+        self._recent.append(np.asarray(encoding, np.float32))
 
     def query(self) -> np.ndarray:
         """The mean of the recent encodings (D,) float32 (the last frame's alone when ``frames`` is 1)."""
         return self._recent[-1] if len(self._recent) == 1 else np.mean(self._recent, axis=0, dtype=np.float32)
 
     def reset(self) -> None:
-        self._recent = []
+        self._recent.clear()
 
 
 def fit_ivf(stored: Encodings, lists: int | None = None, seed: int = 0, block: int = 8192) -> IvfIndex:

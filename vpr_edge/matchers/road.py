@@ -103,7 +103,8 @@ class RoadMatcher:
                  evidence: float, evidence_decay: float, unique: float, route: np.ndarray | None = None,
                  graph: RouteGraph | None = None) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
-        ``still_memory`` is the motion cue's, read where the cue is computed). ``route``: (n_refs,) bool, the
+        ``still_memory`` is the motion cue's, read where the cue is computed; ``seek_frames`` is what the index
+        is asked, read where it is asked, ``index.ivf.SequenceQuery``). ``route``: (n_refs,) bool, the
         references where the map's drive stood (``motion.route_stands``; None: not known). ``graph``: the
         map's drives and where they meet (``route.RouteGraph``; None: one drive)."""
         if n_refs < 1:
@@ -145,7 +146,7 @@ class RoadMatcher:
         self._joins = bool(len(self._cut[1]) or self._src_cols is not None)
         self._gap = -(-self.n_speeds // grid) + 1   # windows closer than this are searched as one
         self._win: Intervals | None = None   # references the next frame searches ([lo, hi) intervals); None = all
-        self.seek, self.peaks, self.seek_frames = max(0, int(seek)), max(1, int(peaks)), max(1, int(seek_frames))
+        self.seek, self.peaks = max(0, int(seek)), max(1, int(peaks))
         self._last: tuple[np.ndarray, np.ndarray | None] = (np.zeros(0, np.float32), None)   # (``_peaks``)
         self.check, self.span, self.hold = max(1, int(check)), max(0, int(span)), hold
         self._held = 0                               # frames since the local search began
