@@ -69,6 +69,24 @@ def _gem(tap: str) -> tuple[str, ...]:
             "--tap", tap, "--width", "160", "--height", "120", "--out", f"{{out}}/models/lite0_{tap}_gem_160x120.onnx")
 
 
+_CODEBOOKS = "0x128,31x32,62x16,24x41,16x62,12x82,20x49"   # the compact codebooks the default was chosen among
+
+
+def _size(dataset: str, tolerance: int, configs: str, suffix: str = "") -> "Section":
+    """size_sweep on one dataset's every stream: ``configs`` (PCA x components) over three codebook seeds."""
+    name = f"size-{dataset}{suffix}"
+    return Section(name, "size_sweep.py", ("--streams", f"{{{dataset}}}", "--kinds", "all", "--tolerance",
+                                           str(tolerance), "--storages", "int8", "--seeds", "0,1,2", "--modes",
+                                           "stream", "--configs", configs, "--out", f"{{out}}/size/{dataset}{suffix}"))
+
+
+def _e2e(dataset: str) -> "Section":
+    """bench_e2e on one dataset: the default and its int8 form, whole commands beside the yardstick."""
+    return Section(f"e2e-{dataset}", "bench_e2e.py", ("--streams", f"{{{dataset}}}", "--config", "default=",
+                                                      "--config", "default-int8=|--precision int8", "--out",
+                                                      f"{{out}}/e2e-{dataset}"))
+
+
 _INDEX_BENCH = ("--refs", "100000", "--frames", "5000", "--dim", "512", "--storage", "int8", "--walk", "0.9",
                 "--noise", "1.0", "--cue", "--checkpoints", "5000")
 
@@ -87,21 +105,11 @@ SECTIONS = (
                                                     "stream,single", "--fits", "logistic,isotonic")),
     Section("evaluating-corridor", "eval_streams.py", ("--streams", "{corridor}")),
     Section("evaluating-nordland-dev", "eval_streams.py", ("--streams", "{nordland-dev}")),
-    Section("size-nordland-dev", "size_sweep.py", ("--streams", "{nordland-dev}", "--kinds", "all", "--tolerance", "2",
-                                                   "--storages", "int8", "--seeds", "0,1,2", "--modes", "stream",
-                                                   "--configs", "0x128,31x32,62x16,24x41,16x62,12x82,20x49",
-                                                   "--out", "{out}/size/nordland-dev")),
-    Section("size-corridor", "size_sweep.py", ("--streams", "{corridor}", "--kinds", "all", "--tolerance", "2",
-                                               "--storages", "int8", "--seeds", "0,1,2", "--modes", "stream",
-                                               "--configs", "0x128,31x32,62x16,24x41,16x62,12x82,20x49",
-                                               "--out", "{out}/size/corridor")),
-    Section("size-corridor-1", "size_sweep.py", ("--streams", "{corridor}", "--kinds", "all", "--tolerance", "1",
-                                                 "--storages", "int8", "--seeds", "0,1,2", "--modes", "stream",
-                                                 "--configs", "0x128,24x41", "--out", "{out}/size/corridor-1")),
-    Section("e2e-nordland-dev", "bench_e2e.py", ("--streams", "{nordland-dev}", "--config", "default=", "--config",
-                                                 "default-int8=|--precision int8", "--out", "{out}/e2e-nordland-dev")),
-    Section("e2e-corridor", "bench_e2e.py", ("--streams", "{corridor}", "--config", "default=", "--config",
-                                             "default-int8=|--precision int8", "--out", "{out}/e2e-corridor")),
+    _size("nordland-dev", 2, _CODEBOOKS),
+    _size("corridor", 2, _CODEBOOKS),
+    _size("corridor", 1, "0x128,24x41", "-1"),
+    _e2e("nordland-dev"),
+    _e2e("corridor"),
     Section("front-ends", "compare_front_ends.py", ("--streams", "{nordland-dev}", "{corridor}", "--front", "default",
                                                     "--front", "gem={out}/models/lite0_stage5_gem_160x120.onnx",
                                                     "--front", "head-gem={out}/models/lite0_head_gem_160x120.onnx"),
@@ -132,27 +140,27 @@ def run_section(section: Section, out: Path, doc: dict) -> str:
     shown = " ".join(["python", f"tools/{section.tool}", *[shlex.quote(places_back(a, out)) for a in args]])
     env = os.environ | {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     t0 = time.perf_counter()
+    def python(argv: list[str], what: str) -> str:
+        done = subprocess.run([sys.executable, *argv], capture_output=True, text=True, env=env)
+        if done.returncode != 0:
+            last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+            raise VprError(f"{what} failed: {last}")
+        return done.stdout
+
     for step in section.setup:
         first = placed(step)
         for a in first:
             if a.startswith(str(out)) and a.endswith(".onnx"):
                 Path(a).parent.mkdir(parents=True, exist_ok=True)
-        done = subprocess.run([sys.executable, *first], capture_output=True, text=True, env=env)
-        if done.returncode != 0:
-            last = (done.stderr.strip().splitlines() or ["no message"])[-1]
-            raise VprError(f"section {section.name}: python {' '.join(step[:2])} failed: {last}")
-    proc = subprocess.run([sys.executable, str(ROOT / "tools" / section.tool), *args], capture_output=True,
-                          text=True, env=env)
-    if proc.returncode != 0:
-        last = (proc.stderr.strip().splitlines() or ["no message"])[-1]
-        raise VprError(f"tools/{section.tool} (section {section.name}) failed: {last}")
+        python(first, f"section {section.name}: python {' '.join(step[:2])}")
+    stdout = python([str(ROOT / "tools" / section.tool), *args], f"tools/{section.tool} (section {section.name})")
     took = time.perf_counter() - t0
     doc.setdefault("sections", {})[section.name] = {"command": shown, "seconds": round(took, 1)}
     for step in reversed(section.setup):
         shown = " ".join(["python", *[shlex.quote(places_back(a, out)) for a in placed(step)]]) + "`, then `" + shown
     head = (f"Made by `{shown}` at commit {doc['commit']}{' (with local changes)' if doc['dirty'] else ''} on "
             f"{doc['machine']['cpu']} ({doc['machine']['cores']} cores), {doc['date']}, in {took:.0f} s:")
-    text = proc.stdout.strip()
+    text = stdout.strip()
     return head + "\n\n" + (f"```\n{text}\n```" if section.fenced else text) + "\n"
 
 
