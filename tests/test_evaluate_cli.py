@@ -180,7 +180,8 @@ def test_evaluate_param_sets_matcher_parameters(tmp_path: Path) -> None:
         assert got[name]["settings"] == json.loads(json.dumps(want.settings))
     assert got["stream"]["settings"]["bias"] == 1.5 and got["single"]["settings"] == {"min_confidence": None}
     for args, needle in ((["--param", "nope=1"], "nope"), (["--param", "lock=x"], "not a number"),
-                         (["--param", "decay=3"], "decay"), (["--modes", "single", "--param", "lock=3"], "lock")):
+                         (["--param", "decay=3"], "decay"), (["--modes", "single", "--param", "lock=3"], "lock"),
+                         (["--param", "unique=1"], "unique must be in [0, 1)")):
         assert_one_line_error(run("evaluate", "--similarity", s, "--gt", gt, *args), needle)
 
 
@@ -202,6 +203,16 @@ def test_evaluate_scores_a_calibration_from_other_frames(tmp_path: Path) -> None
         assert 0.0 <= r["answered_right"] <= 1.0 and 0.0 <= r["mapped_right"] <= r["recall_at_1"] + 1e-9
     assert modes["dtw"]["ece"] is None and modes["dtw"]["reliability"] == []
     assert "ECE" in proc.stdout.splitlines()[1]
+    other = tmp_path / "other.json"
+    bad = run("evaluate", "--similarity", s, "--gt", gt, "--save-calibration", other, "--calibration-fit", "nope")
+    assert_one_line_error(bad, "--calibration-fit", "'nope' is not one of 'logistic', 'isotonic'")
+    assert bad.returncode == 2 and not other.exists()
+    fitted = {}
+    for fit in ("logistic", "isotonic"):   # each fit named in the file it writes
+        assert run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream", "--save-calibration", other,
+                   "--calibration-fit", fit).returncode == 0
+        fitted[fit] = json.loads(other.read_text())["method"]
+    assert fitted == {"logistic": "logistic", "isotonic": "isotonic"}
     bad = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "dtw", "--calibration", cal)
     assert_one_line_error(bad, "cal.json", "no calibration for modes dtw")
     bad = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single", "--calibration", gt)

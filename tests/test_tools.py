@@ -74,6 +74,8 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("results.py", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--sections", "nope"], "no section 'nope'"),
     ("bench_matcher.py", ["--stop-noise", "-1"], "--stop-noise must be >= 0"),
     ("bench_scale.py", ["--work", "{tmp}", "--places", "5"], "need --places >= 10"),
+    ("calibration_check.py", ["--streams", "{tmp}", "{tmp}", "--fits", "logistic,nope"],
+     "--fits 'logistic,nope': choose from logistic, isotonic"),
     ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "gem"], "--front gem: expected NAME=MODEL"),
     ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "gem={tmp}/no.onnx"], "model file not found"),
     ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "default"], "not a tools/derive_streams.py folder"),

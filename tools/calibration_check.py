@@ -15,6 +15,7 @@ calibration as DIR/DS.json (for ``localize --calibration`` / ``evaluate --calibr
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -38,8 +39,10 @@ def main() -> int:
     p.add_argument("--write", type=Path, default=None)
     a = p.parse_args()
     fits = [f for f in a.fits.split(",") if f]
-    if not fits or any(f not in calibration.METHODS for f in fits):
-        p.error(f"--fits {a.fits!r}: choose from {', '.join(calibration.METHODS)}")
+    if not fits or any(f not in calibration.METHODS for f in fits):   # before any work, in one line
+        print(f"calibration_check: error: --fits {a.fits!r}: choose from {', '.join(calibration.METHODS)}",
+              file=sys.stderr)
+        return 2
     modes = {m: get_matcher(m) for m in a.modes.split(",")}
     every = {}
     for folder in a.streams:
