@@ -14,7 +14,8 @@ from vpr_edge.evaluation.streams import write_ground_truth
 
 JSON_KEYS = {"recall_at_1", "recall_at_5", "recall_at_10", "auc", "ap", "precision_at_full_recall",
              "recall_at_full_precision", "median_error", "lost_unmapped", "lost_mapped", "ms_per_frame", "lock_frames",
-             "exit_frames", "answered_right", "mapped_right", "ece", "reliability", "settings"}
+             "exit_frames", "answered_right", "mapped_right", "ece", "reliability", "one_view_frames",
+             "distinct_answered_right", "distinct_mapped_right", "settings"}
 
 
 @pytest.fixture(scope="module")
@@ -57,6 +58,8 @@ def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_qu
     assert png.read_bytes()[:4] == b"\x89PNG"
     assert np.load(sim).shape == (24, 24)
     assert "R@1" in proc.stdout and "seqslam-online" in proc.stdout
+    assert "away from where the map shows one view" in proc.stdout       # a map: its views are known
+    assert all(m["one_view_frames"] >= 0 for m in doc["modes"].values())
 
 
 def test_evaluate_similarity_needs_no_model_nor_torch(tmp_path: Path) -> None:

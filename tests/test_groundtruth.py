@@ -130,3 +130,19 @@ def test_ground_truth_as_spreadsheets_write_it(tmp_path) -> None:
     clash.write_text("query,references\n0,0\n1,1\n1,5\n")
     with pytest.raises(VprError, match="line 4: query 1 has a row already .line 3., with other references"):
         groundtruth.load_csv(clash)
+
+
+def test_one_view_frames_against_a_naive_loop() -> None:
+    """A frame is one-view where any of its truth references lies in a run of references showing the view of
+    the one before, or is the reference that run repeats; unmapped rows never are."""
+    rng = np.random.default_rng(3)
+    same = rng.random(40) < 0.3
+    truth = rng.integers(-1, 40, size=(60, 3))
+    truth[:5] = -1
+    runs = set()
+    for r in range(40):
+        if same[r]:
+            runs.update({r, r - 1} if r else {r})
+    naive = [any(int(t) in runs for t in row if t >= 0) for row in truth]
+    np.testing.assert_array_equal(groundtruth.one_view(truth, same), naive)
+    assert not groundtruth.one_view(truth, same)[:5].any()

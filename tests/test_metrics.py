@@ -198,3 +198,28 @@ def test_logistic_calibration_against_scikit_learn_and_known_curves() -> None:
     assert fit(s, ok, 2, answered=np.zeros(len(s), bool)).n == 0
     with pytest.raises(ValueError, match="calibration method 'nope'"):
         fit(s, ok, 2, method="nope")
+
+
+def test_distinct_shares_leave_out_one_view_frames() -> None:
+    """``score_result`` with one-view frames: the distinct shares are the answered / mapped shares over the
+    other frames (an unmapped frame counts among them), the count the one-view mapped frames."""
+    from vpr_edge.evaluation.metrics import answered_shares
+    from vpr_edge.evaluation.scoring import score_result
+    from vpr_edge.matchers.base import Result
+
+    rng = np.random.default_rng(5)
+    q = 50
+    truth = np.arange(q)[:, None].copy()
+    truth[40:] = -1
+    refs = np.where(rng.random(q) < 0.7, np.arange(q), (np.arange(q) + 7) % q)
+    scores = rng.random(q)
+    res = Result(refs, scores, refs[:, None])
+    view = rng.random(q) < 0.3
+    rep = score_result(res, truth, 0, 0.2, one_view=view)
+    keep = ~view
+    right = refs == truth[:, 0]
+    exp = answered_shares(right[keep], (scores < 0.2)[keep], (truth[:, 0] >= 0)[keep])
+    assert (rep.distinct_answered_right, rep.distinct_mapped_right) == pytest.approx(exp)
+    assert rep.one_view_frames == int((view & (truth[:, 0] >= 0)).sum())
+    plain = score_result(res, truth, 0, 0.2)
+    assert plain.one_view_frames == -1 and np.isnan(plain.distinct_answered_right)

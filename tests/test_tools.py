@@ -81,6 +81,7 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("compare_front_ends.py", ["--streams", "{tmp}", "--front", "default"], "not a tools/derive_streams.py folder"),
     ("compare_drives.py", ["--streams", "{tmp}"], "ref: not a folder"),
     ("bench_fleet.py", ["--refs", "{tmp}/none"], "none: not a folder"),
+    ("one_view_check.py", ["--streams", "{tmp}"], "map.npz: missing"),
 ])
 def test_new_tools_refuse_bad_input_in_one_line(tmp_path: Path, name: str, args: list[str], needle: str) -> None:
     """One line on stderr naming the problem, exit 2, before any work (nothing written)."""
@@ -242,6 +243,11 @@ def test_bench_e2e_and_calibration_check(tmp_path: Path, small_refs: Path, small
     assert [r[1].strip() for r in rows] == ["5", "6"]
     for r in rows:   # no unmapped frames here: nothing to lose, nothing to exit
         assert r[2].strip() == "nan" and r[3].strip() == "-" and 0 <= float(r[6].split()[0]) <= 1
+    text = tool("one_view_check.py", "--streams", str(tmp_path / "one"))
+    assert "agrees with the map's motion cue on" in text
+    rows = [line.split("|")[1:-1] for line in text.splitlines() if line.startswith("| aligned")]
+    given, wrong, at_run = (int(c) for c in rows[0][1:])
+    assert len(rows) == 1 and 0 <= at_run <= wrong <= given <= 24
 
 
 @pytest.mark.slow

@@ -103,6 +103,7 @@ SECTIONS = (
                                                       "still_memory", "--values=10,30,100")),
     Section("calibration", "calibration_check.py", ("--streams", "{corridor}", "{nordland-dev}", "--modes",
                                                     "stream,single", "--fits", "logistic,isotonic")),
+    Section("one-view", "one_view_check.py", ("--streams", "{nordland-dev}", "{corridor}")),
     Section("evaluating-corridor", "eval_streams.py", ("--streams", "{corridor}")),
     Section("evaluating-nordland-dev", "eval_streams.py", ("--streams", "{nordland-dev}")),
     _size("nordland-dev", 2, _CODEBOOKS),
@@ -197,7 +198,9 @@ def figures(report) -> dict:
     """The figures of one matcher's ``ModeReport`` that the tables quote (from ``as_json``: evaluate --json's)."""
     js = report.as_json()
     return {"r1": js["recall_at_1"]} | {k: js[k] for k in ("auc", "answered_right", "mapped_right", "lost_unmapped",
-                                                          "lost_mapped", "exit_frames", "lock_frames")}
+                                                          "lost_mapped", "exit_frames", "lock_frames",
+                                                          "one_view_frames", "distinct_answered_right",
+                                                          "distinct_mapped_right")}
 
 
 def measure(datasets: Path, out: Path) -> dict:

@@ -37,6 +37,14 @@ def table(reports: dict[str, ModeReport]) -> str:
                                            cell(r.answered_right), cell(r.mapped_right), cell(r.ece),
                                            cell(r.match_ms, "{:.2f}")]
         lines.append(f"{name:<{width}} " + " ".join(f"{c:>8s}" for c in cells))
+    distinct = {name: r for name, r in reports.items() if r.one_view_frames >= 0}
+    if distinct:
+        n = next(iter(distinct.values())).one_view_frames
+        lines += ["", f"away from where the map shows one view (its drive stood still or saw nothing; {n} mapped "
+                      "frames' truth lies there, a count of frames no image tells apart):",
+                  f"{'mode':<{width}} {'ans.ok':>8s} {'map.ok':>8s}"]
+        lines += [f"{name:<{width}} {cell(r.distinct_answered_right):>8s} {cell(r.distinct_mapped_right):>8s}"
+                  for name, r in distinct.items()]
     metres = {name: r.metres for name, r in reports.items() if r.metres is not None}
     if metres:
         keys = list(next(iter(metres.values())))
@@ -53,9 +61,10 @@ def delays_text(frames: Sequence[float | None]) -> str:
     return "/".join("never" if d is None or d != d else f"{d:.0f}" for d in frames) or "-"
 
 
-JSON_SCHEMA_VERSION = 5   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres;
+JSON_SCHEMA_VERSION = 6   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres;
 #                          5: front_end (the model file run and its form), answered_right, mapped_right, ece
-#                          and reliability per mode
+#                          and reliability per mode; 6: one_view_frames, distinct_answered_right and
+#                          distinct_mapped_right per mode
 
 
 def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, reports: dict[str, ModeReport],
@@ -187,15 +196,23 @@ def _dataset_label(name: str) -> str:
 
 def answers_table(doc: dict) -> str:
     """docs/results.md's "Right or silent" table from ``tools/results.py``'s JSON: per dataset, the share of
-    answered frames right and of mapped frames answered right by the ``stream`` matcher within ±2."""
+    answered frames right and of mapped frames answered right by the ``stream`` matcher within ±2; then the
+    mapped frames whose truth lies where the map shows one view (``truth.one_view``) and the two shares over
+    the other frames ('-' where the JSON has none)."""
     names = list(doc["datasets"])
     kinds = list(doc["datasets"][names[0]]["streams"])
     lines = ["| `stream`, ±2 | " + " | ".join(kinds) + " |", "|---|" + "---|" * len(kinds)]
-    for n in names:
-        label = _dataset_label(n)
-        for key, what in (("answered_right", "answered right"), ("mapped_right", "mapped right")):
-            cells = [doc["datasets"][n]["streams"][k]["stream"]["2"][key] for k in kinds]
-            lines.append(f"| {label} {what} | " + " | ".join("-" if v is None else f"{v:.3f}" for v in cells) + " |")
+    rows = (("answered_right", "answered right"), ("mapped_right", "mapped right"),
+            ("one_view_frames", "mapped frames at one view"),
+            ("distinct_answered_right", "answered right, other frames"),
+            ("distinct_mapped_right", "mapped right, other frames"))
+    for part in (rows[:2], rows[2:]):
+        for n in names:
+            label = _dataset_label(n)
+            for key, what in part:
+                cells = [doc["datasets"][n]["streams"][k]["stream"]["2"].get(key) for k in kinds]
+                lines.append(f"| {label} {what} | " + " | ".join(
+                    "-" if v is None else str(v) if isinstance(v, int) else f"{v:.3f}" for v in cells) + " |")
     return "\n".join(lines)
 
 

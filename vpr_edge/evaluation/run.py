@@ -3,6 +3,7 @@ per matcher. ``vpr-edge evaluate`` parses options and prints what this returns; 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -12,9 +13,11 @@ from vpr_edge.calibration import Curve
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation import sources
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
-from vpr_edge.evaluation.truth import Truth
+from vpr_edge.evaluation.truth import Truth, one_view
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.matchers import MATCHERS, Matcher, check_lost_line, get_matcher
+from vpr_edge.matchers.motion import MEMORY, route_stands
+from vpr_edge.matchers.params import STREAM
 from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.map import MapQuery, PlaceMap, load_map
 from vpr_edge.positions import Positions
@@ -93,6 +96,13 @@ def check_truth_fits(truth: np.ndarray, gt_shape: tuple[int, ...] | None, sim: n
         raise VprError(f"{where}: names reference {int(truth.max())} but there are only {sim.shape[1]} references")
 
 
+def map_same_view(blocks: Iterable[np.ndarray]) -> np.ndarray:
+    """The map's references in route order, as consecutive blocks (n, D) -> (R,) bool: True where a reference
+    shows the view of the one before it (its drive stood still, or saw nothing), by the default ``stream``
+    motion cue (``motion.route_stands`` at the default ``still``): what ``truth.one_view`` reads."""
+    return route_stands(blocks, STREAM["still"].default, MEMORY)
+
+
 def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None = None, tolerance: int = 1,
              min_confidence: float | None = None, on_skip: sources.OnSkip = lambda frame: None,
              calibration: dict[str, Curve] | None = None) -> Evaluation:
@@ -127,13 +137,19 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
         rows = rows[sims.kept]
     check_truth_fits(rows, gt_shape, sims.cosine, truth.name)
     by_kind = {"cosine": sims.cosine, "svm": sims.svm}
+    same_view = None   # where the map shows one view (its drive stood still or saw nothing): truth.one_view
     if sims.references is not None:   # the map's own stops and drives, for matchers that read them
         graph = None if query is None else RouteGraph(*query.joins())
         chosen = {name: m.on_route(sims.references.in_order(), graph) for name, m in chosen.items()}
+        same_view = next((m.route for m in chosen.values() if m.route is not None
+                          and (m.still_threshold, m.still_memory) == (STREAM["still"].default, MEMORY)), None)
+        if same_view is None:
+            same_view = map_same_view(sims.references.in_order())
     drive = None if query is None or len(query.map.drives) < 2 else query.map.drives.of_each()
     reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions,
                                    (calibration or {}).get(name),
-                                   None if sims.encodings is None else m.cue(sims.encodings), drive)
+                                   None if sims.encodings is None else m.cue(sims.encodings), drive,
+                                   None if same_view is None else one_view(rows, same_view))
                for name, m in chosen.items()}
     return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms, rows,
                       sims.positions, sims.front)

@@ -46,6 +46,9 @@ class ModeReport:
     mapped_right: float = float("nan")     # share of mapped frames answered right
     ece: float = float("nan")              # with a calibration: expected calibration error of the confidence
     reliability: tuple = ()                # ... and its reliability table (metrics.reliability)
+    one_view_frames: int = -1              # mapped frames whose truth lies where the map shows one view
+    distinct_answered_right: float = float("nan")   # answered_right and mapped_right over the other frames
+    distinct_mapped_right: float = float("nan")     # (-1, NaN: the map's views not known; ``truth.one_view``)
 
     def as_json(self) -> dict:
         """The keys of ``evaluate --json`` (NaN as null)."""
@@ -60,6 +63,8 @@ class ModeReport:
             "lock_frames": [num(v) for v in self.lock_frames], "exit_frames": [num(v) for v in self.exit_frames],
             "answered_right": num(self.answered_right), "mapped_right": num(self.mapped_right),
             "ece": num(self.ece), "reliability": list(self.reliability),
+            "one_view_frames": self.one_view_frames, "distinct_answered_right": num(self.distinct_answered_right),
+            "distinct_mapped_right": num(self.distinct_mapped_right),
             "settings": self.settings} | ({"metres": {k: num(v) for k, v in self.metres.items()}}
                                           if self.metres is not None else {})
 
@@ -67,18 +72,20 @@ class ModeReport:
 def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, tolerance: int = 1,
                   min_confidence: float | None = None, positions: Positions | None = None,
                   calibration: Curve | None = None, still: np.ndarray | None = None,
-                  drive: np.ndarray | None = None) -> ModeReport:
+                  drive: np.ndarray | None = None, one_view: np.ndarray | None = None) -> ModeReport:
     """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics); with the
     references' ``positions``, the error in metres too; with a ``calibration`` (score -> probability right,
     ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error over the answers
     given. ``still`` (Q,): each
     frame's motion cue (``Matcher.cue`` of the query encodings; None: a bare similarity matrix). ``drive`` (R,):
-    each reference's drive in a map of several (answers within ``tolerance`` count only in the truth's drive)."""
+    each reference's drive in a map of several (answers within ``tolerance`` count only in the truth's drive).
+    ``one_view`` (Q,) bool: the frames whose truth lies where the map shows one view (``truth.one_view``): the
+    answered / mapped right shares are also given over the other frames."""
     t0 = time.perf_counter()
     result = matcher.run(sim, k=max(RECALL_KS), still=still)
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)
     threshold = matcher.lost_line(min_confidence)
-    report = replace(score_result(result, truth, tolerance, threshold, ms, positions, drive),
+    report = replace(score_result(result, truth, tolerance, threshold, ms, positions, drive, one_view),
                      settings=matcher.params | {"min_confidence": threshold})
     if calibration is not None:   # over the answers given: a lost frame carries no confidence
         given = ~report.lost
@@ -89,9 +96,9 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
 
 def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshold: float | None = None,
                  match_ms: float = float("nan"), positions: Positions | None = None,
-                 drive: np.ndarray | None = None) -> ModeReport:
+                 drive: np.ndarray | None = None, one_view: np.ndarray | None = None) -> ModeReport:
     """A matcher's answers (``Result``, Q frames) against ``truth`` (Q, T); frames scoring below
-    ``threshold`` count as lost (None: no lost state); ``drive``: as ``evaluate_mode``'s."""
+    ``threshold`` count as lost (None: no lost state); ``drive``, ``one_view``: as ``evaluate_mode``'s."""
     mapped = (truth >= 0).any(axis=1)
     correct = metrics.correct_candidates(result.ranked, truth, tolerance, drive)
     curve = metrics.pr_curve(result.scores, correct[:, 0], int(mapped.sum()))
@@ -103,6 +110,11 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
 
     lock, exits = metrics.transition_delays(mapped, correct[:, 0] & ~lost, lost)
     answered_right, mapped_right = metrics.answered_shares(correct[:, 0], lost, mapped)
+    distinct = (-1, float("nan"), float("nan"))
+    if one_view is not None:
+        keep = ~np.asarray(one_view, bool)
+        distinct = (int((mapped & ~keep).sum()),
+                    *metrics.answered_shares(correct[keep, 0], lost[keep], mapped[keep]))
     return ModeReport({k: metrics.recall_at_k(correct, mapped, k) for k in RECALL_KS},
                       metrics.auc_trapezoid(curve), metrics.average_precision(curve),
                       metrics.precision_at_full_recall(curve), metrics.recall_at_full_precision(curve),
@@ -112,4 +124,5 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
                       metres=None if positions is None else metrics.metre_summary(
                           metrics.metre_errors(result.refs, truth, positions.coords, positions.geo), lost),
                       refs=result.refs, lost=lost, correct=correct[:, 0], scores=result.scores,
-                      answered_right=answered_right, mapped_right=mapped_right)
+                      answered_right=answered_right, mapped_right=mapped_right, one_view_frames=distinct[0],
+                      distinct_answered_right=distinct[1], distinct_mapped_right=distinct[2])

@@ -111,6 +111,21 @@ def within(queries: Positions, refs: Positions, radius_m: float, chunk: int = 51
     return pad(sets)
 
 
+def one_view(truth: np.ndarray, same_view: np.ndarray) -> np.ndarray:
+    """Frames whose place no image can pin to a reference: ``truth`` (Q, T) padded, ``same_view`` (R,) bool,
+    True where a reference shows the view of the one before it (the map's drive stood still, or saw nothing:
+    ``motion.route_stands`` of the map) -> (Q,) bool, True where a truth reference lies in a run of such
+    references or is the reference that run repeats. Within a run every reference shows one view, so an answer
+    anywhere in it looks as right as the truth's, and a truth of +-k frames there is a count, not a view."""
+    same_view = np.asarray(same_view, bool)
+    run = same_view.copy()
+    run[:-1] |= same_view[1:]          # the reference a run repeats
+    hit = np.zeros(truth.shape, bool)
+    ok = truth >= 0
+    hit[ok] = run[truth[ok]]
+    return hit.any(axis=1)
+
+
 @dataclass(frozen=True)
 class Truth:
     """Where an evaluation's ground truth comes from, read by this module's loaders (``load``): ``gt`` (the

@@ -1,0 +1,103 @@
+#!/usr/bin/env python3
+"""Where a map shows one view: the runs of references its drive saw alike, checked against the images.
+
+    python tools/one_view_check.py --streams out/nordland-dev out/corridor [--tolerance 2]
+
+For each folder (``tools/derive_streams.py`` output: map.npz and the reference images it was built from,
+ref/), the references the map's own motion cue reads as the view of the one before
+(``evaluation.run.map_same_view``, what ``evaluate`` reads for its "other frames" shares) are grouped into runs
+(each with the reference it repeats) and checked on the images themselves, independently of the front end:
+per run its length, the images' mean brightness (0-255 grey; a dark run is a tunnel or a covered lens, not a
+stop) and their mean absolute difference from the run's first image, against the route's median difference
+between consecutive images; and how often a pixel rule (consecutive images differing by less than a quarter
+of that median) flags the same references. Then per derived stream, the ``stream`` matcher's answers at
+``--tolerance`` (``evaluate``): the wrong answers given and how many of them have their truth in a run.
+Bad input is one line on stderr and exit code 2, before any work.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from vpr_edge.errors import VprError, one_line_errors
+from vpr_edge.evaluation import Source, Truth, evaluate
+from vpr_edge.evaluation.run import map_same_view
+from vpr_edge.evaluation.streams import KINDS
+from vpr_edge.evaluation.truth import one_view
+from vpr_edge.frames.images import load_image
+from vpr_edge.map import load_map
+from vpr_edge.matchers import get_matcher
+
+
+def runs_of(same: np.ndarray) -> list[tuple[int, int]]:
+    """(R,) bool, True where a reference shows the one before's view -> [first, last] of each run, the
+    reference it repeats included."""
+    out, r = [], 0
+    while r < len(same):
+        if same[r]:
+            end = r
+            while end + 1 < len(same) and same[end + 1]:
+                end += 1
+            out.append((max(r - 1, 0), end))
+            r = end + 1
+        else:
+            r += 1
+    return out
+
+
+def grey(path: Path) -> np.ndarray:
+    """An image file -> its grey levels (H, W) float32, 0-255."""
+    return cv2.cvtColor(load_image(path), cv2.COLOR_BGR2GRAY).astype(np.float32)
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--streams", type=Path, nargs="+", required=True, help="derive_streams folders with map.npz")
+    p.add_argument("--tolerance", type=int, default=2)
+    a = p.parse_args()
+    return one_line_errors("one_view_check", lambda: _run(a))
+
+
+def _run(a: argparse.Namespace) -> int:
+    for folder in a.streams:
+        for need in [folder / "map.npz", folder / "ref", *(folder / k for k in KINDS)]:
+            if not need.exists():
+                raise VprError(f"{need}: missing (make it with tools/derive_streams.py and build-map)")
+    for folder in a.streams:
+        pm = load_map(folder / "map.npz")
+        same = map_same_view(pm.stored.in_order())
+        images = np.stack([grey(folder / "ref" / name) for name in pm.names])
+        step = np.abs(images[1:] - images[:-1]).mean(axis=(1, 2))
+        typical = float(np.median(step))
+        print(f"**{folder.name}**: {len(pm.names)} references, {int(same.sum())} show the view of the one before "
+              f"(the route's median difference between consecutive images: {typical:.1f} grey levels)\n")
+        pixel = np.r_[False, step < typical / 4]
+        print(f"A pixel rule (consecutive images differ by less than {typical / 4:.1f}) flags {int(pixel.sum())} "
+              f"references; it agrees with the map's motion cue on {np.mean(pixel == same):.1%} of them.\n")
+        spans = runs_of(same)
+        if spans:
+            print("| run (references) | length | mean brightness | mean difference from its first image |")
+            print("|---|---|---|---|")
+            for lo, hi in spans:
+                run = images[lo:hi + 1]
+                print(f"| {lo}-{hi} | {hi - lo + 1} | {run.mean():.1f} | {np.abs(run - run[0]).mean():.2f} |")
+            print()
+        print(f"`stream` at ±{a.tolerance}: wrong answers given, and those whose truth lies in a run:\n")
+        print("| stream | answers given | wrong | wrong, truth in a run |")
+        print("|---|---|---|---|")
+        for kind in KINDS:
+            ev = evaluate(Source(map=folder / "map.npz", queries=folder / kind), Truth(gt=folder / f"{kind}.csv"),
+                          {"stream": get_matcher("stream")}, a.tolerance)
+            r = ev.reports["stream"]
+            wrong = ~r.lost & ~r.correct
+            at = one_view(ev.truth, same)
+            print(f"| {kind} | {int((~r.lost).sum())} | {int(wrong.sum())} | {int((wrong & at).sum())} |")
+        print()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
