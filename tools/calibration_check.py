@@ -8,8 +8,9 @@ For each mode, the answers of every derived stream of one dataset (``evaluate``,
 stream mode gets its motion cue as ``localize`` does) are pooled and a calibration is fitted on their answers given (``vpr_edge.calibration.fit``, what ``evaluate
 --save-calibration`` writes; each fit of ``--fits``); it is then scored on every stream of the other dataset
 and of its own: the expected calibration error over the answers given (``metrics.reliability``, 10 bins;
-a lost frame carries no confidence), the share of answered frames right and of mapped frames answered right
-at the mode's lost threshold. ``--write DIR`` keeps each fitted
+a lost frame carries no confidence; also over the answers whose truth does not lie where the map shows one
+view, ``truth.one_view``), the share of answered frames right and of mapped frames answered right at the mode's
+lost threshold. ``--write DIR`` keeps each fitted
 calibration as DIR/DS.json (for ``localize --calibration`` / ``evaluate --calibration``).
 """
 from __future__ import annotations
@@ -63,8 +64,9 @@ def main() -> int:
                                   f"{folder} (all derived streams)", fit)
         print(f"\n{mode}, tolerance {a.tolerance}, {fit} fit: ECE of the confidence over the answers given per "
               f"stream, calibrated on each dataset\n")
-        print("| scored on | calibrated on | " + " | ".join(KINDS) + " | all | answered right | mapped right |")
-        print("|---|---|" + "---|" * (len(KINDS) + 3))
+        print("| scored on | calibrated on | " + " | ".join(KINDS) + " | all | all, other frames | answered right | "
+              "mapped right |")
+        print("|---|---|" + "---|" * (len(KINDS) + 4))
         for folder in a.streams:
             mine = [reports[folder.name, k] for k in KINDS]
             for fitted in a.streams:
@@ -72,11 +74,19 @@ def main() -> int:
                 eces = [metrics.reliability(curve.of(r.scores[~r.lost]), r.correct[~r.lost])[0] for r in mine]
                 pooled = metrics.reliability(curve.of(np.concatenate([r.scores[~r.lost] for r in mine])),
                                              np.concatenate([r.correct[~r.lost] for r in mine]))[0]
+                other = [~r.lost & ~_at_one_view(r) for r in mine]
+                apart = metrics.reliability(curve.of(np.concatenate([r.scores[o] for r, o in zip(mine, other)])),
+                                            np.concatenate([r.correct[o] for r, o in zip(mine, other)]))[0]
                 own = " (own)" if fitted == folder else ""
                 print(f"| {folder.name} | {fitted.name}{own} | " + " | ".join(f"{e:.3f}" for e in eces)
-                      + f" | {pooled:.3f} | " + " / ".join(f"{r.answered_right:.3f}" for r in mine)
+                      + f" | {pooled:.3f} | {apart:.3f} | " + " / ".join(f"{r.answered_right:.3f}" for r in mine)
                       + " | " + " / ".join(f"{r.mapped_right:.3f}" for r in mine) + " |")
     return 0
+
+
+def _at_one_view(report) -> np.ndarray:
+    """(Q,) bool: the frames whose truth lies where the map shows one view (none where not known)."""
+    return np.zeros(len(report.scores), bool) if report.one_view is None else report.one_view
 
 
 if __name__ == "__main__":

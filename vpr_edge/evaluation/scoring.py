@@ -42,6 +42,7 @@ class ModeReport:
     lost: np.ndarray | None = field(default=None, repr=False, compare=False)      # (Q,) bool
     correct: np.ndarray | None = field(default=None, repr=False, compare=False)   # (Q,) bool, within tolerance
     scores: np.ndarray | None = field(default=None, repr=False, compare=False)    # (Q,) each answer's score
+    one_view: np.ndarray | None = field(default=None, repr=False, compare=False)  # (Q,) bool: ``truth.one_view``
     answered_right: float = float("nan")   # share of answered (not lost) frames that are right
     mapped_right: float = float("nan")     # share of mapped frames answered right
     ece: float = float("nan")              # with a calibration: expected calibration error of the confidence
@@ -124,5 +125,6 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
                       metres=None if positions is None else metrics.metre_summary(
                           metrics.metre_errors(result.refs, truth, positions.coords, positions.geo), lost),
                       refs=result.refs, lost=lost, correct=correct[:, 0], scores=result.scores,
-                      answered_right=answered_right, mapped_right=mapped_right, one_view_frames=distinct[0],
+                      answered_right=answered_right, mapped_right=mapped_right,
+                      one_view=None if one_view is None else np.asarray(one_view, bool), one_view_frames=distinct[0],
                       distinct_answered_right=distinct[1], distinct_mapped_right=distinct[2])
