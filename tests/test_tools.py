@@ -70,6 +70,8 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
      "still_memory takes whole numbers"),
     ("lost_tradeoff.py", ["--streams", "{tmp}", "--vary", "evidence_decay", "--values", "2"],
      "evidence_decay must be in [0, 1)"),
+    ("lost_tradeoff.py", ["--streams", "{tmp}", "--vary", "still_memory", "--values", "10", "--against", "1.5"],
+     "--against 1.5: want a whole number"),
     ("results.py", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--quick"], "not a dataset folder with ref/"),
     ("results.py", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--sections", "nope"], "no section 'nope'"),
     ("bench_matcher.py", ["--stop-noise", "-1"], "--stop-noise must be >= 0"),

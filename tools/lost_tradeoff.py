@@ -12,7 +12,9 @@ For each folder (``tools/derive_streams.py`` output with its map.npz) every stre
 to the first lost frame and from re-entering to the first right answer; the lowest share of answered frames
 right and of mapped frames answered right over the streams (and which stream); the largest drop of a
 stream's mapped frames answered right from the default ``lock`` (always run, with the same ``--param``
-values); the mean ``stream`` R@1 and AUC. Only which answers are called lost moves with ``lock`` (the
+values; or from ``--against``'s value); the same two over the frames whose truth does not lie where the map
+shows one view (``truth.one_view``: a run of references its drive saw alike, where a frame-counted truth is a
+count no image recovers); the mean ``stream`` R@1 and AUC. Only which answers are called lost moves with ``lock`` (the
 trajectory search is the same), so the table is the trade-off the threshold allows. Bad input (a lock that is
 not a positive number, an unknown parameter, a folder without its map or streams) is one line on stderr and
 exit code 2, before any work.
@@ -51,6 +53,9 @@ def main() -> int:
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                    help="another stream parameter for every row (as `vpr-edge evaluate --param`)")
+    p.add_argument("--against", type=float, default=None,
+                   help="the value the drops are measured from (default: the parameter's default; e.g. 0 for a "
+                        "rule read against the parameter switched off)")
     a = p.parse_args()
     return one_line_errors("lost_tradeoff", lambda: _run(a))
 
@@ -76,9 +81,13 @@ def _run(a: argparse.Namespace) -> int:
     kind = type(STREAM[a.vary].default)   # an int parameter (e.g. still_memory) takes whole values
     if kind is int and any(x != int(x) for x in locks):
         raise VprError(f"--values: {a.vary} takes whole numbers")
+    default = float(STREAM[a.vary].default if a.against is None else a.against)
+    if not np.isfinite(default) or (kind is int and default != int(default)):
+        raise VprError(f"--against {a.against:g}: want a {'whole ' if kind is int else ''}number")
     try:
         fixed = get_matcher("stream").parse_params(a.param)
-        get_matcher("stream").parse_params([f"{a.vary}={kind(x)}" for x in locks])
+        for x in [*locks, default]:   # one at a time: the items of one call set one key
+            get_matcher("stream").parse_params([f"{a.vary}={kind(x)}"])
     except ValueError as e:
         raise VprError(str(e)) from None
     for folder in a.streams:
@@ -86,14 +95,14 @@ def _run(a: argparse.Namespace) -> int:
                    [folder / f"{k}.csv" for k in KINDS] if not p.exists()]
         if missing:
             raise VprError(f"{folder}: not a derive_streams folder with its map ({missing[0]} is missing)")
-    default = float(STREAM[a.vary].default)
     locks = sorted(set(locks) | {default})
     modes = {f"{a.vary}={x:g}": get_matcher("stream").with_params(**fixed | {a.vary: kind(x)}) for x in locks}
     print(f"stream matcher{''.join(f' {k}={v}' for k, v in fixed.items())}, tolerance {a.tolerance}; "
           "worst stream in brackets\n")
     print(f"| dataset | `{a.vary}` | detour unmapped lost | exit frames | re-lock frames | min answered right "
-          "| min mapped right | mapped right, largest drop | mean R@1 / AUC |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          f"| min mapped right | mapped right, largest drop from {default:g} | other frames: min answered right | "
+          f"other frames: mapped right, largest drop from {default:g} | mean R@1 / AUC |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for folder in a.streams:
         reports = {kind: evaluate(Source(map=folder / "map.npz", queries=folder / kind),
                                   Truth(gt=folder / f"{kind}.csv"), modes, a.tolerance).reports for kind in KINDS}
@@ -104,10 +113,16 @@ def _run(a: argparse.Namespace) -> int:
             got = min(KINDS, key=lambda k: _or_inf(per[k].mapped_right))
             drop = {k: per[k].mapped_right - reports[k][f"{a.vary}={default:g}"].mapped_right for k in KINDS}
             worst = min(KINDS, key=drop.get)
+            # over the frames whose truth does not lie where the map shows one view (``truth.one_view``)
+            ans_o = min(KINDS, key=lambda k: _or_inf(per[k].distinct_answered_right))
+            drop_o = {k: per[k].distinct_mapped_right - reports[k][f"{a.vary}={default:g}"].distinct_mapped_right
+                      for k in KINDS}
+            worst_o = min(KINDS, key=lambda k: _or_inf(drop_o[k]))
             print(f"| {folder.name} | {name.split('=')[1]} | {detour.lost_unmapped:.3f} | "
                   f"{_frames(detour.exit_frames)} | {_frames(detour.lock_frames[1:])} | "
                   f"{per[ans].answered_right:.3f} ({ans}) | {per[got].mapped_right:.3f} ({got}) | "
-                  f"{drop[worst]:+.3f} ({worst}) | {np.mean([per[k].recall[1] for k in KINDS]):.3f} / "
+                  f"{drop[worst]:+.3f} ({worst}) | {per[ans_o].distinct_answered_right:.3f} ({ans_o}) | "
+                  f"{drop_o[worst_o]:+.3f} ({worst_o}) | {np.mean([per[k].recall[1] for k in KINDS]):.3f} / "
                   f"{np.mean([per[k].auc for k in KINDS]):.3f} |", flush=True)
     return 0
 
