@@ -110,7 +110,7 @@ def test_searching_around_candidates_answers_as_the_dense_matcher() -> None:
     index = fit_ivf(stored, lists=70)
     answers = {}
     for name in ("dense", "index"):
-        m = MATCHERS["stream"].stream(len(refs))
+        m = MATCHERS["stream"].on_route([refs]).stream(len(refs))   # as Localizer: the map's stops and reach
         out = []
         for q in queries:
             cands = None if name == "dense" else (lambda q=q: index.candidates(stored, q))

@@ -701,10 +701,11 @@ def test_road_matcher_lost_line_is_the_rows_own() -> None:
 def test_road_matcher_reports_leaving_the_map_within_three_frames() -> None:
     """A vehicle leaves the map for 20 frames of unmapped views: the first frame reported lost comes within 4
     frames of leaving in every one of 8 draws (2 on average), and >= 80% of the unmapped frames are lost on
-    average; without the evidence line (the trajectory score alone) the lock's memory holds the answer for 5
+    average; without the evidence line and the uniqueness floor (the trajectory score alone) the lock's memory
+    holds the answer for 5
     frames or more (8 on average) and loses about 60%."""
     m = get_matcher("stream")
-    off = m.with_params(evidence=-99.0)
+    off = m.with_params(evidence=-99.0, unique=0.0)   # the trajectory score alone
     exits, shares, exits_off = [], [], []
     for seed in range(8):
         rng = np.random.default_rng(seed)
@@ -824,3 +825,73 @@ def test_an_answer_with_a_rival_as_strong_along_its_drive_is_lost() -> None:
     assert (alone.scores[late] < 1.0).all()
     for res in (off, twice):
         assert (res.scores[late] >= 1.0).all() and ((res.refs[late] % 40) == truth[late]).all()
+
+
+def naive_reach(x: np.ndarray, stands: np.ndarray | None) -> int:
+    """``likeness.reach`` as plain loops over every pair (maps short enough that it reads every pair)."""
+    from vpr_edge.matchers.likeness import MAX_LAG
+
+    m = len(x)
+    run, r = [], 0
+    for s in (np.zeros(m, bool) if stands is None else stands):
+        r += not s
+        run.append(r)
+    far = min(MAX_LAG, m // 2)
+    rng = np.random.default_rng(0)
+    i = rng.integers(0, m - far, 2048)
+    j = np.minimum(i + far + rng.integers(0, m - far - i), m - 1)
+    unrelated = [float(x[a] @ x[b]) for a, b in zip(i, j)]
+    line = np.median(unrelated) + np.std(unrelated)
+    for k in range(1, far):
+        pairs = [float(x[a] @ x[a + k]) for a in range(m - k) if run[a] != run[a + k]]
+        if len(pairs) >= 4 and np.median(pairs) <= line:
+            return k
+    return far
+
+
+@pytest.mark.parametrize("rho, stops", [(0.0, False), (0.6, False), (0.9, False), (0.9, True)])
+def test_reach_against_a_loop_and_with_the_maps_density(rho: float, stops: bool) -> None:
+    """The lag at which references stop being alike: as plain loops; longer the more alike consecutive
+    references are; a run of one view (the drive stood) does not lengthen it."""
+    from vpr_edge.matchers.likeness import reach
+
+    rng = np.random.default_rng(7)
+    x = rng.normal(size=(600, 32))
+    for i in range(1, len(x)):
+        x[i] = rho * x[i - 1] + np.sqrt(1 - rho ** 2) * x[i]
+    stands = np.zeros(len(x), bool)
+    if stops:   # the drive stood at ten places for 20 frames each: one view repeated
+        for s in range(30, 600, 60):
+            x[s + 1:s + 21] = x[s]
+            stands[s + 1:s + 21] = True
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    got = reach(x.astype(np.float32), stands)
+    assert got == naive_reach(x, stands)
+    expected = {0.0: (1, 1), 0.6: (2, 6), 0.9: (8, 30)}[rho]
+    assert expected[0] <= got <= expected[1], got
+    if stops:
+        assert got <= reach(x.astype(np.float32), None)   # read as density, the stops would lengthen it
+
+
+def test_a_densely_sampled_map_keeps_its_right_answers_unique() -> None:
+    """On a map whose references stay alike for ~20 places (a slow drive, every frame kept), a right answer's
+    nearest rivals share its evidence: read on the map (``on_route``: its reach), the rival lies beyond them and
+    the uniqueness floor keeps the right answers; with the fixed rival window alone it loses some."""
+    rng = np.random.default_rng(2)
+    n, d = 1500, 48
+    refs = rng.normal(size=(n, d))
+    for i in range(1, n):
+        refs[i] = 0.9 * refs[i - 1] + np.sqrt(1 - 0.81) * refs[i]
+    refs /= np.linalg.norm(refs, axis=1, keepdims=True)
+    truth = (100 + np.arange(300) * 1.5).astype(int)
+    q = refs[truth] + 0.12 * rng.normal(size=(300, d))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    sim = q @ refs.T
+    m = get_matcher("stream")
+    on_map = m.on_route([refs.astype(np.float32)])
+    assert on_map.reach > m.params["rival_window"]
+    kept = {}
+    for name, matcher in (("reach", on_map), ("fixed", m)):
+        res = matcher.run(sim)
+        kept[name] = ((np.abs(res.refs - truth) <= 2) & (res.scores >= 1.0))[20:].mean()
+    assert kept["reach"] > 0.97 and kept["reach"] > kept["fixed"] + 0.05, kept

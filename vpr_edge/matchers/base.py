@@ -33,6 +33,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from vpr_edge.errors import VprError
+from vpr_edge.matchers.likeness import LikenessSample
 from vpr_edge.matchers.motion import MEMORY, MotionCue, cue_at, route_stands, stillness
 from vpr_edge.matchers.params import Param, read_items
 from vpr_edge.matchers.route import RouteGraph
@@ -159,9 +160,10 @@ class Matcher:
     params: dict[str, Any] = field(default_factory=dict)
     min_confidence: float | None = None
     scores: str = "cosine"
-    reads_route: bool = False                 # start() takes ``route`` (the map's standing references) and
-    route: np.ndarray | None = field(default=None, repr=False, compare=False)   # ``graph`` (its drives)
-    graph: RouteGraph | None = field(default=None, repr=False, compare=False)
+    reads_route: bool = False                 # start() takes ``route`` (the map's standing references),
+    route: np.ndarray | None = field(default=None, repr=False, compare=False)   # ``graph`` (its drives) and
+    graph: RouteGraph | None = field(default=None, repr=False, compare=False)   # ``reach`` (likeness.reach)
+    reach: int = field(default=0, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not self.params:
@@ -213,7 +215,7 @@ class Matcher:
                 raise ValueError(f"matcher {self.name!r}: route of {len(self.route)} references for {n_refs}")
             if self.graph is not None and self.graph.n_refs != n_refs:
                 raise ValueError(f"matcher {self.name!r}: drives of {self.graph.n_refs} references for {n_refs}")
-            return self.start(n_refs, route=self.route, graph=self.graph, **self.params)
+            return self.start(n_refs, route=self.route, graph=self.graph, reach=self.reach, **self.params)
         return self.start(n_refs, **self.params)
 
     @property
@@ -240,14 +242,20 @@ class Matcher:
     def on_route(self, blocks: Iterable[np.ndarray], graph: RouteGraph | None = None) -> "Matcher":
         """This matcher on a map whose references are given in route order as consecutive blocks (n, D) and
         whose drives meet as ``graph`` says (``route.RouteGraph``; None: one drive): for a matcher that
-        ``reads_route``, with the map's standing references (``motion.route_stands``) and its graph; else
-        itself."""
+        ``reads_route``, with the map's standing references (``motion.route_stands``), its graph and how far
+        along it references stay alike (``likeness.reach``), read in one pass over the blocks; else itself."""
         if not self.reads_route:
             return self
         graph = None if graph is None or graph.simple else graph
+        sample = LikenessSample()
+        rows = sample.feed(blocks)
+        route = None
         if self.still_threshold is None:
-            return replace(self, graph=graph)
-        return replace(self, route=route_stands(blocks, self.still_threshold, self.still_memory), graph=graph)
+            for _ in rows:
+                pass
+        else:
+            route = route_stands(rows, self.still_threshold, self.still_memory)
+        return replace(self, route=route, graph=graph, reach=sample.reach(route))
 
     def run(self, sim: np.ndarray, k: int = 10, still: np.ndarray | None = None) -> Result:
         """Match every row of ``sim`` (Q, R); online matchers see the rows in order, past frames only, each

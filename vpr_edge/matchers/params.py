@@ -36,11 +36,12 @@ STREAM: dict[str, Param] = {
                            "reference, averaged over frames with evidence_decay; a standing frame may raise the "
                            "average, not lower it); -99 = off"),
     "evidence_decay": Param(0.5, "weight of the past in that average (0: this frame alone)"),
-    "unique": Param(0.03, "the answer is reported lost unless its uniqueness (1 - (H_rival + 1) / (H_best + 1): "
+    "unique": Param(0.25, "the answer is reported lost unless its uniqueness (1 - (H_rival + 1) / (H_best + 1): "
                          "how far the best trajectory leads the best one beyond rival_window) is at least this; "
                          "0 = off"),
     "rival_window": Param(10, "references either side of the answer that a rival trajectory must lie beyond "
-                              "(the uniqueness part of the score)"),
+                              "(the uniqueness part of the score); on a map whose references stay alike further "
+                              "along the route, as far as they do (likeness.reach, measured on the map)"),
     "window": Param(100, "local search: references either side of a firm lock read per frame, on routes of "
                          "more than 4x this (0 = every reference every frame)"),
     "probe": Param(512, "local search: fixed random references that estimate a frame's similarity mean and "

@@ -59,7 +59,9 @@ as z uses them; the bulk of a row is the "not this place" distribution of that f
 conditions), averaged over frames (E = evidence_decay * E + (1 - evidence_decay) * e; a standing frame may
 raise E, never lower it). H remembers ~1/(1 - decay) frames, so alone it reports a vehicle that left the
 map lost only after that memory fades; E says so within a frame or two.
-H_rival is the best trajectory ending more than ``rival_window`` references away: like SeqSLAM's
+H_rival is the best trajectory ending more than ``rival_window`` references away (or more than the map's
+``reach``, how far along it references stay alike, ``likeness.reach``, where that is further: on a densely
+sampled map a trajectory a few places on shares the answer's evidence and is no rival): like SeqSLAM's
 best/second-best ratio, uniqueness ranks frames by how unambiguous the answer is, which H alone does badly,
 while H decides lost better than uniqueness (docs/design.md, "Matching"). An answer whose uniqueness is below
 ``unique`` (a trajectory elsewhere along the answer's drive nearly as strong: either could be the place) is
@@ -101,12 +103,14 @@ class RoadMatcher:
                  hold: float, seek: int, peaks: int, seek_frames: int, stop_gain: float, stop_decay: float, still: float,
                  still_memory: int,
                  evidence: float, evidence_decay: float, unique: float, route: np.ndarray | None = None,
-                 graph: RouteGraph | None = None) -> None:
+                 graph: RouteGraph | None = None, reach: int = 0) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
         ``still_memory`` is the motion cue's, read where the cue is computed; ``seek_frames`` is what the index
         is asked, read where it is asked, ``index.ivf.SequenceQuery``). ``route``: (n_refs,) bool, the
         references where the map's drive stood (``motion.route_stands``; None: not known). ``graph``: the
-        map's drives and where they meet (``route.RouteGraph``; None: one drive)."""
+        map's drives and where they meet (``route.RouteGraph``; None: one drive). ``reach``: how far along
+        the map references stay alike (``likeness.reach``; 0: not known): a rival trajectory must lie beyond
+        it as well as beyond ``rival_window``."""
         if n_refs < 1:
             raise ValueError("need at least one reference")
         if not 0.0 < decay < 1.0:
@@ -123,7 +127,8 @@ class RoadMatcher:
             raise ValueError(f"need grid >= 1, vmax >= 0, memory >= 1, window >= 0, probe >= 2 (got {grid}, "
                              f"{vmax}, {memory}, {window}, {probe})")
         self.n_refs, self.grid, self.decay, self.bias = n_refs, grid, decay, bias
-        self.turn, self.memory, self.lock, self.rival_window = turn, memory, lock, max(0, int(rival_window))
+        self.turn, self.memory, self.lock = turn, memory, lock
+        self.rival_window = max(0, int(rival_window), int(reach))
         self.stop_gain, self.stop_decay, self.still = stop_gain, stop_decay, still
         self.evidence, self.evidence_decay, self.unique = evidence, evidence_decay, unique
         self._evidence: float | None = None   # the answer's recent standing out of its rows (``evidence``)
