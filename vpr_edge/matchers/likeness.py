@@ -9,7 +9,8 @@ apart along the route are, by their median cosine, no more alike than the median
 cosines plus one standard deviation of them (unrelated: at least ``MAX_LAG`` apart, or half the sample on a
 short map). Pairs inside one run of standing references (``motion.route_stands``: the drive stood, one view)
 are left out, as that likeness is a stop, not the map's density. Estimated on the route's first ``SAMPLE``
-references (a map's density is the camera's and the drive's, not the place's), capped at ``MAX_LAG``: opening
+references in the map's order (a map's density is the camera's and the drive's, not the place's; on a map of
+several short drives some pairs span two drives, read as unrelated), capped at ``MAX_LAG``: opening
 a map pays one pass over up to ``PAIRS`` pairs per lag up to the reach (milliseconds on a map whose references
 differ within a few places, a few hundred on one that stays alike for ``MAX_LAG``).
 """
