@@ -24,6 +24,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError, one_line_errors
 from vpr_edge.evaluation import Source, Truth, evaluate
+from vpr_edge.evaluation.metrics import runs
 from vpr_edge.evaluation.run import map_same_view
 from vpr_edge.evaluation.streams import KINDS
 from vpr_edge.evaluation.truth import one_view
@@ -35,17 +36,7 @@ from vpr_edge.matchers import get_matcher
 def runs_of(same: np.ndarray) -> list[tuple[int, int]]:
     """(R,) bool, True where a reference shows the one before's view -> [first, last] of each run, the
     reference it repeats included."""
-    out, r = [], 0
-    while r < len(same):
-        if same[r]:
-            end = r
-            while end + 1 < len(same) and same[end + 1]:
-                end += 1
-            out.append((max(r - 1, 0), end))
-            r = end + 1
-        else:
-            r += 1
-    return out
+    return [(max(lo - 1, 0), hi - 1) for lo, hi in runs(same)]
 
 
 def grey(path: Path) -> np.ndarray:
