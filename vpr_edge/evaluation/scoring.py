@@ -111,11 +111,10 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
 
     lock, exits = metrics.transition_delays(mapped, correct[:, 0] & ~lost, lost)
     answered_right, mapped_right = metrics.answered_shares(correct[:, 0], lost, mapped)
+    view = None if one_view is None else np.asarray(one_view, bool)
     distinct = (-1, float("nan"), float("nan"))
-    if one_view is not None:
-        keep = ~np.asarray(one_view, bool)
-        distinct = (int((mapped & ~keep).sum()),
-                    *metrics.answered_shares(correct[keep, 0], lost[keep], mapped[keep]))
+    if view is not None:
+        distinct = (int((mapped & view).sum()), *metrics.answered_shares(correct[~view, 0], lost[~view], mapped[~view]))
     return ModeReport({k: metrics.recall_at_k(correct, mapped, k) for k in RECALL_KS},
                       metrics.auc_trapezoid(curve), metrics.average_precision(curve),
                       metrics.precision_at_full_recall(curve), metrics.recall_at_full_precision(curve),
@@ -126,5 +125,5 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
                           metrics.metre_errors(result.refs, truth, positions.coords, positions.geo), lost),
                       refs=result.refs, lost=lost, correct=correct[:, 0], scores=result.scores,
                       answered_right=answered_right, mapped_right=mapped_right,
-                      one_view=None if one_view is None else np.asarray(one_view, bool), one_view_frames=distinct[0],
+                      one_view=view, one_view_frames=distinct[0],
                       distinct_answered_right=distinct[1], distinct_mapped_right=distinct[2])
