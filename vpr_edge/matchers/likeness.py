@@ -62,8 +62,7 @@ def reach(x: np.ndarray, stands: np.ndarray | None = None) -> int:
     far = min(MAX_LAG, m // 2)
     rng = np.random.default_rng(0)
     i = rng.integers(0, m - far, PAIRS)
-    j = i + far + (rng.integers(0, m - far - i) if m - far > 1 else 0)
-    j = np.minimum(j, m - 1)
+    j = i + far + rng.integers(0, m - far - i)      # at least far apart, within the sample (m - far >= 4)
     unrelated = np.einsum("ij,ij->i", x[i], x[j])
     line = float(np.median(unrelated) + np.std(unrelated))
 
