@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from vpr_edge.evaluation.streams import KINDS
@@ -84,6 +85,8 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("compare_drives.py", ["--streams", "{tmp}"], "ref: not a folder"),
     ("bench_fleet.py", ["--refs", "{tmp}/none"], "none: not a folder"),
     ("one_view_check.py", ["--streams", "{tmp}"], "map.npz: missing"),
+    ("leave_one_out.py", ["--streams", "{tmp}", "{tmp}"], "two datasets with one name"),
+    ("leave_one_out.py", ["--streams", "{tmp}/a", "{tmp}/b"], "not a derive_streams folder with its map"),
 ])
 def test_new_tools_refuse_bad_input_in_one_line(tmp_path: Path, name: str, args: list[str], needle: str) -> None:
     """One line on stderr naming the problem, exit 2, before any work (nothing written)."""
@@ -245,6 +248,20 @@ def test_bench_e2e_and_calibration_check(tmp_path: Path, small_refs: Path, small
     assert [r[1].strip() for r in rows] == ["5", "6"]
     for r in rows:   # no unmapped frames here: nothing to lose, nothing to exit
         assert r[2].strip() == "nan" and r[3].strip() == "-" and 0 <= float(r[6].split()[0]) <= 1
+    # the same streams under two names: each dataset's choice is the other's, so held out scores as its own
+    text = tool("leave_one_out.py", "--streams", str(tmp_path / "one"), str(tmp_path / "two"))
+    choices = [line.split("|")[1:-1] for line in text.splitlines() if line.startswith("| `")]
+    assert [c[0].strip() for c in choices] == ["`still`", "`lock`", "`evidence`", "`unique`"]
+    assert all(c[3] == c[4] and float(c[3]) in [float(v) for v in c[1].split(",")] for c in choices)
+    rows = {tuple(c.strip() for c in line.split("|")[1:4]): line.split("|")[4:-1]
+            for line in text.splitlines() if line.startswith("| one") or line.startswith("| two")}
+    assert len(rows) == 12
+    for ds, other in (("one", "two"), ("two", "one")):
+        for frames in ("all", "away from one view"):
+            held = rows[ds, f"chosen on {other} (held out)", frames]
+            assert held == rows[ds, f"chosen on {ds} (own)", frames]
+            shares = [float(x) for cell in held[:len(KINDS)] for x in cell.split("/")]   # NaN: nothing answered
+            assert all(0 <= x <= 1 or np.isnan(x) for x in shares) and not np.isnan(shares[1])
     text = tool("one_view_check.py", "--streams", str(tmp_path / "one"))
     assert "agrees with the map's motion cue on" in text
     rows = [line.split("|")[1:-1] for line in text.splitlines() if line.startswith("| aligned")]

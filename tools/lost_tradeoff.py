@@ -29,7 +29,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError, one_line_errors
 from vpr_edge.evaluation import Source, Truth, evaluate
-from vpr_edge.evaluation.streams import KINDS
+from vpr_edge.evaluation.streams import KINDS, check_streams_folder
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.params import STREAM
 
@@ -91,10 +91,7 @@ def _run(a: argparse.Namespace) -> int:
     except ValueError as e:
         raise VprError(str(e)) from None
     for folder in a.streams:
-        missing = [str(p) for p in [folder / "map.npz"] + [folder / k for k in KINDS] +
-                   [folder / f"{k}.csv" for k in KINDS] if not p.exists()]
-        if missing:
-            raise VprError(f"{folder}: not a derive_streams folder with its map ({missing[0]} is missing)")
+        check_streams_folder(folder)
     locks = sorted(set(locks) | {default})
     modes = {f"{a.vary}={x:g}": get_matcher("stream").with_params(**fixed | {a.vary: kind(x)}) for x in locks}
     print(f"stream matcher{''.join(f' {k}={v}' for k, v in fixed.items())}, tolerance {a.tolerance}; "

@@ -105,6 +105,7 @@ SECTIONS = (
     Section("calibration", "calibration_check.py", ("--streams", "{corridor}", "{nordland-dev}", "--modes",
                                                     "stream,single", "--fits", "logistic,isotonic")),
     Section("one-view", "one_view_check.py", ("--streams", "{nordland-dev}", "{corridor}")),
+    Section("leave-one-out", "leave_one_out.py", ("--streams", "{nordland-dev}", "{corridor}")),
     Section("evaluating-corridor", "eval_streams.py", ("--streams", "{corridor}")),
     Section("evaluating-nordland-dev", "eval_streams.py", ("--streams", "{nordland-dev}")),
     _size("nordland-dev", 2, _CODEBOOKS),
@@ -327,6 +328,10 @@ def main() -> int:
         (a.out / "results.json").write_text(json.dumps(doc, indent=1) + "\n")
         (a.out / "results.md").write_text(markdown(doc))
         if a.write_docs:
+            if not a.quick:   # the sections not re-run stay in docs/results.md as they were: so do their entries
+                kept = ROOT / "docs" / "generated" / "results.json"
+                before = json.loads(kept.read_text()).get("sections", {}) if kept.exists() else {}
+                doc["sections"] = {n: v for n, v in before.items() if n in known} | doc.get("sections", {})
             write_docs(doc)
             write_sections(made)
         print(markdown(doc))

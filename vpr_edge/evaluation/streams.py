@@ -184,6 +184,16 @@ def derive_streams(dataset: str | os.PathLike[str], out: str | os.PathLike[str],
     return counts | {"map places": n_mapped}
 
 
+def check_streams_folder(folder: str | os.PathLike[str], kinds: Sequence[str] = KINDS) -> None:
+    """VprError unless ``folder`` is ``derive_streams`` output with its default map: map.npz, and per kind
+    the stream KIND/ and its truth KIND.csv (what the tools that read every stream check before any work)."""
+    folder = Path(folder)
+    need = [folder / "map.npz"] + [folder / k for k in kinds] + [folder / f"{k}.csv" for k in kinds]
+    missing = [str(p) for p in need if not p.exists()]
+    if missing:
+        raise VprError(f"{folder}: not a derive_streams folder with its map ({missing[0]} is missing)")
+
+
 DRIVES_FOLDER = "drives"   # derive_streams --drives: the map cut into drives, under OUT/drives/
 
 
