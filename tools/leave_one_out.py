@@ -134,7 +134,7 @@ def _run(a: argparse.Namespace) -> int:
     for r in RULES:
         print(f"| `{r.param}` | {', '.join(f'{v:g}' for v in r.values)} | {r.says} | {chosen[names[0]][r.param]:g} | "
               f"{chosen[names[1]][r.param]:g} | {defaults[r.param]:g} |")
-    print(f"\nscored on each dataset with the settings chosen on the other (held out), on its own, and the "
+    print("\nscored on each dataset with the settings chosen on the other (held out), on its own, and the "
           "defaults; per stream: answers given right / mapped frames answered right\n")
     print(f"| scored on | settings | frames | {' | '.join(KINDS)} | detour unmapped lost (first) | mean R@1 |")
     print(f"|---|---|---|{'---|' * len(KINDS)}---|---|")
