@@ -133,6 +133,21 @@ def test_reliability_known_answers() -> None:
     assert np.isnan(reliability(np.zeros(0), np.zeros(0, bool))[0])
 
 
+def test_brier_against_a_loop_and_a_constant() -> None:
+    """Brier = mean squared (confidence - right); a constant at the share right p scores p (1 - p), whatever
+    its ECE (0): the score that tells a confidence that ranks answers from one that does not."""
+    from vpr_edge.evaluation.metrics import brier, reliability
+
+    rng = np.random.default_rng(5)
+    conf, ok = rng.random(300), rng.random(300) < 0.7
+    assert brier(conf, ok) == pytest.approx(sum((c - float(o)) ** 2 for c, o in zip(conf, ok)) / 300)
+    share = ok.mean()
+    flat = np.full(300, share)
+    assert brier(flat, ok) == pytest.approx(share * (1 - share)) and reliability(flat, ok)[0] == pytest.approx(0)
+    assert brier(ok.astype(float), ok) == 0.0 and brier(np.full(3, 2.0), np.ones(3, bool)) == 0.0   # clipped
+    assert np.isnan(brier(np.zeros(0), np.zeros(0, bool)))
+
+
 def test_answered_shares_against_counts() -> None:
     from vpr_edge.evaluation.metrics import answered_shares
 

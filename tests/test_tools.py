@@ -240,7 +240,7 @@ def test_bench_e2e_and_calibration_check(tmp_path: Path, small_refs: Path, small
                 "stream", "--fits", "logistic,isotonic", "--write", str(tmp_path / "cal"))
     assert "stream, tolerance 2, logistic fit" in text and "stream, tolerance 2, isotonic fit" in text
     rows = [line.split("|") for line in text.splitlines() if line.startswith("| one") or line.startswith("| two")]
-    ece = slice(3, 3 + len(KINDS) + 1)   # per stream and all
+    ece = slice(3, 3 + len(KINDS) + 4)   # per stream, all, other frames, Brier, a constant's
     assert len(rows) == 8 and all(r[ece] == r2[ece] for r, r2 in zip(rows[::2], rows[1::2]))   # same ECEs
     assert json.loads((tmp_path / "cal" / "one.json").read_text())["kind"] == "calibration"
     text = tool("lost_tradeoff.py", "--streams", str(tmp_path / "one"), "--locks", "5,6")

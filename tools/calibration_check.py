@@ -9,8 +9,10 @@ stream mode gets its motion cue as ``localize`` does) are pooled and a calibrati
 --save-calibration`` writes; each fit of ``--fits``); it is then scored on every stream of the other dataset
 and of its own: the expected calibration error over the answers given (``metrics.reliability``, 10 bins;
 a lost frame carries no confidence; also over the answers whose truth does not lie where the map shows one
-view, ``truth.one_view``), the share of answered frames right and of mapped frames answered right at the mode's
-lost threshold. ``--write DIR`` keeps each fitted
+view, ``truth.one_view``), the pooled Brier score (``metrics.brier``), and beside them the ECE and Brier
+score of a constant confidence, the calibration dataset's share of answers right (what a confidence that tells
+no answer from another scores), the share of answered frames right and of mapped frames answered right at the
+mode's lost threshold. ``--write DIR`` keeps each fitted
 calibration as DIR/DS.json (for ``localize --calibration`` / ``evaluate --calibration``).
 """
 from __future__ import annotations
@@ -52,34 +54,39 @@ def main() -> int:
                                                 Truth(gt=folder / f"{kind}.csv"), modes, a.tolerance).reports
     for mode, fit in ((m, f) for m in modes for f in fits):
         reports = {key: r[mode] for key, r in every.items()}
-        curves = {}
+        curves, base_rate = {}, {}
         for folder in a.streams:
             mine = [r for (ds, _), r in reports.items() if ds == folder.name]
             curves[folder.name] = calibration.fit(np.concatenate([r.scores for r in mine]),
                                                   np.concatenate([r.correct for r in mine]), a.tolerance,
                                                   np.concatenate([~r.lost for r in mine]), fit)
+            base_rate[folder.name] = np.concatenate([r.correct[~r.lost] for r in mine]).mean()   # its share right
             if a.write:
                 a.write.mkdir(parents=True, exist_ok=True)
                 calibration.write(a.write / f"{folder.name}.json", {mode: curves[folder.name]},
                                   f"{folder} (all derived streams)", fit)
         print(f"\n{mode}, tolerance {a.tolerance}, {fit} fit: ECE of the confidence over the answers given per "
               f"stream, calibrated on each dataset\n")
-        print("| scored on | calibrated on | " + " | ".join(KINDS) + " | all | all, other frames | answered right | "
-              "mapped right |")
-        print("|---|---|" + "---|" * (len(KINDS) + 4))
+        print("| scored on | calibrated on | " + " | ".join(KINDS) + " | all | all, other frames | all: Brier | "
+              "a constant: ECE / Brier | answered right | mapped right |")
+        print("|---|---|" + "---|" * (len(KINDS) + 6))
         for folder in a.streams:
             mine = [reports[folder.name, k] for k in KINDS]
             for fitted in a.streams:
                 curve = curves[fitted.name]
                 eces = [metrics.reliability(curve.of(r.scores[~r.lost]), r.correct[~r.lost])[0] for r in mine]
-                pooled = metrics.reliability(curve.of(np.concatenate([r.scores[~r.lost] for r in mine])),
-                                             np.concatenate([r.correct[~r.lost] for r in mine]))[0]
+                given = np.concatenate([r.scores[~r.lost] for r in mine])
+                right = np.concatenate([r.correct[~r.lost] for r in mine])
+                pooled = metrics.reliability(curve.of(given), right)[0]
+                flat = np.full(len(right), base_rate[fitted.name])   # no answer told from another
+                constant = f"{metrics.reliability(flat, right)[0]:.3f} / {metrics.brier(flat, right):.3f}"
                 other = [~r.lost & ~_at_one_view(r) for r in mine]
                 apart = metrics.reliability(curve.of(np.concatenate([r.scores[o] for r, o in zip(mine, other)])),
                                             np.concatenate([r.correct[o] for r, o in zip(mine, other)]))[0]
                 own = " (own)" if fitted == folder else ""
                 print(f"| {folder.name} | {fitted.name}{own} | " + " | ".join(f"{e:.3f}" for e in eces)
-                      + f" | {pooled:.3f} | {apart:.3f} | " + " / ".join(f"{r.answered_right:.3f}" for r in mine)
+                      + f" | {pooled:.3f} | {apart:.3f} | {metrics.brier(curve.of(given), right):.3f} | {constant} | "
+                      + " / ".join(f"{r.answered_right:.3f}" for r in mine)
                       + " | " + " / ".join(f"{r.mapped_right:.3f}" for r in mine) + " |")
     return 0
 

@@ -194,3 +194,11 @@ def reliability(confidence: np.ndarray, correct: np.ndarray, bins: int = 10) -> 
             table.append({"from": b / bins, "to": (b + 1) / bins, "n": n, "confidence": round(mean_conf, 6),
                           "right": round(share, 6)})
     return float(ece), table
+
+
+def brier(confidence: np.ndarray, correct: np.ndarray) -> float:
+    """Brier score of ``confidence`` (Q,) in [0, 1] against ``correct`` (Q,) bool: the mean squared difference
+    (0 = sure and right every time; a constant at the share right scores that share times its complement).
+    Unlike the ECE it rewards a confidence that tells right answers from wrong ones. NaN for no answers."""
+    conf = np.clip(np.asarray(confidence, np.float64), 0.0, 1.0)
+    return float(np.mean((conf - np.asarray(correct, np.float64)) ** 2)) if len(conf) else float("nan")
