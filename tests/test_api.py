@@ -161,6 +161,8 @@ def test_evaluate_runs_the_stream_matcher_as_localize_does(api_map: Path, small_
     np.testing.assert_allclose([m.score for m in pushed], report.scores, atol=1e-5)
     assert [m.ref_index for m in pushed if not m.lost] == [int(r) for r, lost in zip(report.refs, report.lost)
                                                            if not lost]
+    assert [m.lost_why for m in pushed] == list(report.why)          # the same reason for each lost frame
+    assert all((m.lost_why is None) == (not m.lost) for m in pushed) and pushed[0].lost_why == "no-trajectory"
     blind = get_matcher("stream").run(loc.similarity(loc.encode([load_image(f) for f in sorted(stream.iterdir())])))
     assert not np.allclose(blind.scores, report.scores, atol=1e-5)       # the cue made a difference here
 

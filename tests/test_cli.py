@@ -110,7 +110,7 @@ def test_localize_jsonl_file_and_reused_codebook(tmp_path: Path, small_map: Path
     assert proc.returncode == 0, proc.stderr
     lines = [json.loads(x) for x in out.read_text().splitlines()]
     assert len(lines) == 24 and list(lines[0]) == ["frame_index", "frame", "stamp", "ref_index", "ref", "drive", "x", "y",
-                                                   "lat", "lon", "heading", "along_m", "score", "confidence", "lost"]
+                                                   "lat", "lon", "heading", "along_m", "score", "confidence", "lost", "lost_why"]
     assert all(m["ref_index"] is None and m["ref"] is None for m in lines if m["lost"])   # nulls when lost
 
 

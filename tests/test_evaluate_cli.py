@@ -15,7 +15,7 @@ from vpr_edge.evaluation.streams import write_ground_truth
 JSON_KEYS = {"recall_at_1", "recall_at_5", "recall_at_10", "auc", "ap", "precision_at_full_recall",
              "recall_at_full_precision", "median_error", "lost_unmapped", "lost_mapped", "ms_per_frame", "lock_frames",
              "exit_frames", "answered_right", "mapped_right", "ece", "reliability", "one_view_frames",
-             "distinct_answered_right", "distinct_mapped_right", "settings"}
+             "distinct_answered_right", "distinct_mapped_right", "lost_why", "settings"}
 
 
 @pytest.fixture(scope="module")
@@ -60,6 +60,11 @@ def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_qu
     assert "R@1" in proc.stdout and "seqslam-online" in proc.stdout
     assert "away from where the map shows one view" in proc.stdout       # a map: its views are known
     assert all(m["one_view_frames"] >= 0 for m in doc["modes"].values())
+    why = doc["modes"]["stream"]["lost_why"]   # the stream matcher says why each lost frame is lost
+    assert set(why) == {"weak-view", "no-trajectory", "ambiguous"} and "lost frames by why" in proc.stdout
+    lost = round(doc["modes"]["stream"]["lost_mapped"] * 24)   # every frame here is mapped
+    assert sum(w["mapped"] for w in why.values()) == lost and all(w["unmapped"] == 0 for w in why.values())
+    assert doc["modes"]["single"]["lost_why"] == {} and doc["modes"]["dtw"]["lost_why"] == {}
 
 
 def test_evaluate_similarity_needs_no_model_nor_torch(tmp_path: Path) -> None:

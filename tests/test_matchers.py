@@ -232,10 +232,10 @@ def test_evaluate_reports_lock_on_and_exit_delays() -> None:
 
 
 def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, stop_gain, stop_decay, still=0.0,
-               cues=None, route=None, evidence=None, evidence_decay=None, unique=None):
+               cues=None, route=None, evidence=None, evidence_decay=None, unique=None, why=None):
     """RoadMatcher written as plain loops over states, from its docstring (``cues``: each frame's motion cue,
     NaN = none; ``route``: the references where the map's drive stood; ``evidence``, ``unique``: None = the
-    default; one drive)."""
+    default; one drive; ``why``: a list that gets each frame's reason, as ``RoadMatcher.why``)."""
     defaults = MATCHERS["stream"].params
     unique = defaults["unique"] if unique is None else unique
     evidence = defaults["evidence"] if evidence is None else evidence
@@ -281,6 +281,9 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, s
             recent = max(recent, avg) if stands else avg
         uniqueness = 1 - (rival + 1) / (best + 1)
         out.append((ref, float(best >= lock and recent >= evidence and uniqueness >= unique) + uniqueness))
+        if why is not None:   # the first condition of the lock that fails
+            why.append("weak-view" if recent < evidence else "no-trajectory" if best < lock else
+                       "ambiguous" if uniqueness < unique else "locked")
     return out
 
 
@@ -292,9 +295,13 @@ def test_road_matcher_against_plain_loops(grid: int, vmax: float, stop_gain: flo
     params = {"vmax": vmax, "grid": grid, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 6.0, "lock": 3.0,
               "rival_window": 2, "stop_gain": stop_gain, "stop_decay": stop_decay}
     m = RoadMatcher(20, **MATCHERS["stream"].params | params)
-    got = [m.update(row) for row in sim]
-    want = naive_road(sim, **params)
+    got, reasons, naive_reasons = [], [], []
+    for row in sim:
+        got.append(m.update(row))
+        reasons.append(m.why())
+    want = naive_road(sim, **params, why=naive_reasons)
     assert [r for r, _ in got] == [r for r, _ in want]
+    assert reasons == naive_reasons and "locked" in reasons and len(set(reasons)) > 2
     np.testing.assert_allclose([c for _, c in got], [c for _, c in want], atol=1e-5)   # float32 state
     assert any(c >= 1 for _, c in got) and any(c < 1 for _, c in got)   # both locked and unlocked frames
 
@@ -823,6 +830,7 @@ def test_an_answer_with_a_rival_as_strong_along_its_drive_is_lost() -> None:
     twice = replace(stream, graph=RouteGraph(d.n_refs, d.starts, tuple(d.junctions()))).run(sim, k=1)
     late = slice(20, 40)                            # locked by then, before the route's end
     assert (alone.scores[late] < 1.0).all()
+    assert (alone.why[late] == "ambiguous").all() and alone.why[0] == "no-trajectory"   # each says why
     for res in (off, twice):
         assert (res.scores[late] >= 1.0).all() and ((res.refs[late] % 40) == truth[late]).all()
 

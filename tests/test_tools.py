@@ -86,6 +86,8 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("bench_fleet.py", ["--refs", "{tmp}/none"], "none: not a folder"),
     ("one_view_check.py", ["--streams", "{tmp}"], "map.npz: missing"),
     ("leave_one_out.py", ["--streams", "{tmp}", "{tmp}"], "two datasets with one name"),
+    ("lost_reasons.py", ["--streams", "{tmp}"], "not a derive_streams folder with its map"),
+    ("lost_reasons.py", ["--streams", "{tmp}", "--tolerance", "-1"], "--tolerance must be >= 0"),
     ("leave_one_out.py", ["--streams", "{tmp}/a", "{tmp}/b"], "not a derive_streams folder with its map"),
 ])
 def test_new_tools_refuse_bad_input_in_one_line(tmp_path: Path, name: str, args: list[str], needle: str) -> None:
@@ -262,6 +264,12 @@ def test_bench_e2e_and_calibration_check(tmp_path: Path, small_refs: Path, small
             assert held == rows[ds, f"chosen on {ds} (own)", frames]
             shares = [float(x) for cell in held[:len(KINDS)] for x in cell.split("/")]   # NaN: nothing answered
             assert all(0 <= x <= 1 or np.isnan(x) for x in shares) and not np.isnan(shares[1])
+    text = tool("lost_reasons.py", "--streams", str(tmp_path / "one"))   # every lost frame has its reason
+    rows = [line.split("|")[1:-1] for line in text.splitlines() if line.startswith("| one")]
+    assert [r[1].strip() for r in rows] == list(KINDS)
+    for r in rows:
+        n, unmapped, mapped = (int(c) for c in r[2:5])
+        assert n == unmapped + mapped and unmapped == 0 and all(c.strip().startswith("0 / ") for c in r[5:])
     text = tool("one_view_check.py", "--streams", str(tmp_path / "one"))
     assert "agrees with the map's motion cue on" in text
     rows = [line.split("|")[1:-1] for line in text.splitlines() if line.startswith("| aligned")]

@@ -106,6 +106,7 @@ SECTIONS = (
                                                     "stream,single", "--fits", "logistic,isotonic")),
     Section("one-view", "one_view_check.py", ("--streams", "{nordland-dev}", "{corridor}")),
     Section("leave-one-out", "leave_one_out.py", ("--streams", "{nordland-dev}", "{corridor}")),
+    Section("lost-reasons", "lost_reasons.py", ("--streams", "{nordland-dev}", "{corridor}")),
     Section("evaluating-corridor", "eval_streams.py", ("--streams", "{corridor}")),
     Section("evaluating-nordland-dev", "eval_streams.py", ("--streams", "{nordland-dev}")),
     _size("nordland-dev", 2, _CODEBOOKS),

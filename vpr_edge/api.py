@@ -29,12 +29,13 @@ from vpr_edge.frames.images import MIN_SIDE, Frame
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.index.ivf import SequenceQuery
 from vpr_edge.map import MapQuery, PlaceMap
-from vpr_edge.matchers import Matcher, get_matcher, is_lost, step
+from vpr_edge.matchers import Matcher, get_matcher, is_lost, lost_why, step
 from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.threads import use_threads
 
 
-RESULTS_SCHEMA = 3   # the output line (docs/formats.md, docs/results-line.schema.json); 3: drive; 2: stamp, position
+RESULTS_SCHEMA = 4   # the output line (docs/formats.md, docs/results-line.schema.json); 4: lost_why; 3: drive;
+#                     2: stamp, position
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,8 @@ class Match:
     positions),
     interpolated between references where the matcher resolves finer than one reference, a score (higher =
     more confident; its meaning per mode: docs/matchers.md), the ``confidence`` (the probability that the
-    answer is right, from a calibration of the mode; None without one) and the lost flag."""
+    answer is right, from a calibration of the mode; None without one), the lost flag and, for a lost frame of
+    a mode that says so, why it is lost (``matchers.LOST_WHY``: weak-view, no-trajectory, ambiguous; else None)."""
 
     frame_index: int
     frame: str
@@ -63,6 +65,7 @@ class Match:
     heading: float | None = None
     along_m: float | None = None
     drive: str | None = None
+    lost_why: str | None = None
 
     def fields(self) -> dict:
         """The line as a dict in the schema's order (JSON lines; CSV writes None as an empty cell); a file
@@ -75,7 +78,7 @@ class Match:
 
 
 FIELDS = ("frame_index", "frame", "stamp", "ref_index", "ref", "drive", "x", "y", "lat", "lon", "heading", "along_m",
-          "score", "confidence", "lost")
+          "score", "confidence", "lost", "lost_why")
 
 
 class Localizer:
@@ -153,7 +156,7 @@ class Localizer:
         given."""
         return self.query.scores(encodings, self.matcher.scores, refs)
 
-    def _step(self, enc: np.ndarray) -> tuple[int, float, float | None]:
+    def _step(self, enc: np.ndarray) -> tuple[int, float, float | None, str | None]:
         """Match one encoding (D,), with its motion cue (its likeness to the encoding of the last frame that
         moved, ``matchers.MotionCue``): only the similarities the matcher asks for are computed (a local search
         around a locked position reads a window of the map, not all of it; with ``coarse``, a whole-route
@@ -171,15 +174,15 @@ class Localizer:
         candidates = None if index is None or self.matcher.scores != "cosine" else \
             (lambda: index.candidates(self.map.stored, self._seq.query()))
         ref, score = step(self._online, similarity, self._cue(enc), candidates)
-        return ref, score, self._online.position()
+        return ref, score, self._online.position(), self._online.why()
 
     def _line(self, index: int, name: str, ref: int, score: float, stamp: float | None = None,
-              where: float | None = None) -> Match:
+              where: float | None = None, why: str | None = None) -> Match:
         """The output line of a frame answered ``ref`` (at fractional reference ``where`` if the matcher
-        resolves finer) with ``score``."""
+        resolves finer) with ``score``; ``why``: the matcher's ``why()`` for the frame (None: it gives none)."""
         lost = bool(is_lost(score, self.threshold))
         if lost:
-            return Match(index, name, None, None, score, True, stamp)
+            return Match(index, name, None, None, score, True, stamp, lost_why=lost_why(why, True))
         confidence = None if self._calibration is None else self._calibration(score)
         place: dict = {}
         if self.map.positions is not None:
@@ -210,9 +213,9 @@ class Localizer:
         matcher asks for, the matcher's update and the output line; online modes only."""
         self._check_online()
         with self._lock:
-            ref, score, where = self._step(np.asarray(encoding, np.float32))
+            ref, score, where, why = self._step(np.asarray(encoding, np.float32))
             self._count += 1
-            return self._line(self._count - 1, name, ref, score, stamp, where)
+            return self._line(self._count - 1, name, ref, score, stamp, where, why)
 
     def run(self, frames: Iterable[Frame], batch_size: int = 1,
             on_skip: Callable[[Frame], None] = lambda f: None) -> Iterator[Match]:
@@ -223,8 +226,8 @@ class Localizer:
         if self._online is not None:
             for frame, enc in encoded:
                 with self._lock:
-                    ref, score, where = self._step(enc)
-                yield self._line(frame.index, frame.name, ref, score, frame.stamp, where)
+                    ref, score, where, why = self._step(enc)
+                yield self._line(frame.index, frame.name, ref, score, frame.stamp, where, why)
             return
         pairs = list(encoded)
         if pairs:

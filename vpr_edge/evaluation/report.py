@@ -45,6 +45,14 @@ def table(reports: dict[str, ModeReport]) -> str:
                   f"{'mode':<{width}} {'ans.ok':>8s} {'map.ok':>8s}"]
         lines += [f"{name:<{width}} {cell(r.distinct_answered_right):>8s} {cell(r.distinct_mapped_right):>8s}"
                   for name, r in distinct.items()]
+    why = {name: r.lost_why for name, r in reports.items() if r.lost_why}
+    if why:
+        kinds = list(next(iter(why.values())))
+        lines += ["", "lost frames by why (unmapped / mapped places): weak-view = the answer does not stand out of "
+                      "what the frame sees, no-trajectory = none has built up, ambiguous = a rival along the route",
+                  f"{'mode':<{width}} " + " ".join(f"{k:>11s}" for k in kinds)]
+        lines += [f"{name:<{width}} " + " ".join(f"{str(w[k]['unmapped']) + ' / ' + str(w[k]['mapped']):>11s}"
+                                                for k in kinds) for name, w in why.items()]
     metres = {name: r.metres for name, r in reports.items() if r.metres is not None}
     if metres:
         keys = list(next(iter(metres.values())))
@@ -61,10 +69,10 @@ def delays_text(frames: Sequence[float | None]) -> str:
     return "/".join("never" if d is None or d != d else f"{d:.0f}" for d in frames) or "-"
 
 
-JSON_SCHEMA_VERSION = 6   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres;
+JSON_SCHEMA_VERSION = 7   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres;
 #                          5: front_end (the model file run and its form), answered_right, mapped_right, ece
 #                          and reliability per mode; 6: one_view_frames, distinct_answered_right and
-#                          distinct_mapped_right per mode
+#                          distinct_mapped_right per mode; 7: lost_why per mode
 
 
 def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, reports: dict[str, ModeReport],

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from vpr_edge.calibration import Curve
-from vpr_edge.matchers import Matcher, Result, is_lost
+from vpr_edge.matchers import LOST_WHY, Matcher, Result, is_lost, lost_why
 from vpr_edge.evaluation import metrics
 from vpr_edge.positions import Positions
 
@@ -50,6 +50,8 @@ class ModeReport:
     one_view_frames: int = -1              # mapped frames whose truth lies where the map shows one view
     distinct_answered_right: float = float("nan")   # answered_right and mapped_right over the other frames
     distinct_mapped_right: float = float("nan")     # (-1, NaN: the map's views not known; ``truth.one_view``)
+    why: np.ndarray | None = field(default=None, repr=False, compare=False)       # (Q,) object: ``lost_why``
+    lost_why: dict[str, dict[str, int]] = field(default_factory=dict)   # reason -> {"unmapped": n, "mapped": n}
 
     def as_json(self) -> dict:
         """The keys of ``evaluate --json`` (NaN as null)."""
@@ -65,7 +67,7 @@ class ModeReport:
             "answered_right": num(self.answered_right), "mapped_right": num(self.mapped_right),
             "ece": num(self.ece), "reliability": list(self.reliability),
             "one_view_frames": self.one_view_frames, "distinct_answered_right": num(self.distinct_answered_right),
-            "distinct_mapped_right": num(self.distinct_mapped_right),
+            "distinct_mapped_right": num(self.distinct_mapped_right), "lost_why": self.lost_why,
             "settings": self.settings} | ({"metres": {k: num(v) for k, v in self.metres.items()}}
                                           if self.metres is not None else {})
 
@@ -111,6 +113,9 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
 
     lock, exits = metrics.transition_delays(mapped, correct[:, 0] & ~lost, lost)
     answered_right, mapped_right = metrics.answered_shares(correct[:, 0], lost, mapped)
+    why = None if result.why is None else np.array([lost_why(w, bool(x)) for w, x in zip(result.why, lost)], object)
+    reasons = {} if why is None else {r: {"unmapped": int(((why == r) & ~mapped).sum()),
+                                          "mapped": int(((why == r) & mapped).sum())} for r in LOST_WHY}
     view = None if one_view is None else np.asarray(one_view, bool)
     distinct = (-1, float("nan"), float("nan"))
     if view is not None:
@@ -126,4 +131,5 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
                       refs=result.refs, lost=lost, correct=correct[:, 0], scores=result.scores,
                       answered_right=answered_right, mapped_right=mapped_right,
                       one_view=view, one_view_frames=distinct[0],
-                      distinct_answered_right=distinct[1], distinct_mapped_right=distinct[2])
+                      distinct_answered_right=distinct[1], distinct_mapped_right=distinct[2], why=why,
+                      lost_why=reasons)

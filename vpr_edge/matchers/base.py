@@ -62,6 +62,10 @@ class OnlineMatcher(Protocol):
         """Where the last answer lies in references, finer than one (the stream's half-reference grid: 41.5
         is half-way from reference 41 to 42); None: at the answered reference."""
 
+    def why(self) -> str | None:
+        """Why the last frame is not confidently answered, one of ``LOST_WHY``, or "locked" when it is; None:
+        the matcher gives no reason (``lost_why`` turns this into a lost frame's reason)."""
+
     def reset(self) -> None:
         """Forget the stream."""
 
@@ -77,6 +81,9 @@ class WholeRoute:
     def position(self) -> None:
         return None
 
+    def why(self) -> None:
+        return None
+
 
 @dataclass(frozen=True)
 class Result:
@@ -86,6 +93,7 @@ class Result:
     refs: np.ndarray
     scores: np.ndarray
     ranked: np.ndarray
+    why: np.ndarray | None = None   # (Q,) object: each frame's ``OnlineMatcher.why()`` (None: not given)
 
 
 def top_k(pref: np.ndarray, k: int) -> np.ndarray:
@@ -137,10 +145,12 @@ def run_rows(matcher: OnlineMatcher, rows: Callable[[int, np.ndarray | None], np
     refs = np.empty(q, np.int64)
     scores = np.empty(q, np.float64)
     ranked = np.empty((q, min(k, r)), np.int64)
+    why = np.empty(q, object)
     for i in range(q):
         refs[i], scores[i] = step(matcher, lambda idx: rows(i, idx), cue_at(still, i))
         ranked[i] = top_k(matcher.ranking(), k)
-    return Result(refs, scores, lead_with(refs, ranked))
+        why[i] = matcher.why()
+    return Result(refs, scores, lead_with(refs, ranked), None if all(w is None for w in why) else why)
 
 
 @dataclass(frozen=True)
@@ -274,6 +284,19 @@ def check_lost_line(min_confidence: float | None) -> float | None:
     if min_confidence is not None and not math.isfinite(min_confidence):
         raise VprError(f"--min-confidence {min_confidence}: the lost threshold must be a finite number")
     return min_confidence
+
+
+LOST_WHY: tuple[str, ...] = ("weak-view", "no-trajectory", "ambiguous")   # why a frame is lost (``lost_why``)
+
+
+def lost_why(why: str | None, lost: bool) -> str | None:
+    """A frame's reason for being lost, from its matcher's ``why()``: None where it is answered or the matcher
+    gives no reason; the matcher's reason (``LOST_WHY``) where it is lost; "ambiguous" where the matcher holds
+    it "locked" but a stricter lost line (``--min-confidence`` above the matcher's) calls it lost: the
+    ``stream`` score above 1 is the answer's uniqueness."""
+    if not lost or why is None:
+        return None
+    return "ambiguous" if why == "locked" else why
 
 
 def is_lost(scores: np.ndarray | float, line: float | None) -> np.ndarray:

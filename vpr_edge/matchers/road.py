@@ -132,6 +132,7 @@ class RoadMatcher:
         self.stop_gain, self.stop_decay, self.still = stop_gain, stop_decay, still
         self.evidence, self.evidence_decay, self.unique = evidence, evidence_decay, unique
         self._evidence: float | None = None   # the answer's recent standing out of its rows (``evidence``)
+        self._why = "no-trajectory"   # which of the lock's conditions the last frame failed first (``why``)
         if route is not None and np.shape(route) != (n_refs,):
             raise ValueError(f"route must flag each of the {n_refs} references, got shape {np.shape(route)}")
         self.route = None if route is None else np.asarray(route, bool)
@@ -467,13 +468,22 @@ class RoadMatcher:
         # driven again, whose places are no rival to it
         own = rival if (first, last) == (0, self.n_refs - 1) else max_outside(
             values, where, merge([*near, (0, first), (last + 1, self.n_refs)]))
-        locked = best >= self.lock and self._evidence >= self.evidence and \
-            1.0 - (own + 1.0) / (best + 1.0) >= self.unique
+        # the first of the lock's conditions that fails names why the frame is lost (``base.LOST_WHY``)
+        self._why = "weak-view" if not self._evidence >= self.evidence else "no-trajectory" if best < self.lock else \
+            "ambiguous" if 1.0 - (own + 1.0) / (best + 1.0) < self.unique else "locked"
+        locked = self._why == "locked"
         # firm lock: strong evidence, and no hypothesis beyond the window half as strong (seen in global frames)
         held = bool(self.window) and best >= self.hold * self.lock and \
             max_outside(values, where, self.graph.near(ref, self.window)) < 0.5 * best
         self._follow(ref, held)
         return ref, float(locked) + uniqueness
+
+    def why(self) -> str:
+        """Why the last frame is not locked, the first of the lock's conditions it fails (``base.LOST_WHY``):
+        "weak-view" (its answer does not stand out of what the frame sees: E < ``evidence``), "no-trajectory"
+        (none has built up: H < ``lock``), "ambiguous" (a rival along the drive nearly as strong:
+        uniqueness < ``unique``); "locked" when it fails none."""
+        return self._why
 
     def _follow(self, ref: int, held: bool) -> None:
         """Choose the next frame's search: the references within ``window`` of ``ref`` along the route
@@ -532,6 +542,7 @@ class RoadMatcher:
         """Forget the stream."""
         self._position = None
         self._evidence = None
+        self._why = "no-trajectory"
         self._hold([], np.zeros(0, np.int64), np.zeros((self.n_speeds, 0), np.float32))
         self._mean[:] = 0.0
         self._stopped = False
