@@ -286,7 +286,8 @@ def check_lost_line(min_confidence: float | None) -> float | None:
     return min_confidence
 
 
-LOST_WHY: tuple[str, ...] = ("weak-view", "no-trajectory", "ambiguous")   # why a frame is lost (``lost_why``)
+WEAK_VIEW, NO_TRAJECTORY, AMBIGUOUS, LOCKED = "weak-view", "no-trajectory", "ambiguous", "locked"
+LOST_WHY: tuple[str, ...] = (WEAK_VIEW, NO_TRAJECTORY, AMBIGUOUS)   # why a frame is lost (``lost_why``)
 
 
 def lost_why(why: str | None, lost: bool) -> str | None:
@@ -296,7 +297,7 @@ def lost_why(why: str | None, lost: bool) -> str | None:
     ``stream`` score above 1 is the answer's uniqueness."""
     if not lost or why is None:
         return None
-    return "ambiguous" if why == "locked" else why
+    return AMBIGUOUS if why == LOCKED else why
 
 
 def is_lost(scores: np.ndarray | float, line: float | None) -> np.ndarray:

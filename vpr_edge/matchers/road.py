@@ -89,6 +89,7 @@ import numpy as np
 
 from collections.abc import Callable
 
+from vpr_edge.matchers.base import AMBIGUOUS, LOCKED, NO_TRAJECTORY, WEAK_VIEW
 from vpr_edge.matchers.motion import stands
 from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, merge, places
 
@@ -132,7 +133,7 @@ class RoadMatcher:
         self.stop_gain, self.stop_decay, self.still = stop_gain, stop_decay, still
         self.evidence, self.evidence_decay, self.unique = evidence, evidence_decay, unique
         self._evidence: float | None = None   # the answer's recent standing out of its rows (``evidence``)
-        self._why = "no-trajectory"   # which of the lock's conditions the last frame failed first (``why``)
+        self._why = NO_TRAJECTORY   # which of the lock's conditions the last frame failed first (``why``)
         if route is not None and np.shape(route) != (n_refs,):
             raise ValueError(f"route must flag each of the {n_refs} references, got shape {np.shape(route)}")
         self.route = None if route is None else np.asarray(route, bool)
@@ -469,9 +470,9 @@ class RoadMatcher:
         own = rival if (first, last) == (0, self.n_refs - 1) else max_outside(
             values, where, merge([*near, (0, first), (last + 1, self.n_refs)]))
         # the first of the lock's conditions that fails names why the frame is lost (``base.LOST_WHY``)
-        self._why = "weak-view" if not self._evidence >= self.evidence else "no-trajectory" if best < self.lock else \
-            "ambiguous" if 1.0 - (own + 1.0) / (best + 1.0) < self.unique else "locked"
-        locked = self._why == "locked"
+        self._why = WEAK_VIEW if not self._evidence >= self.evidence else NO_TRAJECTORY if best < self.lock else \
+            AMBIGUOUS if 1.0 - (own + 1.0) / (best + 1.0) < self.unique else LOCKED
+        locked = self._why == LOCKED
         # firm lock: strong evidence, and no hypothesis beyond the window half as strong (seen in global frames)
         held = bool(self.window) and best >= self.hold * self.lock and \
             max_outside(values, where, self.graph.near(ref, self.window)) < 0.5 * best
@@ -542,7 +543,7 @@ class RoadMatcher:
         """Forget the stream."""
         self._position = None
         self._evidence = None
-        self._why = "no-trajectory"
+        self._why = NO_TRAJECTORY
         self._hold([], np.zeros(0, np.int64), np.zeros((self.n_speeds, 0), np.float32))
         self._mean[:] = 0.0
         self._stopped = False
