@@ -6,6 +6,6 @@ from vpr_edge.matchers.motion import MotionCue, cue_at, route_stands, stands, st
 from vpr_edge.matchers.params import Param, param_key
 from vpr_edge.matchers.registry import MATCHERS, get_matcher
 
-__all__ = ["LOST_WHY", "MATCHERS", "Matcher", "MotionCue", "OnlineMatcher", "Param", "Result", "WholeRoute", "check_lost_line",
-           "cue_at", "get_matcher", "is_lost", "lost_why", "param_key", "route_stands", "run_online", "run_rows", "stands", "step",
-           "stillness", "top_k"]
+__all__ = ["LOST_WHY", "MATCHERS", "Matcher", "MotionCue", "OnlineMatcher", "Param", "Result", "WholeRoute",
+           "check_lost_line", "cue_at", "get_matcher", "is_lost", "lost_why", "param_key", "route_stands", "run_online",
+           "run_rows", "stands", "step", "stillness", "top_k"]
