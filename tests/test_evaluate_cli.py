@@ -15,7 +15,8 @@ from vpr_edge.evaluation.streams import write_ground_truth
 JSON_KEYS = {"recall_at_1", "recall_at_5", "recall_at_10", "auc", "ap", "precision_at_full_recall",
              "recall_at_full_precision", "median_error", "lost_unmapped", "lost_mapped", "ms_per_frame", "lock_frames",
              "exit_frames", "answered_right", "mapped_right", "ece", "reliability", "one_view_frames",
-             "distinct_answered_right", "distinct_mapped_right", "lost_why", "settings"}
+             "distinct_answered_right", "distinct_mapped_right", "lost_why", "settings", "target_precision",
+             "best_line_recall", "line_gap"}
 
 
 @pytest.fixture(scope="module")
@@ -225,3 +226,30 @@ def test_evaluate_scores_a_calibration_from_other_frames(tmp_path: Path) -> None
     assert_one_line_error(bad, "cal.json", "no calibration for modes dtw")
     bad = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single", "--calibration", gt)
     assert_one_line_error(bad, "gt.csv", "not a vpr-edge calibration")
+
+
+def test_evaluate_target_precision_line_gap_and_answers(tmp_path: Path) -> None:
+    """``--target-precision`` is stream-prob's line; every mode gets the best line and the line gap; ``--answers``
+    writes each frame's answer per mode; a target outside (0, 1) is one line, exit 2, before any output."""
+    import csv
+
+    s, gt = planted_similarity(tmp_path)
+    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream,stream-prob", "--target-precision",
+               "0.9", "--answers", tmp_path / "a.csv", "--json", tmp_path / "r.json")
+    assert proc.returncode == 0, proc.stderr
+    assert "line gap" in proc.stdout
+    doc = json.loads((tmp_path / "r.json").read_text())
+    prob = doc["modes"]["stream-prob"]
+    assert prob["settings"]["min_confidence"] == 0.9 and prob["target_precision"] == 0.9
+    assert 0.0 <= prob["best_line_recall"] <= 1.0 and prob["line_gap"] is not None
+    rows = list(csv.DictReader(open(tmp_path / "a.csv")))
+    assert len(rows) == 80 and {r["mode"] for r in rows} == {"stream", "stream-prob"}
+    assert all(r["probability"] == "" for r in rows if r["mode"] == "stream")
+    assert all(0.0 <= float(r["probability"]) <= 1.0 for r in rows if r["mode"] == "stream-prob")
+    lost = [r for r in rows if r["mode"] == "stream-prob" and r["lost"] == "1"]
+    assert all(float(r["probability"]) < 0.9 and r["why"] for r in lost)
+    for bad in ("1", "0", "-0.5", "nan"):
+        proc = run("evaluate", "--similarity", s, "--gt", gt, "--target-precision", bad, "--json", tmp_path / "x.json")
+        assert proc.returncode == 2
+        assert_one_line_error(proc, "--target-precision")
+        assert not (tmp_path / "x.json").exists()

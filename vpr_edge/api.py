@@ -85,7 +85,8 @@ class Localizer:
     """A map, its model and a matcher, ready for frames.
 
     ``mode`` names a registered matcher (``vpr_edge.matchers.MATCHERS``), ``params`` overrides its
-    parameters, ``min_confidence`` its lost threshold (default: the matcher's own). ``precision``: the model's form (``features.choice``: auto runs its int8 form where the CPU has int8
+    parameters, ``min_confidence`` its lost threshold (default: the matcher's own); ``target_precision`` the
+    line of a matcher whose score is the probability that its answer is right (``stream-prob``). ``precision``: the model's form (``features.choice``: auto runs its int8 form where the CPU has int8
     dot products; fp32; int8). ``threads`` > 0 sets
     onnxruntime's threads and, process-wide, NumPy's BLAS pool to that count (0: one per core for both;
     None: onnxruntime's default, BLAS untouched). ``coarse``: a local-search matcher's whole-route frames use
@@ -101,9 +102,10 @@ class Localizer:
     def __init__(self, map_path: str | os.PathLike[str], *, model: str | os.PathLike[str] | None = None,
                  mode: str = "stream", params: dict | None = None, min_confidence: float | None = None,
                  threads: int | None = None, coarse: bool | None = None,
-                 calibration: str | os.PathLike[str] | None = None, precision: str = DEFAULT_PRECISION) -> None:
+                 calibration: str | os.PathLike[str] | None = None, precision: str = DEFAULT_PRECISION,
+                 target_precision: float | None = None) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
-        self.threshold = self.matcher.lost_line(min_confidence)          # checked before the map is opened
+        self.threshold = self.matcher.lost_line(min_confidence, target_precision)          # checked before the map is opened
         ort_threads = 0 if threads is None else use_threads(threads)
         self.query = MapQuery(map_path, model, ort_threads, precision)   # the map and its front end, once
         self.map.check_scores(self.matcher.scores, map_path)

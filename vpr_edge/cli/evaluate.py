@@ -18,6 +18,7 @@ from vpr_edge.files import atomic_output, check_not_input, check_writable, outpu
 from vpr_edge.frames.images import Frame
 from vpr_edge.map import load_map
 from vpr_edge.matchers import MATCHERS, get_matcher
+from vpr_edge.matchers.verdict import TARGET_PRECISION
 from vpr_edge.threads import use_threads
 
 
@@ -64,6 +65,12 @@ def evaluate_cmd(
                                          % MATCHERS["stream"].params["window"]),
     min_confidence: Optional[float] = typer.Option(None, help="Lost threshold for modes with a lost state "
                                                    "(default: each mode's own)."),
+    target_precision: Optional[float] = typer.Option(
+        None, help="The line of modes whose score is the probability that the answer is right (stream-prob; "
+                   "default %.2f), and the precision at which every mode's best line is read." % TARGET_PRECISION),
+    answers_text: Optional[str] = typer.Option(None, "--answers", help="Write each frame's answer per mode "
+                                               "here (CSV: frame, mode, ref, score, probability, lost, why, "
+                                               "right)."),
     param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE",
                                               help=PARAM_HELP + " Applies to every chosen mode that has KEY."),
     list_params: bool = LIST_PARAMS,
@@ -118,11 +125,12 @@ def evaluate_cmd(
             matchers = {n: m.with_params(window=window) if "window" in m.params else m for n, m in matchers.items()}
         if param:
             matchers = param_options_for_all(matchers, param)
-        json_out, plot_out, save_similarity, matrix_out, route_out, calibration_out = (
+        json_out, plot_out, save_similarity, matrix_out, route_out, calibration_out, answers_out = (
             output_path(t) if t else None
-            for t in (json_text, plot_text, similarity_text, matrix_text, route_text, calibration_text))
+            for t in (json_text, plot_text, similarity_text, matrix_text, route_text, calibration_text, answers_text))
         outputs = {"--json": json_out, "--plot": plot_out, "--save-similarity": save_similarity,
-                   "--plot-matrix": matrix_out, "--plot-route": route_out, "--save-calibration": calibration_out}
+                   "--plot-matrix": matrix_out, "--plot-route": route_out, "--save-calibration": calibration_out,
+                   "--answers": answers_out}
         for target in outputs.values():
             if target:
                 check_writable(target)
@@ -146,7 +154,7 @@ def evaluate_cmd(
             typer.echo(f"vpr-edge: warning: {printable(frame.error)}; frame skipped (and its ground-truth row)",
                        err=True)
 
-        result = evaluate(source, truth, matchers, tolerance, min_confidence, skip, curves)
+        result = evaluate(source, truth, matchers, tolerance, min_confidence, skip, curves, target_precision)
         sim = result.similarity
         if save_similarity:
             with atomic_output(save_similarity) as tmp, open(tmp, "wb") as f:
@@ -157,6 +165,8 @@ def evaluate_cmd(
                    + (f"; model {result.front['model']} ({result.front['form']})" if result.front and
                       "model" in result.front else ""))
         typer.echo(report.table(result.reports))
+        if answers_out:
+            report.write_answers(answers_out, result.reports)
         if json_out:
             report.write_json(json_out, sim.shape[0], sim.shape[1], result.reports, tolerance, result.front)
         title = f"{source.name} ({sim.shape[0]} queries, {sim.shape[1]} refs)"

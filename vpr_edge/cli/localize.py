@@ -20,6 +20,7 @@ from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
 from vpr_edge.frames.images import Frame, open_stream
 from vpr_edge.matchers import MATCHERS, get_matcher
+from vpr_edge.matchers.verdict import TARGET_PRECISION
 
 
 class VariantOpt(str, Enum):
@@ -103,6 +104,9 @@ def localize_cmd(
         None, help="Frames scoring below this are reported lost (reference and position fields empty). "
                    "Default: the mode's own (stream: %.1f; other modes: never lost)."
                    % MATCHERS["stream"].min_confidence),
+    target_precision: Optional[float] = typer.Option(
+        None, help="Modes whose score is the probability that the answer is right (stream-prob): the line, "
+                   "answers below it are lost (default %.2f)." % TARGET_PRECISION),
     param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE", help=PARAM_HELP),
     calibration: Optional[Path] = typer.Option(None, help="A calibration (evaluate --save-calibration on a "
                                                "labelled drive of this route): each line's confidence is then "
@@ -143,7 +147,7 @@ def localize_cmd(
         frames, count = open_stream(stream, timestamps, topic)
         localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
                               min_confidence=min_confidence, threads=threads, calibration=calibration,
-                              precision=precision.value)
+                              precision=precision.value, target_precision=target_precision)
         localizer.query.check_source(stream)   # descriptors for a map of descriptors, images for one of images
         if precision.value == "auto" and "form" in localizer.front_description:   # what auto chose, said once
             typer.echo(f"vpr-edge: --precision auto: {localizer.front_description['model']} "

@@ -94,6 +94,21 @@ def recall_at_full_precision(curve: PRCurve) -> float:
     return float(curve.recall[exact].max()) if exact.any() else 0.0
 
 
+def recall_at_precision(curve: PRCurve, precision: float) -> float:
+    """The best line the scores allow: the highest recall among thresholds whose precision is at least
+    ``precision`` (the answers ranked by score); 0 if none reaches it."""
+    ok = curve.precision >= precision - 1e-12
+    return float(curve.recall[ok].max()) if ok.any() else 0.0
+
+
+def line_gap(curve: PRCurve, delivered_precision: float, delivered_recall: float) -> float:
+    """How much recall a lost line leaves on the table: the best line's recall at the precision the line
+    delivered (``recall_at_precision``) minus the recall it delivered (NaN where nothing was answered)."""
+    if not np.isfinite(delivered_precision):
+        return float("nan")
+    return recall_at_precision(curve, delivered_precision) - delivered_recall
+
+
 def localisation_error(refs: np.ndarray, truth: np.ndarray, drive: np.ndarray | None = None) -> np.ndarray:
     """Per query: |answer - nearest correct reference| in references (Q,) float; NaN for unmapped queries
     (with ``drive`` (R,): infinite where no correct reference is in the answer's drive)."""

@@ -45,6 +45,11 @@ def table(reports: dict[str, ModeReport]) -> str:
                   f"{'mode':<{width}} {'ans.ok':>8s} {'map.ok':>8s}"]
         lines += [f"{name:<{width}} {cell(r.distinct_answered_right):>8s} {cell(r.distinct_mapped_right):>8s}"
                   for name, r in distinct.items()]
+    target = next(iter(reports.values())).target_precision if reports else None
+    lines += ["", f"the line: the best line's recall at precision {target} (the answers ranked by score) and the line "
+                  "gap (the best line's recall at the precision delivered, ans.ok, minus the recall delivered, "
+                  "map.ok)", f"{'mode':<{width}} {'best@P':>8s} {'gap':>8s}"]
+    lines += [f"{name:<{width}} {cell(r.best_line_recall):>8s} {cell(r.line_gap):>8s}" for name, r in reports.items()]
     why = {name: r.lost_why for name, r in reports.items() if r.lost_why}
     if why:
         kinds = list(next(iter(why.values())))
@@ -69,10 +74,11 @@ def delays_text(frames: Sequence[float | None]) -> str:
     return "/".join("never" if d is None or d != d else f"{d:.0f}" for d in frames) or "-"
 
 
-JSON_SCHEMA_VERSION = 7   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres;
+JSON_SCHEMA_VERSION = 8   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres;
 #                          5: front_end (the model file run and its form), answered_right, mapped_right, ece
 #                          and reliability per mode; 6: one_view_frames, distinct_answered_right and
-#                          distinct_mapped_right per mode; 7: lost_why per mode
+#                          distinct_mapped_right per mode; 7: lost_why per mode; 8: target_precision,
+#                          best_line_recall and line_gap per mode
 
 
 def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, reports: dict[str, ModeReport],
@@ -83,6 +89,26 @@ def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, report
            "tolerance": tolerance, "front_end": front, "modes": {m: r.as_json() for m, r in reports.items()}}
     with atomic_output(path) as tmp:
         tmp.write_text(json.dumps(doc, indent=1) + "\n")
+
+
+ANSWER_FIELDS = ("frame", "mode", "ref", "score", "probability", "lost", "why", "right")
+
+
+def write_answers(path: str | os.PathLike[str], reports: dict[str, ModeReport]) -> None:
+    """Each frame's answer per mode as CSV (``ANSWER_FIELDS``; probability: the score where the mode's score
+    is the probability that the answer is right, else empty; why: a lost frame's reason, where the mode gives
+    one), written atomically."""
+    import csv
+
+    with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(ANSWER_FIELDS)
+        for mode, r in reports.items():
+            for i in range(len(r.refs)):
+                score = float(r.scores[i])
+                why = "" if r.why is None or r.why[i] is None else r.why[i]
+                w.writerow([i, mode, int(r.refs[i]), f"{score:.6g}", f"{score:.6g}" if r.probability else "",
+                            int(r.lost[i]), why, int(r.correct[i])])
 
 
 def require_matplotlib() -> None:

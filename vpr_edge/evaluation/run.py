@@ -15,7 +15,7 @@ from vpr_edge.evaluation import sources
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
 from vpr_edge.evaluation.truth import Truth, one_view
 from vpr_edge.features.choice import DEFAULT_PRECISION
-from vpr_edge.matchers import MATCHERS, Matcher, check_lost_line, get_matcher
+from vpr_edge.matchers import MATCHERS, Matcher, check_lost_line, check_target_precision, get_matcher
 from vpr_edge.matchers.motion import MEMORY, route_stands
 from vpr_edge.matchers.params import STREAM
 from vpr_edge.matchers.route import RouteGraph
@@ -105,13 +105,16 @@ def map_same_view(blocks: Iterable[np.ndarray]) -> np.ndarray:
 
 def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None = None, tolerance: int = 1,
              min_confidence: float | None = None, on_skip: sources.OnSkip = lambda frame: None,
-             calibration: dict[str, Curve] | None = None) -> Evaluation:
+             calibration: dict[str, Curve] | None = None, target_precision: float | None = None) -> Evaluation:
     """Run every matcher (default: ``default_matchers``) on one similarity matrix from ``source`` and score
     it against ``truth`` (frames that do not decode go to ``on_skip`` and lose their ground-truth row); the
-    modes with a curve in ``calibration`` (mode -> score-to-probability) also get its calibration error.
+    modes with a curve in ``calibration`` (mode -> score-to-probability) also get its calibration error;
+    ``target_precision``: the line of the modes whose score is a probability, and where every mode's best
+    line is read (``scoring.evaluate_mode``).
     VprError, before the work where it can be, for a bad source, ground truth or combination."""
     source.check()
     check_lost_line(min_confidence)
+    check_target_precision(target_precision)
     query = None   # the map and its front end, opened once: the chain Localizer runs
     if source.map is not None:
         query = MapQuery(source.map, source.model, use_threads(source.threads), source.precision)
@@ -149,7 +152,7 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions,
                                    (calibration or {}).get(name),
                                    None if sims.encodings is None else m.cue(sims.encodings), drive,
-                                   None if same_view is None else one_view(rows, same_view))
+                                   None if same_view is None else one_view(rows, same_view), target_precision)
                for name, m in chosen.items()}
     return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms, rows,
                       sims.positions, sims.front)

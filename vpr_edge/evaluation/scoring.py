@@ -9,6 +9,7 @@ import numpy as np
 
 from vpr_edge.calibration import Curve
 from vpr_edge.matchers import LOST_WHY, Matcher, Result, is_lost, lost_why
+from vpr_edge.matchers.verdict import TARGET_PRECISION
 from vpr_edge.evaluation import metrics
 from vpr_edge.positions import Positions
 
@@ -52,6 +53,10 @@ class ModeReport:
     distinct_mapped_right: float = float("nan")     # (-1, NaN: the map's views not known; ``truth.one_view``)
     why: np.ndarray | None = field(default=None, repr=False, compare=False)       # (Q,) object: ``lost_why``
     lost_why: dict[str, dict[str, int]] = field(default_factory=dict)   # reason -> {"unmapped": n, "mapped": n}
+    target_precision: float = TARGET_PRECISION   # the precision the best line is read at
+    best_line_recall: float = float("nan")  # the best line's recall (mapped right) at the target precision
+    line_gap: float = float("nan")          # the best line's recall at the delivered precision - mapped_right
+    probability: bool = False               # the scores are probabilities that the answer is right
 
     def as_json(self) -> dict:
         """The keys of ``evaluate --json`` (NaN as null)."""
@@ -68,6 +73,8 @@ class ModeReport:
             "ece": num(self.ece), "reliability": list(self.reliability),
             "one_view_frames": self.one_view_frames, "distinct_answered_right": num(self.distinct_answered_right),
             "distinct_mapped_right": num(self.distinct_mapped_right), "lost_why": self.lost_why,
+            "target_precision": self.target_precision, "best_line_recall": num(self.best_line_recall),
+            "line_gap": num(self.line_gap),
             "settings": self.settings} | ({"metres": {k: num(v) for k, v in self.metres.items()}}
                                           if self.metres is not None else {})
 
@@ -75,7 +82,8 @@ class ModeReport:
 def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, tolerance: int = 1,
                   min_confidence: float | None = None, positions: Positions | None = None,
                   calibration: Curve | None = None, still: np.ndarray | None = None,
-                  drive: np.ndarray | None = None, one_view: np.ndarray | None = None) -> ModeReport:
+                  drive: np.ndarray | None = None, one_view: np.ndarray | None = None,
+                  target_precision: float | None = None) -> ModeReport:
     """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics); with the
     references' ``positions``, the error in metres too; with a ``calibration`` (score -> probability right,
     ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error over the answers
@@ -83,13 +91,16 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     frame's motion cue (``Matcher.cue`` of the query encodings; None: a bare similarity matrix). ``drive`` (R,):
     each reference's drive in a map of several (answers within ``tolerance`` count only in the truth's drive).
     ``one_view`` (Q,) bool: the frames whose truth lies where the map shows one view (``truth.one_view``): the
-    answered / mapped right shares are also given over the other frames."""
+    answered / mapped right shares are also given over the other frames. ``target_precision``: the line of a
+    matcher whose score is a probability (``Matcher.lost_line``) and where the best line is read (default
+    ``verdict.TARGET_PRECISION``)."""
     t0 = time.perf_counter()
     result = matcher.run(sim, k=max(RECALL_KS), still=still)
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)
-    threshold = matcher.lost_line(min_confidence)
-    report = replace(score_result(result, truth, tolerance, threshold, ms, positions, drive, one_view),
-                     settings=matcher.params | {"min_confidence": threshold})
+    threshold = matcher.lost_line(min_confidence, target_precision)
+    target = TARGET_PRECISION if target_precision is None else target_precision
+    report = replace(score_result(result, truth, tolerance, threshold, ms, positions, drive, one_view, target),
+                     settings=matcher.params | {"min_confidence": threshold}, probability=matcher.probability)
     if calibration is not None:   # over the answers given: a lost frame carries no confidence
         given = ~report.lost
         ece, table = metrics.reliability(calibration.of(report.scores[given]), report.correct[given])
@@ -99,9 +110,11 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
 
 def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshold: float | None = None,
                  match_ms: float = float("nan"), positions: Positions | None = None,
-                 drive: np.ndarray | None = None, one_view: np.ndarray | None = None) -> ModeReport:
+                 drive: np.ndarray | None = None, one_view: np.ndarray | None = None,
+                 target_precision: float = TARGET_PRECISION) -> ModeReport:
     """A matcher's answers (``Result``, Q frames) against ``truth`` (Q, T); frames scoring below
-    ``threshold`` count as lost (None: no lost state); ``drive``, ``one_view``: as ``evaluate_mode``'s."""
+    ``threshold`` count as lost (None: no lost state); ``drive``, ``one_view``: as ``evaluate_mode``'s; the
+    best line (the answers ranked by score) read at ``target_precision`` and at the delivered precision."""
     mapped = (truth >= 0).any(axis=1)
     correct = metrics.correct_candidates(result.ranked, truth, tolerance, drive)
     curve = metrics.pr_curve(result.scores, correct[:, 0], int(mapped.sum()))
@@ -132,4 +145,6 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
                       answered_right=answered_right, mapped_right=mapped_right,
                       one_view=view, one_view_frames=distinct[0],
                       distinct_answered_right=distinct[1], distinct_mapped_right=distinct[2], why=why,
-                      lost_why=reasons)
+                      lost_why=reasons, target_precision=target_precision,
+                      best_line_recall=metrics.recall_at_precision(curve, target_precision),
+                      line_gap=metrics.line_gap(curve, answered_right, mapped_right))

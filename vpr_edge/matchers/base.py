@@ -170,6 +170,7 @@ class Matcher:
     params: dict[str, Any] = field(default_factory=dict)
     min_confidence: float | None = None
     scores: str = "cosine"
+    probability: bool = False                 # its score is the probability that the answer is right
     reads_route: bool = False                 # start() takes ``route`` (the map's standing references),
     route: np.ndarray | None = field(default=None, repr=False, compare=False)   # ``graph`` (its drives) and
     graph: RouteGraph | None = field(default=None, repr=False, compare=False)   # ``reach`` (likeness.reach)
@@ -182,11 +183,16 @@ class Matcher:
             raise ValueError(f"matcher {self.name!r}: parameters {sorted(self.params)} do not match their "
                              f"definitions {sorted(self.definitions)}")
 
-    def lost_line(self, min_confidence: float | None = None) -> float | None:
+    def lost_line(self, min_confidence: float | None = None, target_precision: float | None = None) -> float | None:
         """The score below which this matcher's answers are lost: ``min_confidence`` if given (checked:
-        ``check_lost_line``), else its own ``min_confidence`` (None: no lost state)."""
+        ``check_lost_line``), else for a matcher whose score is a probability (``probability``) the
+        ``target_precision`` if given (checked: ``check_target_precision``), else its own ``min_confidence``
+        (None: no lost state)."""
         given = check_lost_line(min_confidence)
-        return self.min_confidence if given is None else float(given)
+        target = check_target_precision(target_precision)
+        if given is not None:
+            return float(given)
+        return target if self.probability and target is not None else self.min_confidence
 
     def params_help(self) -> str:
         """One line per parameter: name, value and meaning (``localize --list-params``)."""
@@ -284,6 +290,14 @@ def check_lost_line(min_confidence: float | None) -> float | None:
     if min_confidence is not None and not math.isfinite(min_confidence):
         raise VprError(f"--min-confidence {min_confidence}: the lost threshold must be a finite number")
     return min_confidence
+
+
+def check_target_precision(target: float | None) -> float | None:
+    """A target precision given by the user (``--target-precision``), checked: VprError unless it lies in
+    (0, 1) (None: not given)."""
+    if target is not None and not (math.isfinite(target) and 0.0 < target < 1.0):
+        raise VprError(f"--target-precision {target}: the target precision must lie between 0 and 1 (exclusive)")
+    return None if target is None else float(target)
 
 
 WEAK_VIEW, NO_TRAJECTORY, AMBIGUOUS, LOCKED = "weak-view", "no-trajectory", "ambiguous", "locked"

@@ -67,6 +67,9 @@ STREAM: dict[str, Param] = {
     "still_memory": Param(MEMORY, "motion cue: moving frames whose median step (1 - cosine of encodings) is the "
                                   "stream's typical moving step"),
 }
+# the stream matcher's lock rules; ``stream-prob`` replaces them by a model of "not this place" (``verdict``)
+LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "unique", "hold")
+STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM.items() if k not in LOCK_RULES}
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),
 }

@@ -11,13 +11,19 @@ from vpr_edge.matchers.dtw import dtw_match
 from vpr_edge.matchers.road import RoadMatcher
 from vpr_edge.matchers.seqslam import SeqSLAMOnline, seqslam_match
 from vpr_edge.matchers.single import BestMatch
+from vpr_edge.matchers.probability import ProbabilityMatcher
 from vpr_edge.matchers.stream_dtw import StreamingDTW
+from vpr_edge.matchers.verdict import TARGET_PRECISION
 
 
 MATCHERS: dict[str, Matcher] = {m.name: m for m in (
     Matcher("stream", "trajectories over (position, speed) with contrast-normalised similarities: any speed "
             "0-4 places/frame, lock-on anywhere, lost state (online, default)", start=RoadMatcher,
             definitions=P.STREAM, min_confidence=1.0, reads_route=True),
+    Matcher("stream-prob", "the stream matcher with its score the probability that the answer is right, from a "
+            "model of 'not this place' read on the map and the stream (no labels); lost below the target "
+            "precision (online)", start=ProbabilityMatcher, definitions=P.STREAM_PROB, min_confidence=TARGET_PRECISION,
+            reads_route=True, probability=True),
     Matcher("single", "best single match per frame, no sequence information (online)", start=BestMatch),
     Matcher("stream-dtw", "decayed streaming DTW over 1 - cos (online; the first streaming matcher, kept "
             "as a baseline)", start=StreamingDTW, definitions=P.STREAM_DTW),

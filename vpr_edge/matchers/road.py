@@ -452,13 +452,30 @@ class RoadMatcher:
         self._position = col / g
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
         self._last = (values, where)   # for ``around``'s hypotheses held
+        score, held = self._verdict(ref, best, values, where, part, probe, mean, std, standing)
+        self._follow(ref, held)
+        return ref, score
+
+    def _answer_view(self, ref: int, where: np.ndarray | None, part: np.ndarray) -> np.ndarray:
+        """The frame's similarities (of ``part``, over the places ``where``; None: all) to the answer ``ref``
+        and its neighbours along its drive (one either side where there is one)."""
+        first, last = self.graph.bounds(ref)
+        at = int(np.searchsorted(where, ref)) if where is not None else ref
+        lo_ = max(0, at - (1 if ref > first else 0))
+        return part[lo_:at + (2 if ref < last else 1)]
+
+    def _verdict(self, ref: int, best: float, values: np.ndarray, where: np.ndarray | None, part: np.ndarray,
+                 probe: np.ndarray, mean: float, std: float, standing: bool) -> tuple[float, bool]:
+        """The frame's score and whether the lock is firm (a local search may follow it), from the answer
+        ``ref`` and its trajectory score ``best``, the best trajectory ending at each place (``values`` over the
+        places ``where``; None: all), the frame's similarities (``part`` over ``where``; ``probe``: over the
+        probe sample, or every reference; ``mean``, ``std``: the frame's, as z uses them) and whether it stands. Here: the lock's rules (module docstring);
+        ``probability.ProbabilityMatcher``: a model of "not this place"."""
         near = self.graph.near(ref, self.rival_window)
         rival = max_outside(values, where, near)
         # how far the answer stands out of its frame's row, averaged; a standing frame may raise it, not lower it
         first, last = self.graph.bounds(ref)
-        at = int(np.searchsorted(where, ref)) if where is not None else ref
-        lo_ = max(0, at - (1 if ref > first else 0))
-        here = (float(part[lo_:at + (2 if ref < last else 1)].max()) - mean) / std
+        here = (float(self._answer_view(ref, where, part).max()) - mean) / std
         if self._evidence is None:
             self._evidence = here
         else:
@@ -476,8 +493,7 @@ class RoadMatcher:
         # firm lock: strong evidence, and no hypothesis beyond the window half as strong (seen in global frames)
         held = bool(self.window) and best >= self.hold * self.lock and \
             max_outside(values, where, self.graph.near(ref, self.window)) < 0.5 * best
-        self._follow(ref, held)
-        return ref, float(locked) + uniqueness
+        return float(locked) + uniqueness, held
 
     def why(self) -> str:
         """Why the last frame is not locked, the first of the lock's conditions it fails (``base.LOST_WHY``):

@@ -1,0 +1,119 @@
+"""The probability line (``matchers.verdict``, the ``stream-prob`` matcher): each function against a plain
+loop, and planted front ends whose right line is known."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vpr_edge.evaluation.scoring import evaluate_mode
+from vpr_edge.matchers import get_matcher
+from vpr_edge.matchers.verdict import (TailScale, ViewFilter, block_peaks, local_best, spacings,
+                                       trajectory_probability, view_quantile)
+
+
+def test_block_peaks_against_a_loop() -> None:
+    rng = np.random.default_rng(0)
+    values = rng.exponential(size=57)
+    where = np.sort(rng.choice(200, 57, replace=False))
+    exclude = [(30, 45), (150, 160)]
+    peaks, blocks = block_peaks(values, where, 10, exclude)
+    naive: dict[int, float] = {}
+    for v, p in zip(values, where):
+        if any(lo <= p < hi for lo, hi in exclude):
+            continue
+        naive[p // 10] = max(naive.get(p // 10, -np.inf), v)
+    assert blocks.tolist() == sorted(naive)
+    np.testing.assert_allclose(peaks, [naive[b] for b in sorted(naive)])
+
+
+def test_spacings_estimate_an_exponential_tails_scale() -> None:
+    """Renyi: the normalised spacings of exponential order statistics have the tail's scale as mean."""
+    rng = np.random.default_rng(1)
+    tail = TailScale(memory=1e9)
+    for _ in range(400):
+        tail.add(spacings(3.0 + rng.exponential(2.5, size=40)))
+    assert tail.value == pytest.approx(2.5, rel=0.05)
+    x = np.array([5.0, 3.0, 0.0, 2.0])   # zeros (floored trajectories) are left out
+    np.testing.assert_allclose(spacings(x), [1 * (5 - 3), 2 * (3 - 2)])
+
+
+def test_trajectory_probability_is_a_softmax_over_rivals() -> None:
+    rivals = np.array([1.0, 2.0, 0.0])
+    p = trajectory_probability(5.0, rivals, 1.5)
+    assert p == pytest.approx(1 / (1 + sum(np.exp((r - 5.0) / 1.5) for r in rivals)))
+    assert trajectory_probability(5.0, rivals, None) == 0.0      # no scale yet: nothing stands out
+
+
+def test_local_best_and_view_quantile_against_loops() -> None:
+    rng = np.random.default_rng(2)
+    part = rng.normal(size=30)
+    where = np.arange(100, 130)
+    got = local_best(part, where, [(110, 115)])
+    naive = [max(part[max(0, i - 1):i + 2]) for i in range(30) if not 110 <= where[i] < 115]
+    np.testing.assert_allclose(got, naive)
+    assert view_quantile(got, 10.0) == pytest.approx(1 / (len(got) + 1))
+    assert view_quantile(got, -10.0) == 1.0
+
+
+def test_view_filter_believes_sharp_views_and_doubts_uniform_ones() -> None:
+    rng = np.random.default_rng(3)
+    f = ViewFilter()
+    for _ in range(60):
+        f.update(float(rng.uniform(0, 0.02)), teach=True)
+    assert f.p > 0.99 and f.a < 0.3
+    lost_after = next(i for i in range(20) if f.update(float(rng.uniform(0.3, 1.0)), teach=False) < 0.98)
+    assert lost_after <= 2   # a sharp front end says at once that the view no longer fits
+
+
+def planted(rng: np.random.Generator, n_refs: int, places: np.ndarray, signal: float, noise: float = 1.0) -> np.ndarray:
+    """Rows (F, R): the true place (-1: none) raised by ``signal`` over independent noise."""
+    sim = noise * rng.normal(size=(len(places), n_refs))
+    on = places >= 0
+    sim[np.flatnonzero(on), places[on]] += signal
+    return sim
+
+
+def run(sim: np.ndarray, places: np.ndarray, target: float = 0.98):
+    truth = np.where(places[:, None] >= 0, places[:, None], -1)
+    return evaluate_mode(get_matcher("stream-prob"), sim, truth, tolerance=1, target_precision=target)
+
+
+def test_the_same_probability_for_a_narrow_and_a_wide_band_of_cosines() -> None:
+    """A front end whose cosines all lie in 0.9-1.0 and one whose cosines spread over 0-1: the same answers,
+    the same probabilities."""
+    rng = np.random.default_rng(4)
+    places = np.r_[np.arange(10, 90), -np.ones(20, int), np.arange(100, 150)]
+    sim = planted(rng, 160, places, 3.0)
+    wide = (sim - sim.min()) / (sim.max() - sim.min())
+    narrow = 0.9 + 0.1 * wide
+    a, b = run(wide, places), run(narrow, places)
+    assert np.array_equal(a.refs, b.refs)
+    np.testing.assert_allclose(a.scores, b.scores, atol=1e-4)
+
+
+def test_a_strong_front_end_is_answered_at_the_target_and_leaves_the_map_at_once() -> None:
+    rng = np.random.default_rng(5)
+    places = np.r_[np.arange(0, 120), -np.ones(30, int), np.arange(150, 250)]
+    r = run(planted(rng, 260, places, 4.0), places)
+    assert r.answered_right >= 0.98 and r.mapped_right >= 0.9
+    assert r.lost_unmapped >= 0.95 and r.exit_frames[0] <= 3
+
+
+def test_a_front_end_right_one_frame_in_four_is_not_silent() -> None:
+    """Each frame alone finds its place about one time in four: the sequence does, and the line says so."""
+    rng = np.random.default_rng(6)
+    places = np.arange(0, 300)
+    sim = planted(rng, 400, places, 2.2)
+    single = evaluate_mode(get_matcher("single"), sim, places[:, None], tolerance=0).recall[1]
+    assert 0.15 <= single <= 0.45
+    r = run(sim, places)
+    assert r.recall[1] >= 0.9
+    assert r.mapped_right >= 0.5 and r.answered_right >= 0.95
+
+
+def test_foreign_imagery_is_lost() -> None:
+    """Frames of a place the map does not hold at all: similarities with no structure, nearly all lost."""
+    rng = np.random.default_rng(7)
+    places = -np.ones(400, int)
+    r = run(planted(rng, 300, places, 0.0), places)
+    assert r.lost_unmapped >= 0.99

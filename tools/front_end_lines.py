@@ -1,0 +1,84 @@
+#!/usr/bin/env python3
+"""The lost line on many front ends (docs/results.md, "The line on any front end"): each stream mode's answers
+on every derived stream and on foreign imagery, from the similarity matrices ``tools/front_end_cache.py``
+wrote, scored by the library's ``scoring.evaluate_mode`` (what ``evaluate`` runs).
+
+    python tools/front_end_cache.py --streams out/corridor out/nordland-dev --out out/fronts
+    python tools/front_end_lines.py --cache out/fronts --modes stream,stream-prob,seqslam-online
+
+Per dataset and front end, one row per mode and stream: the best answers' R@1 (lost ignored), the precision
+and recall the line delivers (answered right, mapped right), the best line's recall at the target precision
+(the answers ranked by score), the line gap (the best line's recall at the delivered precision minus the
+delivered recall), and on the detour the unmapped frames lost and the first lost after leaving; foreign
+imagery (the other dataset's aligned frames against this map): the share of frames lost. Tolerance 2 (the
+derived streams' truth names one place).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from vpr_edge.evaluation.scoring import evaluate_mode
+from vpr_edge.matchers import get_matcher
+from vpr_edge.matchers.verdict import TARGET_PRECISION
+from vpr_edge.threads import use_threads
+
+
+def load(path: Path) -> dict[str, np.ndarray]:
+    with np.load(path, allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
+def score(mode: str, case: dict[str, np.ndarray], tolerance: int, target: float):
+    m = get_matcher(mode)
+    if m.reads_route and "route" in case:
+        m = dataclasses.replace(m, route=case["route"].astype(bool), reach=int(case["reach"]))
+    still = case.get("cue")
+    return evaluate_mode(m, case["sim"], case["truth"], tolerance, still=still,
+                         one_view=case.get("one_view"), target_precision=target)
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--cache", type=Path, required=True)
+    p.add_argument("--modes", default="stream,stream-prob,seqslam-online")
+    p.add_argument("--fronts", default=None, help="comma-separated front ends (default: every one cached)")
+    p.add_argument("--tolerance", type=int, default=2)
+    p.add_argument("--target-precision", type=float, default=TARGET_PRECISION)
+    a = p.parse_args()
+    use_threads(2)
+    modes = a.modes.split(",")
+    print(f"tolerance {a.tolerance}, target precision {a.target_precision}")
+    print("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
+          "best line @P | line gap | unmapped lost (first) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for ds in sorted(d for d in a.cache.iterdir() if d.is_dir() and d.name != "models"):
+        fronts = sorted(f.name for f in ds.iterdir() if f.is_dir())
+        if a.fronts:
+            fronts = [f for f in a.fronts.split(",") if f in fronts]
+        for front in fronts:
+            files = sorted((ds / front).glob("*.npz"))
+            for mode in modes:
+                for f in files:
+                    if f.stem == "map":
+                        continue
+                    case = load(f)
+                    r = score(mode, case, a.tolerance, a.target_precision)
+                    single = float(case.get("single_r1", np.nan))
+                    if f.stem == "foreign":
+                        print(f"| {ds.name} | {front} | {mode} | foreign | - | - | - | - | - | - | "
+                              f"{r.lost_unmapped:.3f} |")
+                        continue
+                    first = f" ({r.exit_frames[0]:.0f})" if r.exit_frames else ""
+                    unm = "-" if np.isnan(r.lost_unmapped) else f"{r.lost_unmapped:.3f}{first}"
+                    print(f"| {ds.name} | {front} | {mode} | {f.stem} | {single:.3f} | {r.recall[1]:.3f} | "
+                          f"{r.answered_right:.3f} | {r.mapped_right:.3f} | {r.best_line_recall:.3f} | "
+                          f"{r.line_gap:.3f} | {unm} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

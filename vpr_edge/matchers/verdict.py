@@ -1,0 +1,169 @@
+"""The stream matcher's verdict: the probability that its answer is right, from a model of "not this place"
+estimated on the map and the stream alone (no labels, no front-end constant), so that one line (the target
+precision) means the same on every front end, route and camera.
+
+Two questions, two factors, ``probability = trajectory * view``:
+
+* **Does the answer's trajectory stand out of the trajectories that are not this place?** The trajectory
+  scores H of places far from the answer are the null: H of a wrong place is a decayed sum of a frame's
+  normalised similarities minus a bias, a reflected random walk with negative drift, whose scores have an
+  exponential upper tail (Lindley). Its scale ``beta`` is read from the spacings of the highest rival peaks
+  (one per block of the route, so that one cluster counts once): for an exponential tail the normalised
+  spacings i * (x_(i) - x_(i+1)) are independent draws of mean ``beta`` (Renyi), pooled over the recent
+  frames (``TailScale``). A rival peak x then explains the answer's score b with weight exp(-(b - x) / beta),
+  and ``trajectory_probability`` = 1 / (1 + sum over rivals of those weights): a softmax over the hypotheses
+  with the null's own temperature. Off the map, the best is the top of the null and the gap to the next is an
+  exponential draw of mean beta, so a line at P is passed by at most about 1 - P of such frames (a constant
+  false-alarm rate), whatever the similarities' scale.
+* **Does this frame still show the answer's place?** A trajectory remembers ~1/(1 - decay) frames, so it
+  says late that the vehicle left the map; the frame says so at once. ``view_quantile`` is the share of the
+  frame's references that look at least as much like it as the answer does (uniform over [0, 1] where the
+  answer is not its place). Where it is, the quantile leans to 0: modelled as Beta(a, 1), whose ``a`` is
+  learned from the stream's own frames whose trajectory stands out (``ViewFilter``; 1 = a front end that tells
+  nothing, near 0 = a sharp one). A two-state filter (on the answer's place / not) turns the likelihood
+  ratio a * q^(a - 1) into the probability of being on it; leaving and entering have fixed prior rates
+  (``LEAVE``, ``ENTER``: constants, not fitted to a route).
+
+The constants below are the model's and are named once here; docs/results.md says what they were chosen on.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vpr_edge.matchers.route import Intervals
+
+# the line: answers whose probability of being right is below this are lost (``--target-precision``)
+TARGET_PRECISION = 0.98
+# rival peaks whose spacings estimate the null's tail scale in one frame (the highest ones)
+TAIL_PEAKS = 16
+# frames whose spacings are pooled into the tail scale (an exponential memory)
+TAIL_MEMORY = 100.0
+# the view's Beta(a, 1) model: a's prior value and its weight in frames, the trajectory probability above
+# which a frame teaches it, and the range it is kept in
+VIEW_PRIOR, VIEW_PRIOR_FRAMES, VIEW_LEARN, VIEW_RANGE = 0.5, 10.0, 0.9, (0.02, 1.0)
+# frames of the view's learning pooled (an exponential memory)
+VIEW_MEMORY = 200.0
+# the filter's prior rates per frame: leaving the answer's place (a detour, a lost track), coming onto it
+LEAVE, ENTER = 0.01, 0.05
+# a lock is firm (a local search may follow it) at this trajectory probability
+FIRM = 0.999
+
+
+def block_peaks(values: np.ndarray, where: np.ndarray | None, width: int,
+                exclude: Intervals) -> tuple[np.ndarray, np.ndarray]:
+    """The per-place trajectory scores ``values`` (n,) at the places ``where`` (n,) sorted (None: 0..n-1) ->
+    (peaks, blocks): the highest score in each block of ``width`` places along the map (block = place //
+    width) that holds a place outside the intervals ``exclude`` ([lo, hi) places; those are left out), and
+    the blocks' numbers, both (blocks,) in block order."""
+    values = np.asarray(values, np.float64)
+    places = np.arange(len(values)) if where is None else np.asarray(where, np.int64)
+    keep = np.ones(len(places), bool)
+    for lo, hi in exclude:
+        keep &= (places < lo) | (places >= hi)
+    if not keep.any():
+        return np.zeros(0), np.zeros(0, np.int64)
+    v, block = values[keep], places[keep] // max(1, int(width))
+    starts = np.flatnonzero(np.r_[True, block[1:] != block[:-1]])
+    return np.maximum.reduceat(v, starts), block[starts]
+
+
+def spacings(peaks: np.ndarray, top: int = TAIL_PEAKS) -> np.ndarray:
+    """The normalised spacings i * (x_(i) - x_(i+1)), i = 1.., of the ``top`` highest positive ``peaks``
+    (sorted down): for an exponential tail, independent draws whose mean is its scale. (k,) with k one less
+    than the positive peaks used (0 if fewer than two)."""
+    x = np.sort(np.asarray(peaks, np.float64)[np.asarray(peaks) > 0])[::-1][:top]
+    if len(x) < 2:
+        return np.zeros(0)
+    return np.arange(1, len(x)) * (x[:-1] - x[1:])
+
+
+class TailScale:
+    """The null's tail scale ``beta``, pooled over frames: each frame's ``spacings`` added with the past's
+    weight decayed by 1 - 1 / ``memory``. ``value`` is None until a spacing has been seen."""
+
+    def __init__(self, memory: float = TAIL_MEMORY) -> None:
+        self.keep = 1.0 - 1.0 / memory
+        self.total, self.count = 0.0, 0.0
+
+    def add(self, gaps: np.ndarray) -> None:
+        self.total = self.keep * self.total + float(np.sum(gaps))
+        self.count = self.keep * self.count + len(gaps)
+
+    @property
+    def value(self) -> float | None:
+        if self.count <= 0 or self.total <= 0:
+            return None
+        return self.total / self.count
+
+
+def rival_weight(best: float, rivals: np.ndarray, beta: float | None) -> float:
+    """Sum over rival peaks of exp(-(best - rival) / beta): how much the rivals explain the answer's score
+    (``beta`` None: the scale is not known yet, the rivals explain everything: inf)."""
+    if beta is None:
+        return math.inf
+    r = np.asarray(rivals, np.float64)
+    return float(np.exp(np.minimum((r - best) / beta, 50.0)).sum())
+
+
+def trajectory_probability(best: float, rivals: np.ndarray, beta: float | None, far: float = 0.0) -> float:
+    """The probability that the best trajectory (score ``best``) is the place rather than one of the
+    ``rivals`` (peaks of the null) or anything they stand for: 1 / (1 + rival weight + ``far``), ``far``
+    being the weight of rivals not in ``rivals`` (places not searched this frame)."""
+    w = rival_weight(best, rivals, beta) + far
+    return 0.0 if math.isinf(w) else 1.0 / (1.0 + w)
+
+
+def local_best(part: np.ndarray, where: np.ndarray | None, exclude: Intervals) -> np.ndarray:
+    """A frame's similarities ``part`` (n,) to the places ``where`` (sorted; None: 0..n-1), each replaced by
+    the best of it and its neighbours in ``part`` (as the answer's view is read), less the places in the
+    intervals ``exclude`` ([lo, hi)): the frame's views of places that are not the answer's, (m,)."""
+    part = np.asarray(part, np.float64)
+    best = part.copy()
+    if len(part) > 1:
+        np.maximum(best[1:], part[:-1], out=best[1:])
+        np.maximum(best[:-1], part[1:], out=best[:-1])
+    places = np.arange(len(part)) if where is None else np.asarray(where, np.int64)
+    keep = np.ones(len(part), bool)
+    for lo, hi in exclude:
+        keep &= (places < lo) | (places >= hi)
+    return best[keep]
+
+
+def view_quantile(null: np.ndarray, here: float) -> float:
+    """The share of the views ``null`` (``local_best``) at least as alike the frame as ``here`` (the
+    answer's), counting the answer's own: in (0, 1]; uniform where the answer is not the frame's place."""
+    null = np.asarray(null)
+    return (float(np.count_nonzero(null >= here)) + 1.0) / (len(null) + 1.0)
+
+
+class ViewFilter:
+    """The probability that the frames still show the answer's place, from their ``view_quantile``s (see the
+    module docstring). ``update(q, teach)``: one frame's quantile; ``teach``: its trajectory stands out, so
+    its quantile is a sample of the on-place distribution (learns ``a``). ``p``: the current probability."""
+
+    def __init__(self) -> None:
+        self.keep = 1.0 - 1.0 / VIEW_MEMORY
+        self.log_sum, self.frames = VIEW_PRIOR_FRAMES / VIEW_PRIOR, VIEW_PRIOR_FRAMES   # sum of -log q, count
+        self.p = ENTER
+
+    @property
+    def a(self) -> float:
+        """The on-place Beta(a, 1) shape: frames / sum of -log q (its maximum-likelihood value), in range."""
+        lo, hi = VIEW_RANGE
+        return min(hi, max(lo, self.frames / self.log_sum))
+
+    def ratio(self, q: float) -> float:
+        """Likelihood ratio on-place / off-place of a frame with quantile ``q``."""
+        a = self.a
+        return a * max(q, 1e-12) ** (a - 1.0)
+
+    def update(self, q: float, teach: bool) -> float:
+        prior = self.p * (1.0 - LEAVE) + (1.0 - self.p) * ENTER
+        lr = self.ratio(q)
+        self.p = prior * lr / (prior * lr + 1.0 - prior)
+        if teach:
+            self.log_sum = self.keep * self.log_sum + -math.log(max(q, 1e-12))
+            self.frames = self.keep * self.frames + 1.0
+        return self.p
