@@ -57,6 +57,7 @@ from vpr_edge.evaluation.run import check_truth_fits, map_same_view
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.evaluation.streams import KINDS
 from vpr_edge.evaluation.truth import Truth, one_view
+from vpr_edge.frames.frame import Frame
 from vpr_edge.frames.images import list_images
 from vpr_edge.map import MapQuery
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
@@ -88,8 +89,8 @@ class Stream:
 
 @dataclass
 class Encoded:
-    """A stream as a map's chain sees it: the query encodings (Q, D) of the decoded frames ``kept`` (Q,),
-    the (Q, R) similarities, and the padded truth rows of those frames."""
+    """A stream as a front end sees it: the query encodings (Q, D) of its decoded frames (None: pixels), their
+    (Q, R) similarities to the references, and their padded truth rows."""
 
     encodings: np.ndarray | None
     sim: np.ndarray
@@ -225,7 +226,7 @@ def load_truth(stream: Stream, query: MapQuery | None) -> np.ndarray:
     return rows
 
 
-def skip_warning(frame) -> None:  # noqa: ANN001 (a frames.Frame)
+def skip_warning(frame: Frame) -> None:
     print(f"warning: skipped frame {frame.name} (not decodable)", file=sys.stderr)
 
 

@@ -6,7 +6,8 @@ wrote, scored by the library's ``scoring.evaluate_mode`` (what ``evaluate`` runs
     python tools/front_end_cache.py --streams out/corridor out/nordland-dev --out out/fronts
     python tools/front_end_lines.py --cache out/fronts --modes stream,stream-prob,seqslam-online
 
-Per dataset and front end, one row per mode and stream: the best answers' R@1 (lost ignored), the precision
+Per dataset and front end, one row per mode and stream: the front end alone (``single``'s R@1 at the cache's
+tolerance), the best answers' R@1 (lost ignored), the precision
 and recall the line delivers (answered right, mapped right), the best line's recall at the target precision
 (the answers ranked by score), the line gap (the best line's recall at the delivered precision minus the
 delivered recall), and on the detour the unmapped frames lost and the first lost after leaving; foreign
@@ -63,11 +64,11 @@ def main() -> int:
             files = sorted((ds / front).glob("*.npz"))
             for mode in modes:
                 for f in files:
-                    if f.stem == "map":
-                        continue
                     case = load(f)
+                    if "sim" not in case:   # the map, the noise drawn
+                        continue
                     r = score(mode, case, a.tolerance, a.target_precision)
-                    single = float(case.get("single_r1", np.nan))
+                    single = float(case.get("single_r1_tol", np.nan))
                     if f.stem == "foreign":
                         print(f"| {ds.name} | {front} | {mode} | foreign | - | - | - | - | - | - | "
                               f"{r.lost_unmapped:.3f} |")
