@@ -7,7 +7,7 @@ import pytest
 
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import get_matcher
-from vpr_edge.matchers.verdict import (TailScale, ViewFilter, block_peaks, local_best, spacings,
+from vpr_edge.matchers.verdict import (TailScale, ViewFilter, block_peaks, local_best, rival_weight, spacings,
                                        trajectory_probability, view_quantile)
 
 
@@ -39,9 +39,9 @@ def test_spacings_estimate_an_exponential_tails_scale() -> None:
 
 def test_trajectory_probability_is_a_softmax_over_rivals() -> None:
     rivals = np.array([1.0, 2.0, 0.0])
-    p = trajectory_probability(5.0, rivals, 1.5)
+    p = trajectory_probability(rival_weight(5.0, rivals, 1.5))
     assert p == pytest.approx(1 / (1 + sum(np.exp((r - 5.0) / 1.5) for r in rivals)))
-    assert trajectory_probability(5.0, rivals, None) == 0.0      # no scale yet: nothing stands out
+    assert trajectory_probability(rival_weight(5.0, rivals, None)) == 0.0   # no scale yet: nothing stands out
 
 
 def test_local_best_and_view_quantile_against_loops() -> None:

@@ -105,7 +105,7 @@ class Localizer:
                  calibration: str | os.PathLike[str] | None = None, precision: str = DEFAULT_PRECISION,
                  target_precision: float | None = None) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
-        self.threshold = self.matcher.lost_line(min_confidence, target_precision)          # checked before the map is opened
+        self.threshold = self.matcher.lost_line(min_confidence, target_precision)   # checked before the map opens
         ort_threads = 0 if threads is None else use_threads(threads)
         self.query = MapQuery(map_path, model, ort_threads, precision)   # the map and its front end, once
         self.map.check_scores(self.matcher.scores, map_path)

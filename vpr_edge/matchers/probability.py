@@ -74,8 +74,8 @@ class ProbabilityMatcher(RoadMatcher):
         blocks, peaks = np.r_[blocks, far_blocks], np.r_[peaks, far_peaks]
         rivals = peaks[(blocks >= first // width) & (blocks <= last // width)]
         beta = self._tail.value
-        p = trajectory_probability(best, rivals, beta)
+        weight = rival_weight(best, rivals, beta)
         if not len(rivals) or beta is None:
-            return p, False
+            return trajectory_probability(weight), False
         top = float(np.exp(min((float(rivals.max()) - best) / beta, 50.0)))
-        return p, top >= 0.5 * rival_weight(best, rivals, beta)
+        return trajectory_probability(weight), top >= 0.5 * weight

@@ -162,11 +162,18 @@ def max_outside(values: np.ndarray, refs: np.ndarray | None, intervals: Interval
             best = max(best, float(values[at:lo].max(initial=0.0)))
             at = hi
         return max(best, float(values[at:].max(initial=0.0)))
+    return float(values[~inside(refs, intervals)].max(initial=0.0))
+
+
+def inside(refs: np.ndarray, intervals: Intervals) -> np.ndarray:
+    """Whether each place of ``refs`` (int array) lies in one of the sorted, disjoint ``intervals``: (n,) bool."""
+    refs = np.asarray(refs, np.int64)
+    if not intervals:
+        return np.zeros(len(refs), bool)
     los = np.array([lo for lo, _ in intervals], np.int64)
     his = np.array([hi for _, hi in intervals], np.int64)
     k = np.searchsorted(los, refs, side="right") - 1
-    inside = (k >= 0) & (refs < his[np.maximum(k, 0)])
-    return float(values[~inside].max(initial=0.0))
+    return (k >= 0) & (refs < his[np.maximum(k, 0)])
 
 
 def _sorted_by_column(v: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ Two questions, two factors, ``probability = trajectory * view``:
   (one per block of the route, so that one cluster counts once): for an exponential tail the normalised
   spacings i * (x_(i) - x_(i+1)) are independent draws of mean ``beta`` (Renyi), pooled over the recent
   frames (``TailScale``). A rival peak x then explains the answer's score b with weight exp(-(b - x) / beta),
-  and ``trajectory_probability`` = 1 / (1 + sum over rivals of those weights): a softmax over the hypotheses
+  and ``trajectory_probability`` = 1 / (1 + sum over rivals of those weights, ``rival_weight``): a softmax over the hypotheses
   with the null's own temperature. Off the map, the best is the top of the null and the gap to the next is an
   exponential draw of mean beta, so a line at P is passed by at most about 1 - P of such frames (a constant
   false-alarm rate), whatever the similarities' scale.
@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from vpr_edge.matchers.route import Intervals
+from vpr_edge.matchers.route import Intervals, inside
 
 # the line: answers whose probability of being right is below this are lost (``--target-precision``)
 TARGET_PRECISION = 0.98
@@ -59,9 +59,7 @@ def block_peaks(values: np.ndarray, where: np.ndarray | None, width: int,
     the blocks' numbers, both (blocks,) in block order."""
     values = np.asarray(values, np.float64)
     places = np.arange(len(values)) if where is None else np.asarray(where, np.int64)
-    keep = np.ones(len(places), bool)
-    for lo, hi in exclude:
-        keep &= (places < lo) | (places >= hi)
+    keep = ~inside(places, exclude)
     if not keep.any():
         return np.zeros(0), np.zeros(0, np.int64)
     v, block = values[keep], places[keep] // max(1, int(width))
@@ -107,12 +105,10 @@ def rival_weight(best: float, rivals: np.ndarray, beta: float | None) -> float:
     return float(np.exp(np.minimum((r - best) / beta, 50.0)).sum())
 
 
-def trajectory_probability(best: float, rivals: np.ndarray, beta: float | None, far: float = 0.0) -> float:
-    """The probability that the best trajectory (score ``best``) is the place rather than one of the
-    ``rivals`` (peaks of the null) or anything they stand for: 1 / (1 + rival weight + ``far``), ``far``
-    being the weight of rivals not in ``rivals`` (places not searched this frame)."""
-    w = rival_weight(best, rivals, beta) + far
-    return 0.0 if math.isinf(w) else 1.0 / (1.0 + w)
+def trajectory_probability(weight: float) -> float:
+    """The probability that the best trajectory is the place rather than one of the rivals whose
+    ``rival_weight`` is ``weight``: 1 / (1 + weight) (0 for an infinite weight)."""
+    return 0.0 if math.isinf(weight) else 1.0 / (1.0 + weight)
 
 
 def local_best(part: np.ndarray, where: np.ndarray | None, exclude: Intervals) -> np.ndarray:
@@ -125,10 +121,7 @@ def local_best(part: np.ndarray, where: np.ndarray | None, exclude: Intervals) -
         np.maximum(best[1:], part[:-1], out=best[1:])
         np.maximum(best[:-1], part[1:], out=best[:-1])
     places = np.arange(len(part)) if where is None else np.asarray(where, np.int64)
-    keep = np.ones(len(part), bool)
-    for lo, hi in exclude:
-        keep &= (places < lo) | (places >= hi)
-    return best[keep]
+    return best[~inside(places, exclude)]
 
 
 def view_quantile(null: np.ndarray, here: float) -> float:
