@@ -243,6 +243,10 @@ CASES = [
     Case("loc-out-link-loop", LOC + " -o {w}/loop", ("loop", "loop of symbolic links")),
     Case("loc-min-confidence-nan", LOC + " --min-confidence nan", ("--min-confidence nan", "finite")),
     Case("ev-min-confidence-inf", EV + " --min-confidence inf", ("--min-confidence inf", "finite")),
+    Case("loc-target-precision-one", LOC + " --mode stream-prob --target-precision 1", ("--target-precision 1",
+                                                                                       "between 0 and 1")),
+    Case("ev-target-precision-negative", EV + " --target-precision -0.5", ("--target-precision -0.5", "between 0 and 1")),
+    Case("ev-answers-is-the-gt", EV + " --answers {w}/gt.csv", ("gt.csv", "--answers", "an input")),
     Case("loc-threads-absurd", LOC + " --threads 100000", ("--threads 100000", "per core")),
     Case("ev-json-and-similarity-out", EV + " --json {w}/x.out --save-similarity {w}/x.out", ("x.out", "same file")),
     # damaged or hostile maps
