@@ -145,7 +145,7 @@ def test_evaluate_runs_the_stream_matcher_as_localize_does(api_map: Path, small_
     import shutil
 
     from vpr_edge.evaluation import Source, Truth, evaluate
-    from vpr_edge.evaluation.streams import write_ground_truth
+    from vpr_edge.evaluation.truth import write_ground_truth
 
     files = sorted(small_queries.iterdir())
     order = [0, 1, 2, 3, 4, 5, 5, 5, 5, 5, 5, 5, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 10, 11, 12, 13, 14]

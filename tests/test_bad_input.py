@@ -25,7 +25,7 @@ from vpr_edge.cli import app
 from vpr_edge.resources import bundled_model, sample_folder
 from vpr_edge.map import MAP_SCHEMA
 from vpr_edge.files import read_npz, write_npz
-from vpr_edge.evaluation.streams import write_ground_truth
+from vpr_edge.evaluation.truth import write_ground_truth
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -106,7 +106,7 @@ def test_build_and_localize_from_bags(kind: str, tmp_path: Path, small_refs: Pat
     assert len(rows) == 24 and [float(r["stamp"]) for r in rows] == pytest.approx([T0 + i / 10 for i in range(24)])
     found = [r for r in rows if r["lost"] == "0"]
     assert found and all(r["lat"] and r["lon"] == "10.000000" and r["x"] == "" for r in found)
-    from vpr_edge.evaluation.streams import write_ground_truth
+    from vpr_edge.evaluation.truth import write_ground_truth
 
     write_ground_truth(tmp_path / "gt.csv", [[i] for i in range(24)])
     ev = run("evaluate", "-m", tmp_path / "m.npz", "-q", queries, "--topic", "/camera/image", "--gt",

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from vpr_edge import Localizer
-from vpr_edge.evaluation.streams import write_ground_truth
+from vpr_edge.evaluation.truth import write_ground_truth
 from vpr_edge.map import load_map
 
 

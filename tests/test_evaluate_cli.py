@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from test_cli import assert_one_line_error, run
-from vpr_edge.evaluation.streams import write_ground_truth
+from vpr_edge.evaluation.truth import write_ground_truth
 
 JSON_KEYS = {"recall_at_1", "recall_at_5", "recall_at_10", "auc", "ap", "precision_at_full_recall",
              "recall_at_full_precision", "median_error", "lost_unmapped", "lost_mapped", "ms_per_frame", "lock_frames",

@@ -25,7 +25,7 @@ from vpr_edge.frames.images import load_image
 from vpr_edge.map import PlaceMap, load_map, map_front_end, save_map
 from vpr_edge.matchers import MATCHERS
 from vpr_edge.features.patches import pixel_descriptor
-from vpr_edge.evaluation.streams import write_ground_truth
+from vpr_edge.evaluation.truth import write_ground_truth
 
 
 @pytest.fixture(scope="module")

@@ -20,7 +20,7 @@ from onnx import TensorProto, helper  # noqa: E402
 
 from vpr_edge import Localizer  # noqa: E402
 from vpr_edge.cli import app  # noqa: E402
-from vpr_edge.evaluation.streams import write_ground_truth  # noqa: E402
+from vpr_edge.evaluation.truth import write_ground_truth  # noqa: E402
 from vpr_edge.frames.images import list_images, load_image  # noqa: E402
 from vpr_edge.map import load_map  # noqa: E402
 from vpr_edge.map.query import MapQuery  # noqa: E402

@@ -146,3 +146,11 @@ def test_one_view_frames_against_a_naive_loop() -> None:
     naive = [any(int(t) in runs for t in row if t >= 0) for row in truth]
     np.testing.assert_array_equal(groundtruth.one_view(truth, same), naive)
     assert not groundtruth.one_view(truth, same)[:5].any()
+
+
+def test_written_ground_truth_reads_back(tmp_path) -> None:
+    """``write_ground_truth`` writes what ``load_csv`` reads: several references, none (not in the map)."""
+    path = tmp_path / "gt.csv"
+    groundtruth.write_ground_truth(path, [[3], [], [4, 5]])
+    assert path.read_text() == "query,references\n0,3\n1,\n2,4 5\n"
+    np.testing.assert_array_equal(groundtruth.load_csv(path), [[3, -1], [-1, -1], [4, 5]])

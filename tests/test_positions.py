@@ -185,7 +185,7 @@ def test_metre_errors_worked_by_hand() -> None:
 
 @pytest.mark.slow
 def test_evaluate_reports_metres_with_map_positions(positioned: Path, small_queries: Path, tmp_path: Path) -> None:
-    from vpr_edge.evaluation.streams import write_ground_truth
+    from vpr_edge.evaluation.truth import write_ground_truth
 
     write_ground_truth(tmp_path / "gt.csv", [[i] for i in range(24)])
     proc = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt", tmp_path / "gt.csv",
@@ -266,7 +266,7 @@ def test_evaluate_draws_the_matrix_and_the_route(positioned: Path, small_queries
     pytest.importorskip("matplotlib")
     import cv2
 
-    from vpr_edge.evaluation.streams import write_ground_truth
+    from vpr_edge.evaluation.truth import write_ground_truth
 
     write_ground_truth(tmp_path / "gt.csv", [[i] for i in range(24)])
     proc = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt", tmp_path / "gt.csv",
@@ -292,7 +292,7 @@ def test_gt_positions_from_the_map(positioned: Path, small_queries: Path, tmp_pa
     a = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt-positions", "map",
             tmp_path / "q.csv", "--radius", "1", "--modes", "dtw", "--tolerance", "0", "--json", tmp_path / "a.json")
     assert a.returncode == 0, a.stderr
-    from vpr_edge.evaluation.streams import write_ground_truth
+    from vpr_edge.evaluation.truth import write_ground_truth
 
     write_ground_truth(tmp_path / "gt.csv", [[i] for i in range(24)])
     b = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt", tmp_path / "gt.csv",
@@ -369,7 +369,7 @@ def test_isotonic_against_scikit_learn_and_by_hand() -> None:
 
 @pytest.mark.slow
 def test_calibrated_confidence_end_to_end(positioned: Path, small_queries: Path, tmp_path: Path) -> None:
-    from vpr_edge.evaluation.streams import write_ground_truth
+    from vpr_edge.evaluation.truth import write_ground_truth
 
     write_ground_truth(tmp_path / "gt.csv", [[i] for i in range(24)])
     a = run("evaluate", "-m", positioned / "map.npz", "-q", small_queries, "--gt", tmp_path / "gt.csv",

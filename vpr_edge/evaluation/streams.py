@@ -7,7 +7,6 @@ list of source query indices (which frame to show) and, per frame, its true plac
 """
 from __future__ import annotations
 
-import csv
 import os
 import shutil
 from collections.abc import Sequence
@@ -19,6 +18,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError
 from vpr_edge.frames.images import list_images, load_image
+from vpr_edge.evaluation.truth import write_ground_truth
 from vpr_edge.files import atomic_output, read_csv_rows
 
 KINDS: tuple[str, ...] = ("aligned", "speed2", "speed3", "stop-and-go", "camera-stops", "variable", "partial",
@@ -81,16 +81,6 @@ def derive_stream(kind: str, n_mapped: int, n_places: int, seed: int = 0) -> np.
         return np.concatenate([np.arange(0, (2 * n_mapped) // 5), np.arange(n_mapped, n_mapped + n_off),
                                np.arange((3 * n_mapped) // 5, n_mapped)])
     raise VprError(f"unknown stream kind {kind!r}; choose from {', '.join(KINDS)}")
-
-
-def write_ground_truth(path: str | os.PathLike[str], truth: Sequence[Sequence[int]]) -> None:
-    """Write the project's ground-truth CSV (``query,references``; empty = place not in the map)
-    atomically."""
-    with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
-        w = csv.writer(f, lineterminator="\n")
-        w.writerow(["query", "references"])
-        for q, refs in enumerate(truth):
-            w.writerow([q, " ".join(str(int(r)) for r in refs)])
 
 
 def sensor_noise(image: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.evaluation.metrics import runs
-from vpr_edge.evaluation.streams import write_ground_truth
+from vpr_edge.evaluation.truth import write_ground_truth
 from vpr_edge.files import atomic_output
 
 BLOCK = 65_536   # descriptors generated and written at a time

@@ -8,9 +8,12 @@ references, -1 as padding (a row of -1: the query's place is not in the map).
   GThard / GTsoft), read without pickle;
 * positions: two CSV files (references, queries) with columns ``x,y`` (metres) or ``lat,lon`` (degrees);
   the correct references of a query are those within a radius in metres.
+
+``write_ground_truth`` writes the project's CSV (what a user's own labelled drive, or a test, gives ``evaluate``).
 """
 from __future__ import annotations
 
+import csv
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -19,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError
-from vpr_edge.files import read_csv_rows
+from vpr_edge.files import atomic_output, read_csv_rows
 from vpr_edge.positions import Positions, distances
 from vpr_edge.positions import read_csv as read_positions
 
@@ -59,6 +62,16 @@ def load_csv(path: str | os.PathLike[str], labels: Callable[[], dict[str, int]] 
     if any(v < 0 for refs in out.values() for v in refs):
         raise VprError(f"{path}: reference indices must be >= 0")
     return pad([out[i] for i in range(len(out))])
+
+
+def write_ground_truth(path: str | os.PathLike[str], truth: Sequence[Sequence[int]]) -> None:
+    """Write the project's ground-truth CSV (``query,references``; per query its reference indices, space
+    separated; empty = place not in the map) atomically: what ``load_csv`` reads."""
+    with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(["query", "references"])
+        for q, refs in enumerate(truth):
+            w.writerow([q, " ".join(str(int(r)) for r in refs)])
 
 
 def _resolver(labels: Callable[[], dict[str, int]] | None, path: str | os.PathLike[str]
