@@ -26,6 +26,24 @@ def test_block_peaks_against_a_loop() -> None:
     np.testing.assert_allclose(peaks, [naive[b] for b in sorted(naive)])
 
 
+
+@pytest.mark.parametrize("exclude", [[], [(30, 45)], [(33, 36)], [(0, 12)], [(50, 57)], [(0, 57)], [(40, 40)]])
+@pytest.mark.parametrize("width", [1, 7, 10])
+def test_block_peaks_of_the_whole_route_against_a_loop(exclude: list[tuple[int, int]], width: int) -> None:
+    """The whole route (``where`` None) less at most one interval: the fast path gives what the loop gives,
+    a block cut by the interval counted once."""
+    values = np.random.default_rng(1).exponential(size=57)
+    peaks, blocks = block_peaks(values, None, width, exclude)
+    naive: dict[int, float] = {}
+    for p, v in enumerate(values):
+        if not any(lo <= p < hi for lo, hi in exclude):
+            naive[p // width] = max(naive.get(p // width, -np.inf), v)
+    assert blocks.tolist() == sorted(naive)
+    np.testing.assert_allclose(peaks, [naive[b] for b in sorted(naive)])
+    ref_peaks, ref_blocks = block_peaks(values, np.arange(57), width, exclude)   # the general path
+    np.testing.assert_array_equal(blocks, ref_blocks)
+    np.testing.assert_array_equal(peaks, ref_peaks)
+
 def test_spacings_estimate_an_exponential_tails_scale() -> None:
     """Renyi: the normalised spacings of exponential order statistics have the tail's scale as mean."""
     rng = np.random.default_rng(1)
@@ -35,6 +53,9 @@ def test_spacings_estimate_an_exponential_tails_scale() -> None:
     assert tail.value == pytest.approx(2.5, rel=0.05)
     x = np.array([5.0, 3.0, 0.0, 2.0])   # zeros (floored trajectories) are left out
     np.testing.assert_allclose(spacings(x), [1 * (5 - 3), 2 * (3 - 2)])
+    many = rng.exponential(size=50)   # more than the top 16: the loop over the 16 highest
+    top = sorted(many, reverse=True)[:16]
+    np.testing.assert_allclose(spacings(many, 16), [i * (top[i - 1] - top[i]) for i in range(1, 16)])
 
 
 def test_trajectory_probability_is_a_softmax_over_rivals() -> None:
@@ -53,6 +74,9 @@ def test_local_best_and_view_quantile_against_loops() -> None:
     np.testing.assert_allclose(got, naive)
     assert view_quantile(got, 10.0) == pytest.approx(1 / (len(got) + 1))
     assert view_quantile(got, -10.0) == 1.0
+    whole = local_best(part, None, [(3, 6), (20, 22)])   # the whole route: places 0..29
+    np.testing.assert_allclose(whole, [max(part[max(0, i - 1):i + 2]) for i in range(30)
+                                       if not (3 <= i < 6 or 20 <= i < 22)])
 
 
 def test_recent_views_against_a_loop() -> None:

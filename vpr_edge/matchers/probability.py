@@ -73,10 +73,11 @@ class ProbabilityMatcher(RoadMatcher):
             kept_peaks, kept_blocks = self._far
             out = ~np.isin(kept_blocks, np.unique(where // width))
             far_peaks, far_blocks = kept_peaks[out], kept_blocks[out]
+        if len(far_peaks):
+            blocks, peaks = np.concatenate([blocks, far_blocks]), np.concatenate([peaks, far_peaks])
         if not standing:
-            self._tail.add(spacings(np.r_[peaks, far_peaks]))
+            self._tail.add(spacings(peaks))
         first, last = self.graph.bounds(ref)
-        blocks, peaks = np.r_[blocks, far_blocks], np.r_[peaks, far_peaks]
         rivals = peaks[(blocks >= first // width) & (blocks <= last // width)]
         beta = self._tail.value
         weight = rival_weight(best, rivals, beta)

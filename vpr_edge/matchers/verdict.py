@@ -67,12 +67,35 @@ def block_peaks(values: np.ndarray, where: np.ndarray | None, width: int,
     width) that holds a place outside the intervals ``exclude`` ([lo, hi) places; those are left out), and
     the blocks' numbers, both (blocks,) in block order."""
     values = np.asarray(values, np.float64)
+    width = max(1, int(width))
+    if where is None and len(exclude) <= 1:   # the whole route less one interval: two runs of whole blocks
+        lo, hi = exclude[0] if exclude else (0, 0)
+        runs = [(0, lo), (hi, len(values))] if hi > lo else [(0, len(values))]
+        out_v, out_b = [], []
+        for a, b in runs:
+            if b <= a:
+                continue
+            first = np.arange(a // width, (b - 1) // width + 1, dtype=np.int64)
+            starts = np.maximum(first * width, a) - a
+            out_v.append(np.maximum.reduceat(values[a:b], starts))
+            out_b.append(first)
+        if not out_v:
+            return np.zeros(0), np.zeros(0, np.int64)
+        if len(out_v) == 1:
+            return out_v[0], out_b[0]
+        if out_b[0][-1] == out_b[1][0]:   # the interval left out lies inside one block: that block counts once
+            out_v[1][0] = max(out_v[1][0], out_v[0][-1])
+            out_v[0], out_b[0] = out_v[0][:-1], out_b[0][:-1]
+        return np.concatenate(out_v), np.concatenate(out_b)
     places = np.arange(len(values)) if where is None else np.asarray(where, np.int64)
     keep = ~inside(places, exclude)
     if not keep.any():
         return np.zeros(0), np.zeros(0, np.int64)
-    v, block = values[keep], places[keep] // max(1, int(width))
-    starts = np.flatnonzero(np.r_[True, block[1:] != block[:-1]])
+    v, block = values[keep], places[keep] // width
+    change = np.empty(len(block), bool)
+    change[0] = True
+    np.not_equal(block[1:], block[:-1], out=change[1:])
+    starts = np.flatnonzero(change)
     return np.maximum.reduceat(v, starts), block[starts]
 
 
@@ -80,10 +103,14 @@ def spacings(peaks: np.ndarray, top: int = TAIL_PEAKS) -> np.ndarray:
     """The normalised spacings i * (x_(i) - x_(i+1)), i = 1.., of the ``top`` highest positive ``peaks``
     (sorted down): for an exponential tail, independent draws whose mean is its scale. (k,) with k one less
     than the positive peaks used (0 if fewer than two)."""
-    x = np.sort(np.asarray(peaks, np.float64)[np.asarray(peaks) > 0])[::-1][:top]
+    x = np.asarray(peaks, np.float64)
+    x = x[x > 0]
+    if len(x) > top:   # the top ones only: a partition, then a sort of those
+        x = np.partition(x, len(x) - top)[len(x) - top:]
     if len(x) < 2:
         return np.zeros(0)
-    return np.arange(1, len(x)) * (x[:-1] - x[1:])
+    x.sort()
+    return np.arange(1, len(x)) * np.diff(x)[::-1]
 
 
 class TailScale:
@@ -129,8 +156,12 @@ def local_best(part: np.ndarray, where: np.ndarray | None, exclude: Intervals) -
     if len(part) > 1:
         np.maximum(best[1:], part[:-1], out=best[1:])
         np.maximum(best[:-1], part[1:], out=best[:-1])
-    places = np.arange(len(part)) if where is None else np.asarray(where, np.int64)
-    return best[~inside(places, exclude)]
+    if where is None:   # the whole route: the intervals cut out by slices
+        keep = np.ones(len(part), bool)
+        for lo, hi in exclude:
+            keep[lo:hi] = False
+        return best[keep]
+    return best[~inside(np.asarray(where, np.int64), exclude)]
 
 
 def view_quantile(null: np.ndarray, here: float) -> float:
