@@ -22,7 +22,7 @@ READS_CODEBOOK = (1, 2)
 
 # The default codebook: 41 GMM components over local descriptors reduced to 24 whitened PCA dims, a
 # 2 x 41 x 24 = 1,968-dim IFV (1,972 bytes a place as int8). Chosen on nordland-dev's derived streams among
-# maps of at most 2,000 bytes a place, reported on Corridor too (docs/results.md, "The default").
+# maps of at most 2,000 bytes a place, reported on Corridor too (docs/decisions.md, "The codebook").
 DEFAULT_COMPONENTS = 41
 DEFAULT_PCA_DIM = 24
 
@@ -41,7 +41,7 @@ class FitSettings:
     whiten: bool = True
     alpha: float = 0.5            # signed power normalisation exponent (ifv, vlad); 1 = off
     max_descriptors: int = 30_000
-    iterations: int = 20          # EM / k-means iterations at most (docs/results.md, "Tried and not taken")
+    iterations: int = 20          # EM / k-means iterations at most (docs/decisions.md, "Tried and not taken")
     seed: int = 0
     tfidf: bool = False           # bow: weight words by inverse document frequency over the references
 

@@ -79,7 +79,7 @@ def fit_gmm(x: np.ndarray, s: FitSettings) -> tuple[np.ndarray, np.ndarray, np.n
     scikit-learn's EM, started as its own ``k-means++`` start does (means at k-means++ seeds, equal weights,
     variances at the regularisation floor, so the first E-step assigns each descriptor to its nearest seed)
     but with the seeds drawn from ``INIT_SAMPLE`` descriptors; EM runs in float32 (every array given to it is
-    float32, or NumPy promotes the whole EM to float64), faster than float64 (docs/results.md, "Tried and not
+    float32, or NumPy promotes the whole EM to float64), faster than float64 (docs/decisions.md, "Tried and not
     taken")."""
     from sklearn.cluster import kmeans_plusplus
     from sklearn.exceptions import ConvergenceWarning
@@ -94,7 +94,7 @@ def fit_gmm(x: np.ndarray, s: FitSettings) -> tuple[np.ndarray, np.ndarray, np.n
     seeds, _ = kmeans_plusplus(pool, m, random_state=s.seed)
     def em(data: np.ndarray, reg: float):
         dt = data.dtype
-        with warnings.catch_warnings():  # stopping EM early is the chosen trade (docs/results.md): no warning
+        with warnings.catch_warnings():  # stopping EM early is the chosen trade (docs/decisions.md): no warning
             warnings.simplefilter("ignore", ConvergenceWarning)
             return GaussianMixture(n_components=m, covariance_type="diag", reg_covar=reg, max_iter=s.iterations,
                                    random_state=s.seed, init_params="random_from_data",

@@ -1,6 +1,6 @@
 """Which model a cnn front end runs: the bundled input size that suits the camera (build-map), and the
 model's int8 form where the CPU has int8 dot-product instructions (every command that describes frames).
-Measurements behind both policies: docs/results.md, "The default"."""
+Measurements behind both policies: docs/decisions.md, "fp32 by default, int8 beside it"."""
 from __future__ import annotations
 
 import platform
@@ -11,8 +11,8 @@ from vpr_edge.errors import VprError
 from vpr_edge.resources import MODEL_FILES, bundled_model, int8_form
 
 PRECISIONS = ("fp32", "int8", "auto")
-# fp32 by default: it meets the time budget on its own, and the int8 form costs Corridor's streams up to
-# 0.06 R@1 (docs/results.md, "The default"); auto takes int8 where the CPU has int8 dot products.
+# fp32 by default: it meets the time budget on its own, and the int8 form costs R@1, most on Corridor
+# (docs/decisions.md, "fp32 by default, int8 beside it"); auto takes int8 where the CPU has int8 dot products.
 DEFAULT_PRECISION = "fp32"
 
 
@@ -53,7 +53,7 @@ def _cpu_flags() -> set[str]:
 def int8_dot_product() -> str | None:
     """The CPU's int8 dot-product instructions, by name, or None: x86 AVX512-VNNI / AVX-VNNI, ARM dotprod
     (Linux's /proc/cpuinfo; elsewhere None, so fp32 is kept). Without them onnxruntime's int8 kernels are
-    no faster than fp32, or slower (docs/results.md, "The default")."""
+    no faster than fp32, or slower (docs/decisions.md, "fp32 by default, int8 beside it")."""
     flags = _cpu_flags()
     for flag, name in (("avx512_vnni", "AVX512-VNNI"), ("avx_vnni", "AVX-VNNI"), ("asimddp", "ARM dotprod")):
         if flag in flags:

@@ -1,6 +1,6 @@
 """Reference encodings as a map stores them: float16, float32, or int8 with one scale per row.
 
-int8 rows hold a quarter of float32's bytes at nearly its accuracy (docs/results.md, "Tried and not taken"), so they
+int8 rows hold a quarter of float32's bytes at nearly its accuracy (docs/decisions.md, "Tried and not taken"), so they
 are build-map's default. Similarities are
 computed from what is stored, a block of references at a time, so that a memory-mapped map is read as it
 is used and never expanded whole into RAM.
@@ -16,7 +16,7 @@ from vpr_edge.index.rows import RowReader, release_pages
 
 DTYPES = {"int8": np.int8, "float16": np.float16, "float32": np.float32}  # storage name -> stored dtype
 STORAGES = tuple(DTYPES)
-DEFAULT_STORAGE = "int8"   # a quarter of float32's bytes at nearly its accuracy (docs/results.md, "Tried and not taken")
+DEFAULT_STORAGE = "int8"   # a quarter of float32's bytes at nearly its accuracy (docs/decisions.md, "Tried and not taken")
 BLOCK_BYTES = 2 << 20   # float32 scratch per block of references in ``similarity``: cache-sized blocks ran
                         # faster than large ones (tools/bench_map.py)
 

@@ -42,7 +42,7 @@ class RowReader:
 
     Scattered reads through a mapping (a local window, a probe sample, a coarse search's candidates) leave
     the pages they touch mapped, and a kernel may map page-cache pages in large folios, so a few thousand rows read at
-    random can map half a large map (docs/results.md, "Tried and not taken"). Read this way, the process holds the
+    random can map half a large map (docs/decisions.md, "Tried and not taken"). Read this way, the process holds the
     cache and nothing else; the file's pages are the OS page cache's. Thread-safe."""
 
     def __init__(self, arr: np.memmap, cache_bytes: int = 16 << 20, min_rows: int = 1024) -> None:
