@@ -1,5 +1,5 @@
 """The figures a person reads (``evaluation.report``): titles by base names, and docs/img/ re-made by one
-command (``tools/doc_figures.py``), each small."""
+command (``python -m vpr_edge_bench doc-figures``), each small."""
 from __future__ import annotations
 
 import subprocess
@@ -25,8 +25,8 @@ def test_doc_figures_remakes_small_pngs(tmp_path: Path) -> None:
     pytest.importorskip("matplotlib")
     import cv2
 
-    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "doc_figures.py"), "--out", str(tmp_path)],
-                          capture_output=True, text=True, timeout=600)
+    proc = subprocess.run([sys.executable, "-m", "vpr_edge_bench", "doc-figures", "--out", str(tmp_path)],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     pngs = sorted(tmp_path.glob("*.png"))
     assert [p.name for p in pngs] == ["corridor_matrix.png", "corridor_pr.png", "corridor_route.png"]

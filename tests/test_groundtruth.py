@@ -1,4 +1,4 @@
-"""Ground truth from the project's CSV, a boolean matrix and positions; derived vehicle streams."""
+"""Ground truth from the project's CSV, a boolean matrix and positions."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,8 +6,6 @@ import pytest
 
 from vpr_edge.evaluation import truth as groundtruth
 from vpr_edge.errors import VprError
-from vpr_edge.evaluation.streams import (CAMERA, KINDS, Exposure, derive_stream, new_exposure, sensor_noise,
-                                        write_stream)
 
 
 def test_csv_with_unmapped_rows(tmp_path) -> None:
@@ -44,74 +42,6 @@ def test_positions_metric_and_geographic(tmp_path) -> None:
                                   [[0, 1]])
     with pytest.raises(VprError, match="same columns needed"):
         groundtruth.from_positions(tmp_path / "r.csv", tmp_path / "qg.csv", 5)
-
-
-@pytest.mark.parametrize("kind", KINDS)
-def test_derived_streams(kind: str) -> None:
-    places = derive_stream(kind, 300, 450, seed=1)
-    mapped = places[places < 300]
-    assert len(places) > 50 and places.min() >= 0 and places.max() < 450
-    steps = np.diff(mapped)
-    if kind == "detour":
-        assert (places >= 300).sum() == 90 and places[-1] == 299
-    else:
-        assert (places < 300).all()
-    if kind == "speed3":
-        assert set(steps) == {3}
-    if kind == "stop-and-go":
-        assert (steps == 0).sum() > 20 and set(steps) <= {0, 1}
-    if kind == "variable":
-        assert 0 <= steps.min() and steps.max() <= 3 and len(set(steps)) >= 3
-
-
-def test_sensor_noise_matches_its_sigma_and_stays_in_range() -> None:
-    rng = np.random.default_rng(0)
-    image = np.full((200, 100, 3), 128, np.uint8)
-    noisy = sensor_noise(image, 3.0, rng)
-    assert noisy.dtype == np.uint8 and noisy.shape == image.shape
-    assert abs(float((noisy.astype(float) - 128).std()) - 3.0) < 0.1
-    edges = sensor_noise(np.tile(np.array([[0, 255]], np.uint8), (500, 1)), 50.0, rng).astype(int)
-    dark, bright = edges[:, 0], edges[:, 1]
-    assert 0.4 < np.mean(dark == 0) < 0.6 and 0.4 < np.mean(bright == 255) < 0.6   # clipped at the ends ...
-    assert dark.max() < 200 and bright.min() > 55                                   # ... not wrapped around
-
-
-def test_write_stream_repeats_are_noisy_copies(tmp_path, small_queries) -> None:
-    import cv2
-
-    sources = sorted(small_queries.iterdir())[:3]
-    places = np.array([0, 1, 1, 1, 2])
-    write_stream(tmp_path / "s", sources, places, n_mapped=2, repeat_noise=3.0, seed=1)
-    names = sorted(p.name for p in (tmp_path / "s").iterdir())
-    assert names == ["0000000.jpg", "0000001.jpg", "0000002.png", "0000003.png", "0000004.jpg"]
-    assert (tmp_path / "s.csv").read_text().splitlines()[1:] == ["0,0", "1,1", "2,1", "3,1", "4,"]
-    base = cv2.imread(str(sources[1]), cv2.IMREAD_UNCHANGED).astype(float)
-    a, b = (cv2.imread(str(tmp_path / "s" / n), cv2.IMREAD_UNCHANGED).astype(float) for n in names[2:4])
-    assert a.shape == base.shape and 2.0 < (a - base).std() < 4.0 and not np.array_equal(a, b)
-    write_stream(tmp_path / "t", sources, places, n_mapped=2)             # default: the same file again
-    assert sorted(p.name for p in (tmp_path / "t").iterdir())[2:4] == ["0000002.jpg", "0000003.jpg"]
-
-
-def test_camera_stops_are_stop_and_go_with_new_exposures(tmp_path, small_queries) -> None:
-    """camera-stops stops where stop-and-go does (same seed); each repeat is a new exposure: the place's image
-    shifted by a fraction of a pixel, its gain changed and noise added, so close to it but never equal, and
-    no two repeats alike."""
-    import cv2
-
-    for seed in (0, 3):
-        np.testing.assert_array_equal(derive_stream("camera-stops", 50, 60, seed),
-                                      derive_stream("stop-and-go", 50, 60, seed))
-    image = (np.arange(40 * 60 * 3) % 251).astype(np.uint8).reshape(40, 60, 3)
-    still = new_exposure(image, Exposure(noise=0.0, gain=0.0, shift=0.0), np.random.default_rng(0))
-    np.testing.assert_array_equal(still, image)                           # no noise, gain nor shift: the image
-    sources = sorted(small_queries.iterdir())[:3]
-    places = np.array([0, 1, 1, 1, 2])
-    write_stream(tmp_path / "s", sources, places, n_mapped=3, seed=1, exposure=CAMERA)
-    names = sorted(p.name for p in (tmp_path / "s").iterdir())
-    assert names == ["0000000.jpg", "0000001.jpg", "0000002.png", "0000003.png", "0000004.jpg"]
-    base = cv2.imread(str(sources[1])).astype(float)
-    a, b = (cv2.imread(str(tmp_path / "s" / n)).astype(float) for n in names[2:4])
-    assert a.shape == base.shape and 1.0 < np.abs(a - base).mean() < 8.0 and not np.array_equal(a, b)
 
 
 def test_ground_truth_as_spreadsheets_write_it(tmp_path) -> None:

@@ -111,19 +111,17 @@ def test_formats_names_the_header_localize_writes() -> None:
 
 def test_readme_results_table_is_the_last_regenerated_one() -> None:
     """The README's results table and docs/results.md's answered-right table are exactly what
-    ``tools/results.py --write-docs`` wrote from the figures it measured (docs/generated/results.json): no
-    number in them is typed by hand or left from an older run."""
+    ``python -m vpr_edge_bench results --write-docs`` wrote from the figures it measured
+    (docs/generated/results.json): no number in them is typed by hand or left from an older run."""
     import json
 
-    from vpr_edge.evaluation.report import readme_table
-
-    from vpr_edge.evaluation.report import answers_table
+    from vpr_edge_bench.doc_tables import TABLE_END, TABLE_START, answers_table, readme_table
 
     doc = json.loads((ROOT / "docs" / "generated" / "results.json").read_text())
     for name, table in (("README.md", readme_table(doc)), ("docs/results.md", answers_table(doc))):
         text = (ROOT / name).read_text()
-        block = text.split("<!-- results table: tools/results.py -->\n")[1].split("\n<!-- end of results table -->")[0]
-        assert block == table, f"{name}: regenerate with: python tools/results.py --out out/results --quick --write-docs"
+        block = text.split(TABLE_START)[1].split("\n" + TABLE_END)[0]
+        assert block == table, f"{name}: regenerate it (python -m vpr_edge_bench results --quick --write-docs)"
 
 
 def test_references_to_results_md_name_its_sections() -> None:

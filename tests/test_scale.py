@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.evaluation.synthetic import plan_stream, write_route, write_stream
+from vpr_edge_bench.synthetic import plan_stream, write_route, write_stream
 from vpr_edge.evaluation.truth import load_csv
 from vpr_edge.index.ivf import SequenceQuery
 from vpr_edge.matchers import MATCHERS

@@ -18,7 +18,7 @@ DTYPES = {"int8": np.int8, "float16": np.float16, "float32": np.float32}  # stor
 STORAGES = tuple(DTYPES)
 DEFAULT_STORAGE = "int8"   # a quarter of float32's bytes at nearly its accuracy (docs/decisions.md, "Tried and not taken")
 BLOCK_BYTES = 2 << 20   # float32 scratch per block of references in ``similarity``: cache-sized blocks ran
-                        # faster than large ones (tools/bench_map.py)
+                        # faster than large ones (timed on maps of 1,000 to 100,000 places)
 
 
 def bytes_per_place(dim: int, storage: str) -> int:

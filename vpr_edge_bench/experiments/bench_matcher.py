@@ -1,7 +1,6 @@
-#!/usr/bin/env python3
 """Online matcher benchmark: per-frame time and memory over a long synthetic stream against a large map.
 
-    python tools/bench_matcher.py --matcher stream --refs 100000 --frames 10000 --dim 2048 --storage int8
+    python -m vpr_edge_bench bench-matcher --matcher stream --refs 100000 --frames 10000 --dim 2048 --storage int8
 
 A synthetic vehicle drives the mapped route with planted speed changes: every 20-200 frames it picks a new
 speed in {0 (stopped), 0.5, 1, 2, 3} references per frame, and now and then leaves the route for a 50-frame
@@ -23,18 +22,19 @@ from __future__ import annotations
 import argparse
 import gc
 import resource
-import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-
+from vpr_edge.errors import VprError
+from vpr_edge.files import read_npz, write_npz
 from vpr_edge.index.coarse import CoarseSearch
-from vpr_edge.index.encodings import Encodings, STORAGES
+from vpr_edge.index.encodings import STORAGES, Encodings
 from vpr_edge.index.ivf import SequenceQuery, fit_ivf
 from vpr_edge.matchers import get_matcher, step
-from vpr_edge.files import read_npz, write_npz
+from vpr_edge_bench.runner import parser, run_checked
 
 
 def rss_mb(field: str = "VmRSS") -> float:
@@ -51,8 +51,8 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
     p.add_argument("--refs", type=int, default=10_000)
     p.add_argument("--frames", type=int, default=100_000)
     p.add_argument("--dim", type=int, default=256, help="encoding dimension of the synthetic map")
@@ -76,10 +76,14 @@ def main() -> int:
                    "0: independent random references)")
     p.add_argument("--checkpoints", default="1000,10000,100000")
     p.add_argument("--seed", type=int, default=0)
-    a = p.parse_args()
-    if not a.stop_noise >= 0:   # checked before the synthetic map is built
-        print(f"bench_matcher: error: --stop-noise must be >= 0, got {a.stop_noise}", file=sys.stderr)
-        return 2
+    a = p.parse_args(argv)
+    return run_checked(__name__, lambda: _run(a))
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, its options checked before the synthetic map is built."""
+    if not a.stop_noise >= 0:
+        raise VprError(f"--stop-noise must be >= 0, got {a.stop_noise}")
     rng = np.random.default_rng(a.seed)
     route = np.random.default_rng([a.seed, 1])   # the route's speeds and detours: the same whatever --dim
     refs = rng.normal(size=(a.refs, a.dim)).astype(np.float32)
@@ -168,6 +172,3 @@ def main() -> int:
             last, t_sim, t_dtw, local = t, 0.0, 0.0, 0
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

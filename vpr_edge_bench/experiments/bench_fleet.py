@@ -1,9 +1,10 @@
-#!/usr/bin/env python3
-"""What a build on Ray costs against the plain build (docs/results.md, "Maps of several drives"): the same
+"""A build on Ray against the plain build: its time, and the two maps compared byte for byte.
+
+What a build on Ray costs against the plain build (docs/results.md, "Maps of several drives"): the same
 references built by ``map.make`` without and with ``--ray``, each timed as a whole (start-up included), the
 two maps compared byte for byte.
 
-    python tools/bench_fleet.py --refs ../shared/datasets/nordland-dev/ref --ray local
+    python -m vpr_edge_bench bench-fleet --refs ../shared/datasets/nordland-dev/ref --ray local
 
 Both builds fit the codebook in this process on the same sample; with ``--codebook-first`` a codebook is fitted
 once first and both builds reuse it, so that every reference goes through the per-frame work (on Ray: every
@@ -11,16 +12,16 @@ one on the workers). Prints seconds, frames a second, and for the Ray build fram
 """
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.errors import one_line_errors
 from vpr_edge.map import load_map
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
+from vpr_edge_bench.runner import parser, run_checked
 
 
 def timed_build(refs: Path, out: Path, options: BuildOptions) -> float:
@@ -29,13 +30,13 @@ def timed_build(refs: Path, out: Path, options: BuildOptions) -> float:
     return time.perf_counter() - t0
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
     p.add_argument("--refs", type=Path, required=True)
     p.add_argument("--ray", default="local")
     p.add_argument("--threads", type=int, default=0, help="the plain build's onnxruntime threads (0: a core each)")
     p.add_argument("--codebook-first", action="store_true")
-    a = p.parse_args()
+    a = p.parse_args(argv)
 
     def run() -> int:
         import ray
@@ -58,8 +59,5 @@ def main() -> int:
               f"({n / ray_s / max(cpus, 1):.1f} frames/s each, start-up included)")
         print(f"the same map byte for byte: {same}")
         return 0 if same else 1
-    return one_line_errors("bench_fleet", run)
+    return run_checked(__name__, run)
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

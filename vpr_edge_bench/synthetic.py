@@ -1,6 +1,6 @@
 """A synthetic route of global descriptors at any scale, and a hard stream over it, written as the files a user
 of another network holds (``.npy`` rows, the project's ground-truth CSV): what the scale benchmark
-(``tools/bench_scale.py``) and its tests run ``build-map``, ``localize`` and the scoring on.
+(the ``bench-scale`` experiment) and its tests run ``build-map``, ``localize`` and the scoring on.
 
 The route: ``n_places`` unit descriptors of ``dim`` dims, each place ``rho`` like the one before (a road's
 consecutive places look alike), generated and written a block at a time (never the whole matrix in memory).

@@ -1,8 +1,7 @@
-#!/usr/bin/env python3
 """Accuracy against bytes per place: encodings of several sizes and storages on derived streams.
 
-    python tools/derive_streams.py --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
-    python tools/size_sweep.py --streams out/nordland-dev --kinds aligned,speed2 --out out/size/nordland-dev
+    python -m vpr_edge_bench derive-streams --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
+    python -m vpr_edge_bench size-sweep --streams out/nordland-dev --kinds aligned,speed2 --out out/size/nordland-dev
 
 Local descriptors of the references (STREAMS/ref) and of each stream STREAMS/KIND are extracted once with the
 default bundled model, 160x120 (or --model; cached in OUT/local/, re-extracted when the shape differs) and shared by every configuration. A configuration is an IFV codebook
@@ -20,26 +19,28 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
-
 
 import numpy as np
 
-from vpr_edge.evaluation import truth as groundtruth
-from vpr_edge.index.coarse import agreement, sign_bytes
-from vpr_edge.index.encodings import Encodings, bytes_per_place
 from vpr_edge.encoders import FitSettings
+from vpr_edge.evaluation import truth as groundtruth
 from vpr_edge.evaluation.scoring import evaluate_mode
-from vpr_edge.resources import bundled_model
-
-BUNDLED_MODEL = bundled_model()
 from vpr_edge.features import make_front_end
 from vpr_edge.frames.images import list_images
-from vpr_edge.map.build import extract_all
+from vpr_edge.index.coarse import agreement, sign_bytes
+from vpr_edge.index.encodings import Encodings, bytes_per_place
 from vpr_edge.map import map_from_local
+from vpr_edge.map.build import extract_all
 from vpr_edge.matchers import get_matcher
+from vpr_edge.resources import bundled_model
 from vpr_edge.threads import use_threads
-from vpr_edge.evaluation.streams import KINDS
+from vpr_edge_bench.folder import StreamsFolder
+from vpr_edge_bench.runner import parser, run_checked
+from vpr_edge_bench.streams import KINDS
+
+BUNDLED_MODEL = bundled_model()
 
 
 def cached_local(files: list[Path], front, folder: Path) -> np.ndarray:
@@ -69,9 +70,9 @@ def place_bytes(dim: int, storage: str) -> int:
     return sign_bytes(dim) if storage == "bits" else bytes_per_place(dim, storage)
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--streams", type=Path, required=True, help="derive_streams output: ref/ and KIND/ + KIND.csv")
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
+    p.add_argument("--streams", type=Path, required=True, help="a derived-streams folder: ref/ and KIND/ + KIND.csv")
     p.add_argument("--kinds", default="aligned,speed2", help="streams, comma-separated, or all")
     p.add_argument("--encoding", default="ifv", help="ifv, fv or vlad (PCAxCOMPONENTS as for ifv)")
     p.add_argument("--tolerance", type=int, default=1, help="frames either side counted right (evaluate's)")
@@ -89,20 +90,26 @@ def main() -> int:
                    help="describe the streams with this model instead (an int8 form of --model: a map built "
                         "with --model, queried with it)")
     p.add_argument("--threads", type=int, default=0)
-    a = p.parse_args()
+    a = p.parse_args(argv)
+    return run_checked(__name__, lambda: _run(a))
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, the folder checked first."""
+    kinds = list(KINDS) if a.kinds == "all" else a.kinds.split(",")
+    folder = StreamsFolder(a.streams, kinds).check(map=False, ref=True)
     use_threads(a.threads)
     a.out.mkdir(parents=True, exist_ok=True)
     front = make_front_end("cnn", a.model, a.threads)
-    kinds = list(KINDS) if a.kinds == "all" else a.kinds.split(",")
     modes = a.modes.split(",")
     t0 = time.perf_counter()
-    refs = list_images(a.streams / "ref")
+    refs = list_images(folder.ref)
     ref_local = cached_local(refs, front, a.out / "local" / "ref")
     q_front, q_dir = front, "local"
     if a.query_model is not None:
         q_front, q_dir = make_front_end("cnn", a.query_model, a.threads), f"local-{a.query_model.stem}"
-    queries = {k: (cached_local(list_images(a.streams / k), q_front, a.out / q_dir / k),
-                   groundtruth.load_csv(a.streams / f"{k}.csv")) for k in kinds}
+    queries = {k: (cached_local(list_images(folder.frames(k)), q_front, a.out / q_dir / k),
+                   groundtruth.load_csv(folder.truth(k))) for k in kinds}
     print(f"local descriptors: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     rows = []
     for config, fit in ((c, f) for c in a.configs.split(",") for f in a.fits.split(",")):
@@ -157,6 +164,3 @@ def main() -> int:
     print("\n".join(lines))
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,7 +1,6 @@
-#!/usr/bin/env python3
-"""The pictures in docs/img/, re-made from the bundled Corridor sample in one command:
+"""The pictures in docs/img/, re-made from the bundled Corridor sample in one command.
 
-    python tools/doc_figures.py [--out docs/img]
+    python -m vpr_edge_bench doc-figures [--out docs/img]
 
 A map of the sample's reference frames (build-map's defaults, no positions: as the README's quick start
 makes it), its query frames evaluated against its ground truth (``evaluate``, tolerance 1) with four
@@ -13,28 +12,29 @@ code 2, before any work.
 """
 from __future__ import annotations
 
-import argparse
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
-from vpr_edge.errors import VprError, one_line_errors
+from vpr_edge.errors import VprError
 from vpr_edge.evaluation import Source, Truth, evaluate, report
 from vpr_edge.files import check_writable
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
 from vpr_edge.matchers import get_matcher
 from vpr_edge.resources import sample_folder
+from vpr_edge_bench.runner import parser, run_checked
 
 MODES = ("stream", "stream-prob", "single", "dtw")
 MAX_KB = 150
 FIGURES = {"pr": "corridor_pr.png", "matrix": "corridor_matrix.png", "route": "corridor_route.png"}
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--out", type=Path, default=Path(__file__).resolve().parent.parent / "docs" / "img",
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
+    p.add_argument("--out", type=Path, default=Path(__file__).resolve().parents[2] / "docs" / "img",
                    help="folder the PNGs are written to (default: docs/img of this checkout)")
-    a = p.parse_args()
-    return one_line_errors("doc_figures", lambda: _run(a.out))
+    a = p.parse_args(argv)
+    return run_checked(__name__, lambda: _run(a.out))
 
 
 def _run(out: Path) -> int:
@@ -64,6 +64,3 @@ def _run(out: Path) -> int:
         raise VprError(f"over {MAX_KB} KB: {', '.join(too_big)}")
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -143,7 +143,7 @@ def write_stream(out: str | os.PathLike[str], sources: Sequence[Path], places: n
 def derive_streams(dataset: str | os.PathLike[str], out: str | os.PathLike[str], kinds: Sequence[str] = KINDS,
                    map_places: int | None = None, seed: int = 0, repeat_noise: float = 0.0,
                    drives: int = 0) -> dict[str, int]:
-    """The ``derive_streams`` command: from a frame-aligned pair (``dataset``/ref, ``dataset``/query) write
+    """The ``derive-streams`` experiment: from a frame-aligned pair (``dataset``/ref, ``dataset``/query) write
     ``out``/ref (the map's first ``map_places`` places; default two thirds) and per kind ``out``/KIND with
     ``out``/KIND.csv (``derive_stream``, ``write_stream``; camera-stops with ``CAMERA`` exposures). Inputs are
     checked first (VprError). With ``drives`` the map is also cut into that many drives (``cut_into_drives``,
@@ -174,17 +174,7 @@ def derive_streams(dataset: str | os.PathLike[str], out: str | os.PathLike[str],
     return counts | {"map places": n_mapped}
 
 
-def check_streams_folder(folder: str | os.PathLike[str], kinds: Sequence[str] = KINDS) -> None:
-    """VprError unless ``folder`` is ``derive_streams`` output with its default map: map.npz, and per kind
-    the stream KIND/ and its truth KIND.csv (what the tools that read every stream check before any work)."""
-    folder = Path(folder)
-    need = [folder / "map.npz"] + [folder / k for k in kinds] + [folder / f"{k}.csv" for k in kinds]
-    missing = [str(p) for p in need if not p.exists()]
-    if missing:
-        raise VprError(f"{folder}: not a derive_streams folder with its map ({missing[0]} is missing)")
-
-
-DRIVES_FOLDER = "drives"   # derive_streams --drives: the map cut into drives, under OUT/drives/
+DRIVES_FOLDER = "drives"   # derive-streams --drives: the map cut into drives, under OUT/drives/
 
 
 def cut_into_drives(out: str | os.PathLike[str], n_drives: int, seed: int = 0) -> list[str]:

@@ -1,10 +1,9 @@
-#!/usr/bin/env python3
 """The thesis's experiment grid on one dataset pair: front ends x encodings x matchers, a Markdown table and
 PR curves.
 
-    python tools/derive_streams.py --dataset ../shared/datasets/corridor --out out/grid-streams/corridor \
+    python -m vpr_edge_bench derive-streams --dataset ../shared/datasets/corridor --out out/grid-streams/corridor \
         --kinds speed2 --map-places 111
-    python tools/thesis_grid.py --dataset ../shared/datasets/corridor \
+    python -m vpr_edge_bench thesis-grid --dataset ../shared/datasets/corridor \
         --stream out/grid-streams/corridor/speed2 --out out/grid/corridor
 
 Groups (as the thesis's chapters): (1) handcrafted front ends (HOG, SIFT dense, SIFT on keypoints, LDB,
@@ -15,7 +14,7 @@ taps exported from their weights) with IFV, single vs DTW; (3) the five encoding
 DTW and SVM: encoded vs not, DTW vs SVM.
 
 Query sets: the aligned pair (query i is place i; the thesis's 1-frame tolerance) and, with --stream, a
-derived stream (tools/derive_streams.py with --map-places = all references, so that the stream runs the
+derived stream (derive-streams with --map-places = all references, so that the stream runs the
 whole route and fixed-end DTW's ends are right: its frames and KIND.csv, place indices into the same
 references).
 Every figure comes from ``vpr_edge.evaluation.evaluate_mode``, the function behind ``vpr-edge evaluate``;
@@ -25,32 +24,30 @@ and OUT/<group>.<queries>.pr.png.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
-
-ROOT = Path(__file__).resolve().parent.parent
 
 import numpy as np
 
-from vpr_edge.evaluation import truth as groundtruth
-
-from vpr_edge.evaluation import report
 from vpr_edge.encoders import ENCODERS, FitSettings
+from vpr_edge.evaluation import report
+from vpr_edge.evaluation import truth as groundtruth
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
-from vpr_edge.resources import bundled_model
-
-BUNDLED_MODEL = bundled_model()
 from vpr_edge.features import make_front_end
 from vpr_edge.frames.images import list_images
-from vpr_edge.map.build import extract_all
 from vpr_edge.map import map_from_local
+from vpr_edge.map.build import extract_all
 from vpr_edge.matchers import get_matcher
+from vpr_edge.resources import bundled_model
 from vpr_edge.threads import use_threads
+from vpr_edge_bench.runner import parser
 
+ROOT = Path(__file__).resolve().parents[2]   # the checkout: exported taps go to its out/models by default
+BUNDLED_MODEL = bundled_model()
 HANDCRAFTED = [("hog", "none"), ("sift", "none"), ("sift-kp", "ifv"), ("ldb", "none"), ("pixels", "none")]
 LITE0_TAPS = ("stage3", "stage4", "stage5", "stage6", "stage7", "head")
 THESIS = {"VGG16 block4_conv3 + IFV + DTW, GardensPoint day (thesis)": 0.899,
@@ -146,8 +143,8 @@ class Grid:
             report.plot(out / f"{group}.{q}.pr.png", chosen, f"{group}, {q} ({len(self.queries[q][0])} queries)")
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
     p.add_argument("--dataset", type=Path, required=True, help="folder with ref/ and query/ aligned frame by frame")
     p.add_argument("--stream", type=Path, default=None, help="a derived stream folder (its .csv beside it)")
     p.add_argument("--out", type=Path, required=True)
@@ -156,7 +153,7 @@ def main() -> int:
     p.add_argument("--components", type=int, default=128, help="codebook size (thesis: 128)")
     p.add_argument("--threads", type=int, default=0)
     p.add_argument("--groups", default="handcrafted,taps,encodings")
-    a = p.parse_args()
+    a = p.parse_args(argv)
     use_threads(a.threads)
     a.out.mkdir(parents=True, exist_ok=True)
     a.models.mkdir(parents=True, exist_ok=True)
@@ -195,6 +192,3 @@ def main() -> int:
     print("\n".join(doc))
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,10 +1,11 @@
-#!/usr/bin/env python3
-"""Leave one dataset out, both ways: the stream matcher's settings chosen on one dataset by written rules,
+"""Leave one dataset out, both ways: the stream matcher's settings chosen on one, scored on the other.
+
+Leave one dataset out, both ways: the stream matcher's settings chosen on one dataset by written rules,
 then scored on the other beside its own choice and the package defaults.
 
-    python tools/leave_one_out.py --streams out/nordland-dev out/corridor [--tolerance 2]
+    python -m vpr_edge_bench leave-one-out --streams out/nordland-dev out/corridor [--tolerance 2]
 
-Each folder is ``tools/derive_streams.py`` output with its default map.npz. On each dataset the rules of
+Each folder is ``derive-streams`` output with its default map.npz. On each dataset the rules of
 ``RULES`` choose one parameter at a time, in that order, from ``evaluate`` (the function behind ``vpr-edge
 evaluate``: the map's front end, the motion cue) on all its derived streams, each with the parameters before
 it at the values chosen and the rest at the defaults (``still_memory`` is not chosen: 10 to 100 frames move
@@ -18,18 +19,19 @@ exit code 2, before any work.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.errors import VprError, one_line_errors
-from vpr_edge.evaluation import Source, Truth, evaluate
+from vpr_edge.errors import VprError
 from vpr_edge.evaluation.scoring import ModeReport
-from vpr_edge.evaluation.streams import KINDS, check_streams_folder
 from vpr_edge.matchers import Matcher, get_matcher
 from vpr_edge.matchers.params import STREAM
+from vpr_edge_bench.folder import StreamsFolder, streams_folders
+from vpr_edge_bench.runner import parser, run_checked
+from vpr_edge_bench.streams import KINDS
 
 Table = dict[float, dict[str, ModeReport]]   # a parameter's value -> stream kind -> the stream matcher's report
 
@@ -90,14 +92,13 @@ def _stream(settings: dict[str, float]) -> Matcher:
     return get_matcher("stream").with_params(**{k: type(STREAM[k].default)(v) for k, v in settings.items()})
 
 
-def _reports(folder: Path, modes: dict[str, Matcher], tolerance: int) -> dict[str, dict[str, ModeReport]]:
+def _reports(folder: StreamsFolder, modes: dict[str, Matcher], tolerance: int) -> dict[str, dict[str, ModeReport]]:
     """Mode name -> stream kind -> report: ``evaluate`` on every derived stream of ``folder``."""
-    per_kind = {kind: evaluate(Source(map=folder / "map.npz", queries=folder / kind),
-                               Truth(gt=folder / f"{kind}.csv"), modes, tolerance).reports for kind in KINDS}
+    per_kind = {kind: ev.reports for kind, ev in folder.evaluate(modes, tolerance)}
     return {name: {kind: per_kind[kind][name] for kind in KINDS} for name in modes}
 
 
-def choose(folder: Path, tolerance: int) -> dict[str, float]:
+def choose(folder: StreamsFolder, tolerance: int) -> dict[str, float]:
     """The settings ``RULES`` choose on the dataset of ``folder``, one parameter after another."""
     chosen: dict[str, float] = {}
     for rule in RULES:
@@ -107,25 +108,22 @@ def choose(folder: Path, tolerance: int) -> dict[str, float]:
     return chosen
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
     p.add_argument("--streams", type=Path, nargs=2, required=True,
-                   help="two derive_streams folders (the dataset's name is the folder's), each with its map.npz")
+                   help="two derived-streams folders (the dataset's name is the folder's), each with its map.npz")
     p.add_argument("--tolerance", type=int, default=2)
-    a = p.parse_args()
-    return one_line_errors("leave_one_out", lambda: _run(a))
+    a = p.parse_args(argv)
+    return run_checked(__name__, lambda: _run(a))
 
 
 def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, inputs checked first."""
     if a.tolerance < 0:
         raise VprError(f"--tolerance must be >= 0, got {a.tolerance}")
-    names = [f.name for f in a.streams]
-    if names[0] == names[1]:
-        raise VprError(f"--streams: two datasets with one name {names[0]!r}")
-    for folder in a.streams:
-        check_streams_folder(folder)
-    chosen = {f.name: choose(f, a.tolerance) for f in a.streams}
+    folders = streams_folders(a.streams, distinct=True)
+    names = [f.name for f in folders]
+    chosen = {f.name: choose(f, a.tolerance) for f in folders}
     defaults = {r.param: float(STREAM[r.param].default) for r in RULES}
     print(f"stream matcher, tolerance {a.tolerance}; each parameter chosen in this order, the ones above at the "
           "values chosen, the rest at the defaults\n")
@@ -138,7 +136,7 @@ def _run(a: argparse.Namespace) -> int:
           "defaults; per stream: answers given right / mapped frames answered right\n")
     print(f"| scored on | settings | frames | {' | '.join(KINDS)} | detour unmapped lost (first) | mean R@1 |")
     print(f"|---|---|---|{'---|' * len(KINDS)}---|---|")
-    for folder, other in zip(a.streams, reversed(a.streams)):
+    for folder, other in zip(folders, reversed(folders)):
         settings = {f"chosen on {other.name} (held out)": chosen[other.name],
                     f"chosen on {folder.name} (own)": chosen[folder.name], "defaults": defaults}
         got = _reports(folder, {k: _stream(v) for k, v in settings.items()}, a.tolerance)
@@ -152,6 +150,3 @@ def _run(a: argparse.Namespace) -> int:
                 print(f"| {folder.name} | {name} | {label} | {cells} | {tail} |", flush=True)
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,10 +1,9 @@
-#!/usr/bin/env python3
 """Where a map shows one view: the runs of references its drive saw alike, checked against the images.
 
-    python tools/one_view_check.py --streams out/nordland-dev out/corridor [--tolerance 2]
+    python -m vpr_edge_bench one-view-check --streams out/nordland-dev out/corridor [--tolerance 2]
 
-For each folder (``tools/derive_streams.py`` output: map.npz and the reference images it was built from,
-ref/), the references the map's own motion cue reads as the view of the one before
+For each folder (``derive-streams`` output: map.npz and the reference images it was built from, ref/), the
+references the map's own motion cue reads as the view of the one before
 (``evaluation.run.map_same_view``, what ``evaluate`` reads for its "other frames" shares) are grouped into runs
 (each with the reference it repeats) and checked on the images themselves, independently of the front end:
 per run its length, the images' mean brightness (0-255 grey; a dark run is a tunnel or a covered lens, not a
@@ -17,20 +16,20 @@ Bad input is one line on stderr and exit code 2, before any work.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from vpr_edge.errors import VprError, one_line_errors
-from vpr_edge.evaluation import Source, Truth, evaluate
 from vpr_edge.evaluation.metrics import runs
 from vpr_edge.evaluation.run import map_same_view
-from vpr_edge.evaluation.streams import KINDS
 from vpr_edge.evaluation.truth import one_view
 from vpr_edge.frames.images import load_image
 from vpr_edge.map import load_map
 from vpr_edge.matchers import get_matcher
+from vpr_edge_bench.folder import streams_folders
+from vpr_edge_bench.runner import parser, run_checked
 
 
 def runs_of(same: np.ndarray) -> list[tuple[int, int]]:
@@ -44,23 +43,19 @@ def grey(path: Path) -> np.ndarray:
     return cv2.cvtColor(load_image(path), cv2.COLOR_BGR2GRAY).astype(np.float32)
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--streams", type=Path, nargs="+", required=True, help="derive_streams folders with map.npz")
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
+    p.add_argument("--streams", type=Path, nargs="+", required=True, help="derived-streams folders with map.npz")
     p.add_argument("--tolerance", type=int, default=2)
-    a = p.parse_args()
-    return one_line_errors("one_view_check", lambda: _run(a))
+    a = p.parse_args(argv)
+    return run_checked(__name__, lambda: _run(a))
 
 
 def _run(a: argparse.Namespace) -> int:
-    for folder in a.streams:
-        for need in [folder / "map.npz", folder / "ref", *(folder / k for k in KINDS)]:
-            if not need.exists():
-                raise VprError(f"{need}: missing (make it with tools/derive_streams.py and build-map)")
-    for folder in a.streams:
-        pm = load_map(folder / "map.npz")
+    for folder in streams_folders(a.streams, ref=True):
+        pm = load_map(folder.map)
         same = map_same_view(pm.stored.in_order())
-        images = np.stack([grey(folder / "ref" / name) for name in pm.names])
+        images = np.stack([grey(folder.ref / name) for name in pm.names])
         step = np.abs(images[1:] - images[:-1]).mean(axis=(1, 2))
         typical = float(np.median(step))
         print(f"**{folder.name}**: {len(pm.names)} references, {int(same.sum())} show the view of the one before "
@@ -79,9 +74,7 @@ def _run(a: argparse.Namespace) -> int:
         print(f"`stream` at ±{a.tolerance}: wrong answers given, and those whose truth lies in a run:\n")
         print("| stream | answers given | wrong | wrong, truth in a run |")
         print("|---|---|---|---|")
-        for kind in KINDS:
-            ev = evaluate(Source(map=folder / "map.npz", queries=folder / kind), Truth(gt=folder / f"{kind}.csv"),
-                          {"stream": get_matcher("stream")}, a.tolerance)
+        for kind, ev in folder.evaluate({"stream": get_matcher("stream")}, a.tolerance):
             r = ev.reports["stream"]
             wrong = ~r.lost & ~r.correct
             at = one_view(ev.truth, same)
@@ -89,6 +82,3 @@ def _run(a: argparse.Namespace) -> int:
         print()
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

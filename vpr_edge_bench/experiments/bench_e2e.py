@@ -1,10 +1,11 @@
-#!/usr/bin/env python3
-"""End to end, per configuration: build-map time and bytes a place, then on every derived stream the
+"""Per configuration, build-map and localize timed as whole commands, with accuracy, beside the yardstick.
+
+End to end, per configuration: build-map time and bytes a place, then on every derived stream the
 `localize --threads 1` wall time per frame and the `evaluate --tolerance T` accuracy, beside the yardstick
 (one fp32 inference of the bundled 320x240 model on one thread, measured in the same run).
 
-    python tools/derive_streams.py --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
-    python tools/bench_e2e.py --streams out/nordland-dev --config default= \\
+    python -m vpr_edge_bench derive-streams --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
+    python -m vpr_edge_bench bench-e2e --streams out/nordland-dev --config default= \\
         --config "thesis=--model vpr_edge/models/efficientnet_lite0_stage5_320x240.onnx --components 128 --pca-dim 0"
 
 A configuration is NAME=BUILD-MAP OPTIONS (empty: the defaults); ``NAME=...|LOCALIZE OPTIONS`` adds options
@@ -26,52 +27,63 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-
-from vpr_edge.evaluation.yardstick import yardstick_ms
-from vpr_edge.evaluation.streams import KINDS
+from vpr_edge.errors import VprError
+from vpr_edge_bench.folder import StreamsFolder
+from vpr_edge_bench.runner import parser, run_checked
+from vpr_edge_bench.streams import KINDS
+from vpr_edge_bench.yardstick import yardstick_ms
 
 
 def timed(cmd: list[str], env: dict) -> float:
+    """Wall seconds of the command ``cmd``; VprError with its last line of stderr if it fails."""
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t0
     if proc.returncode:
-        sys.exit(f"bench_e2e: {' '.join(cmd)} failed:\n{proc.stderr}")
+        last = (proc.stderr.strip().splitlines() or ["no message"])[-1]
+        raise VprError(f"{' '.join(cmd)} failed: {last}")
     return wall
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--streams", type=Path, required=True, help="derive_streams output: ref/, KIND/, KIND.csv")
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
+    p.add_argument("--streams", type=Path, required=True, help="a derived-streams folder: ref/, KIND/, KIND.csv")
     p.add_argument("--config", action="append", required=True, help="NAME=BUILD-MAP OPTIONS[|RUN OPTIONS]")
     p.add_argument("--kinds", default=",".join(KINDS))
     p.add_argument("--tolerance", default="2")
     p.add_argument("--threads", default="2", help="build-map's threads")
     p.add_argument("--out", type=Path, default=None)
-    a = p.parse_args()
-    out = a.out or a.streams / "bench"
+    a = p.parse_args(argv)
+    return run_checked(__name__, lambda: _run(a))
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, the folder checked first."""
+    folder = StreamsFolder(a.streams, [k for k in a.kinds.split(",") if k]).check(map=False, ref=True)
+    kinds = folder.kinds
+    out = a.out or folder.path / "bench"
     out.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, OMP_NUM_THREADS="1")
     exe = [sys.executable, "-m", "vpr_edge"]
-    kinds = a.kinds.split(",")
     yard = [yardstick_ms()]
     floor_s = min(timed([sys.executable, "-c", "import numpy, onnxruntime, cv2"], env) for _ in range(5))
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         one = Path(tmp) / "one"
         one.mkdir()
-        first = sorted((a.streams / kinds[0]).iterdir())[0]
+        first = sorted(folder.frames(kinds[0]).iterdir())[0]
         (one / first.name).write_bytes(first.read_bytes())
         for config in a.config:
             name, _, rest = config.partition("=")
             build_opts, _, run_opts = rest.partition("|")
             map_path = out / f"{name}.npz"
             map_path.unlink(missing_ok=True)
-            build_s = timed([*exe, "build-map", str(a.streams / "ref"), "-o", str(map_path), "--threads", a.threads,
+            build_s = timed([*exe, "build-map", str(folder.ref), "-o", str(map_path), "--threads", a.threads,
                              *shlex.split(build_opts)], env)
             info = json.loads(subprocess.run([*exe, "info", str(map_path)], capture_output=True, text=True,
                                              env=env).stdout)
@@ -81,11 +93,11 @@ def main() -> int:
             row = {"config": name, "build_options": build_opts, "run_options": run_opts, "build_s": build_s,
                    "bytes_per_place": info["bytes_per_place"], "startup_s": startup, "streams": {}}
             for kind in kinds:
-                frames = len(list((a.streams / kind).iterdir()))
-                wall = timed([*loc, str(Path(tmp) / "o.csv"), "--stream", str(a.streams / kind)], env)
+                frames = len(list(folder.frames(kind).iterdir()))
+                wall = timed([*loc, str(Path(tmp) / "o.csv"), "--stream", str(folder.frames(kind))], env)
                 js = Path(tmp) / "e.json"
-                timed([*exe, "evaluate", "--map", str(map_path), "--queries", str(a.streams / kind), "--gt",
-                       str(a.streams / f"{kind}.csv"), "--modes", "stream", "--tolerance", a.tolerance,
+                timed([*exe, "evaluate", "--map", str(map_path), "--queries", str(folder.frames(kind)), "--gt",
+                       str(folder.truth(kind)), "--modes", "stream", "--tolerance", a.tolerance,
                        "--threads", "1", *run, "--json", str(js)], env)
                 doc = json.loads(js.read_text())
                 r = doc["modes"]["stream"]
@@ -125,6 +137,3 @@ def main() -> int:
     print(text)
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,7 +1,6 @@
-#!/usr/bin/env python3
 """Does the coarse whole-route search change what the stream matcher answers? Exact against coarse on real maps.
 
-    python tools/coarse_check.py --map out/nordland-dev/map.npz --streams out/nordland-dev --keep 16 --calib 64
+    python -m vpr_edge_bench coarse-check --map out/nordland-dev/map.npz --streams out/nordland-dev --keep 16 --calib 64
 
 Each derived stream (STREAMS/KIND with STREAMS/KIND.csv) is encoded once through the map's front end
 (``map.MapQuery``, the chain ``Localizer`` runs) and matched by the ``stream`` matcher twice (with each frame's
@@ -16,32 +15,40 @@ the share of whole-route frames, per stream.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-
 from vpr_edge.evaluation import truth as groundtruth
-from vpr_edge.index.coarse import CoarseSearch
 from vpr_edge.evaluation.scoring import score_result
 from vpr_edge.frames.images import list_images, load_image
+from vpr_edge.index.coarse import CoarseSearch
 from vpr_edge.map import MapQuery
 from vpr_edge.matchers import get_matcher, run_online, run_rows
 from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.threads import use_threads
-from vpr_edge.evaluation.streams import KINDS
+from vpr_edge_bench.folder import StreamsFolder
+from vpr_edge_bench.runner import parser, run_checked
+from vpr_edge_bench.streams import KINDS
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
     p.add_argument("--map", type=Path, required=True)
-    p.add_argument("--streams", type=Path, required=True, help="derive_streams output: KIND/ and KIND.csv")
+    p.add_argument("--streams", type=Path, required=True, help="a derived-streams folder: KIND/ and KIND.csv")
     p.add_argument("--kinds", default=",".join(KINDS))
     p.add_argument("--keep", type=int, default=1024, help="exact values for the best KEEP by sign agreement")
     p.add_argument("--calib", type=int, default=512, help="exact values of CALIB fixed random references")
     p.add_argument("--tolerance", type=int, default=1)
     p.add_argument("--threads", type=int, default=0)
-    a = p.parse_args()
+    a = p.parse_args(argv)
+    return run_checked(__name__, lambda: _run(a))
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, the streams checked first."""
+    folder = StreamsFolder(a.streams, [k for k in a.kinds.split(",") if k]).check(map=False)
     query = MapQuery(a.map, ort_threads=use_threads(a.threads))   # the map and its front end, as localize opens them
     place_map = query.map
     matcher = get_matcher("stream").on_route(query.references(), RouteGraph(*query.joins()))
@@ -51,9 +58,9 @@ def main() -> int:
     print("| stream | exact R@1 / AUC | coarse R@1 / AUC | exact lost unmapped / mapped | coarse lost unmapped / "
           "mapped | same answer | whole-route frames |")
     print("|---|---|---|---|---|---|---|")
-    for kind in a.kinds.split(","):
-        files = list_images(a.streams / kind)
-        truth = groundtruth.load_csv(a.streams / f"{kind}.csv")
+    for kind in folder.kinds:
+        files = list_images(folder.frames(kind))
+        truth = groundtruth.load_csv(folder.truth(kind))
         enc = np.concatenate([query.encode([load_image(f) for f in files[i:i + 16]]) for i in range(0, len(files), 16)])
         cue = matcher.cue(enc)   # each frame's motion cue, as localize computes it
         exact = place_map.similarity(enc)
@@ -75,6 +82,3 @@ def main() -> int:
               f"{float(np.mean(base.refs == approx.refs)):.3f} | {whole[0] / len(enc):.2f} |", flush=True)
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,11 +1,12 @@
-#!/usr/bin/env python3
-"""What the stream matcher's lost threshold trades: off-map frames reported lost against mapped frames
+"""What the stream matcher's lost threshold trades: off-map frames lost against mapped frames right.
+
+What the stream matcher's lost threshold trades: off-map frames reported lost against mapped frames
 answered right, on every derived stream of each dataset.
 
-    python tools/lost_tradeoff.py --streams out/corridor out/nordland-dev [--locks 5,6,6.5,7,8] [--tolerance 2]
+    python -m vpr_edge_bench lost-tradeoff --streams out/corridor out/nordland-dev [--locks 5,6,6.5,7,8] [--tolerance 2]
         [--param decay=0.85 ...]
 
-For each folder (``tools/derive_streams.py`` output with its map.npz) every stream is evaluated once
+For each folder (``derive-streams`` output with its map.npz) every stream is evaluated once
 (``evaluate``, the function behind ``vpr-edge evaluate``: the map's front end, the motion cue) with the
 ``stream`` matcher at each ``lock`` (``--param lock=L``; or each value of the parameter ``--vary`` names, e.g.
 ``--vary evidence --values 0,1,1.5``; everything else default, or as ``--param`` sets it for every row) and prints, per lock: the detour's unmapped frames reported lost, frames from leaving the map
@@ -22,16 +23,17 @@ exit code 2, before any work.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-
-from vpr_edge.errors import VprError, one_line_errors
-from vpr_edge.evaluation import Source, Truth, evaluate
-from vpr_edge.evaluation.streams import KINDS, check_streams_folder
+from vpr_edge.errors import VprError
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.params import STREAM
+from vpr_edge_bench.folder import streams_folders
+from vpr_edge_bench.runner import parser, run_checked
+from vpr_edge_bench.streams import KINDS
 
 
 def _frames(v: tuple[float, ...]) -> str:
@@ -44,9 +46,9 @@ def _or_inf(v: float) -> float:
     return float("inf") if np.isnan(v) else v
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--streams", type=Path, nargs="+", required=True, help="derive_streams folders with map.npz")
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
+    p.add_argument("--streams", type=Path, nargs="+", required=True, help="derived-streams folders with map.npz")
     p.add_argument("--locks", "--values", dest="locks", default="5,6,6.5,7,8",
                    help="values of the varied parameter to compare (default: lost thresholds around lock's 6)")
     p.add_argument("--vary", default="lock", help="the stream parameter the rows vary (default lock; e.g. evidence)")
@@ -56,8 +58,8 @@ def main() -> int:
     p.add_argument("--against", type=float, default=None,
                    help="the value the drops are measured from (default: the parameter's default; e.g. 0 for a "
                         "rule read against the parameter switched off)")
-    a = p.parse_args()
-    return one_line_errors("lost_tradeoff", lambda: _run(a))
+    a = p.parse_args(argv)
+    return run_checked(__name__, lambda: _run(a))
 
 
 def _locks(text: str, vary: str = "lock") -> list[float]:
@@ -90,8 +92,7 @@ def _run(a: argparse.Namespace) -> int:
             get_matcher("stream").parse_params([f"{a.vary}={kind(x)}"])
     except ValueError as e:
         raise VprError(str(e)) from None
-    for folder in a.streams:
-        check_streams_folder(folder)
+    folders = streams_folders(a.streams)
     locks = sorted(set(locks) | {default})
     modes = {f"{a.vary}={x:g}": get_matcher("stream").with_params(**fixed | {a.vary: kind(x)}) for x in locks}
     print(f"stream matcher{''.join(f' {k}={v}' for k, v in fixed.items())}, tolerance {a.tolerance}; "
@@ -100,9 +101,8 @@ def _run(a: argparse.Namespace) -> int:
           f"| min mapped right | mapped right, largest drop from {default:g} | other frames: min answered right | "
           f"other frames: mapped right, largest drop from {default:g} | mean R@1 / AUC |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    for folder in a.streams:
-        reports = {kind: evaluate(Source(map=folder / "map.npz", queries=folder / kind),
-                                  Truth(gt=folder / f"{kind}.csv"), modes, a.tolerance).reports for kind in KINDS}
+    for folder in folders:
+        reports = {kind: ev.reports for kind, ev in folder.evaluate(modes, a.tolerance)}
         for name in modes:
             per = {kind: r[name] for kind, r in reports.items()}
             detour = per["detour"]
@@ -123,6 +123,3 @@ def _run(a: argparse.Namespace) -> int:
                   f"{np.mean([per[k].auc for k in KINDS]):.3f} |", flush=True)
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,28 +1,26 @@
-#!/usr/bin/env python3
 """Re-measure the figures the README quotes, on the current code, from the shared datasets, and write them.
 
-    python tools/results.py --datasets ../shared/datasets --out out/results --quick [--write-docs]
+    python -m vpr_edge_bench results --datasets ../shared/datasets --out out/results --quick [--write-docs]
 
 For each dataset (DATASETS/corridor, DATASETS/nordland-dev: ref/ and query/ aligned frame by frame) it derives
-the streams a vehicle produces (``evaluation.streams.derive_streams``, seed 0), builds the default map of the
+the streams a vehicle produces (``streams.derive_streams``, seed 0), builds the default map of the
 first two thirds of its places (``map.make``: what ``vpr-edge build-map`` makes), and runs ``evaluate`` (the
 library function behind ``vpr-edge evaluate``) on every stream with the ``stream`` matcher and online SeqSLAM
 at tolerance 2 and 1. Then the speed yardstick: one fp32 inference of the 320x240 model on one thread
-(``evaluation.yardstick``) beside the default chain's time per frame once started (``Localizer.run``, one
+(``yardstick``) beside the default chain's time per frame once started (``Localizer.run``, one
 thread, over each dataset's aligned stream), both in this run: the ratio is the figure.
 
-``--quick`` is all of that (minutes on 2 cores). The full run (no ``--quick``) then runs every tool of
-``SECTIONS`` on those streams and maps, each the tool that makes one of docs/results.md's tables, and keeps
-what each printed (OUT/sections/NAME.md, headed by the command, the commit and the machine; ``--sections``
-runs some of them only). OUT gets results.json (every figure, the commit and the machine) and results.md (the
-tables). ``--write-docs`` also copies results.json to docs/generated/results.json and rewrites from it the
-README's results table and docs/results.md's answered-right table (a test checks that both hold exactly the
-tables that file gives), and puts each section run between its markers in docs/results.md
-(``<!-- generated: NAME -->`` ... ``<!-- end of generated: NAME -->``).
+``--quick`` is all of that (minutes on 2 cores). The full run (no ``--quick``) then runs every experiment of
+``SECTIONS`` on those streams and maps, each the one that makes a generated table of docs/, and keeps what each
+printed (OUT/sections/NAME.md, headed by the command, the commit and the machine; ``--sections`` runs some of
+them only). OUT gets results.json (every figure, the commit and the machine) and results.md (the tables).
+``--write-docs`` also copies results.json to docs/generated/results.json and rewrites from it the README's
+results table and docs/results.md's answered-right table (``doc_tables``; a test checks that both hold exactly
+the tables that file gives), and puts each section run between its markers in the document of docs/ that holds
+them (``<!-- generated: NAME -->`` ... ``<!-- end of generated: NAME -->``).
 """
 from __future__ import annotations
 
-import argparse
 import datetime
 import json
 import os
@@ -31,20 +29,22 @@ import shlex
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.errors import VprError, one_line_errors
-from vpr_edge.evaluation import Source, Truth, evaluate
-from vpr_edge.evaluation.report import answers_table, readme_table
-from vpr_edge.evaluation.streams import KINDS, derive_streams
-from vpr_edge.evaluation.yardstick import chain_ms, yardstick_ms
+from vpr_edge.errors import VprError
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
 from vpr_edge.matchers import get_matcher
+from vpr_edge_bench.doc_tables import TABLE_END, TABLE_START, answers_table, readme_table, replace_between
+from vpr_edge_bench.folder import StreamsFolder
+from vpr_edge_bench.runner import PROG, parser, run_checked
+from vpr_edge_bench.streams import KINDS, derive_streams
+from vpr_edge_bench.yardstick import chain_ms, yardstick_ms
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]   # the checkout: README.md, docs/, vpr_edge_bench/
 DATASETS = ("corridor", "nordland-dev")
 MODES = ("stream", "seqslam-online")
 TOLERANCES = (2, 1)
@@ -52,15 +52,15 @@ TOLERANCES = (2, 1)
 
 @dataclass(frozen=True)
 class Section:
-    """A table of docs/results.md and the tool that makes it: ``tools/TOOL ARGS``, where ``{corridor}`` and
-    ``{nordland-dev}`` stand for the run's derived-stream folders (each with its default map.npz) and
-    ``{out}`` for OUT."""
+    """A generated table of docs/ and the experiment that makes it: ``python -m vpr_edge_bench EXPERIMENT ARGS``,
+    where ``{corridor}`` and ``{nordland-dev}`` stand for the run's derived-stream folders (each with its
+    default map.npz) and ``{out}`` for OUT."""
 
     name: str
-    tool: str
+    experiment: str
     args: tuple[str, ...]
     setup: tuple[tuple[str, ...], ...] = ()   # ``python ARGS`` run first (e.g. exporting a model), same places
-    fenced: bool = False                      # the tool prints plain text, not Markdown: kept as a code block
+    fenced: bool = False                      # it prints plain text, not Markdown: kept as a code block
 
 
 def _gem(tap: str) -> tuple[str, ...]:
@@ -73,66 +73,66 @@ _CODEBOOKS = "0x128,31x32,62x16,24x41,16x62,12x82,20x49"   # the compact codeboo
 
 
 def _size(dataset: str, tolerance: int, configs: str, suffix: str = "") -> "Section":
-    """size_sweep on one dataset's every stream: ``configs`` (PCA x components) over three codebook seeds."""
+    """size-sweep on one dataset's every stream: ``configs`` (PCA x components) over three codebook seeds."""
     name = f"size-{dataset}{suffix}"
-    return Section(name, "size_sweep.py", ("--streams", f"{{{dataset}}}", "--kinds", "all", "--tolerance",
-                                           str(tolerance), "--storages", "int8", "--seeds", "0,1,2", "--modes",
-                                           "stream", "--configs", configs, "--out", f"{{out}}/size/{dataset}{suffix}"))
+    return Section(name, "size-sweep", ("--streams", f"{{{dataset}}}", "--kinds", "all", "--tolerance",
+                                        str(tolerance), "--storages", "int8", "--seeds", "0,1,2", "--modes",
+                                        "stream", "--configs", configs, "--out", f"{{out}}/size/{dataset}{suffix}"))
 
 
 def _e2e(dataset: str) -> "Section":
-    """bench_e2e on one dataset: the default and its int8 form, whole commands beside the yardstick."""
-    return Section(f"e2e-{dataset}", "bench_e2e.py", ("--streams", f"{{{dataset}}}", "--config", "default=",
-                                                      "--config", "default-int8=|--precision int8", "--out",
-                                                      f"{{out}}/e2e-{dataset}"))
+    """bench-e2e on one dataset: the default and its int8 form, whole commands beside the yardstick."""
+    return Section(f"e2e-{dataset}", "bench-e2e", ("--streams", f"{{{dataset}}}", "--config", "default=",
+                                                   "--config", "default-int8=|--precision int8", "--out",
+                                                   f"{{out}}/e2e-{dataset}"))
 
 
 _INDEX_BENCH = ("--refs", "100000", "--frames", "5000", "--dim", "512", "--storage", "int8", "--walk", "0.9",
                 "--noise", "1.0", "--cue", "--checkpoints", "5000")
 
 SECTIONS = (
-    Section("lost-line", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "evidence",
-                                              "--values=-99,1,1.25,1.5,1.75,2")),
-    Section("lost-lock", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "lock",
-                                              "--values=5,6,6.5,7,7.5,8")),
-    Section("lost-unique", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "unique",
-                                                "--values=0,0.01,0.02,0.03,0.04,0.05,0.1,0.15,0.2,0.25,0.3,0.4,0.5",
-                                                "--against", "0")),
-    Section("lost-still", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "still",
-                                               "--values=0.3,0.4,0.5,0.6,0.7")),
-    Section("lost-still-memory", "lost_tradeoff.py", ("--streams", "{nordland-dev}", "{corridor}", "--vary",
-                                                      "still_memory", "--values=10,30,100")),
-    Section("calibration", "calibration_check.py", ("--streams", "{corridor}", "{nordland-dev}", "--modes",
-                                                    "stream,single", "--fits", "logistic,isotonic")),
-    Section("one-view", "one_view_check.py", ("--streams", "{nordland-dev}", "{corridor}")),
-    Section("leave-one-out", "leave_one_out.py", ("--streams", "{nordland-dev}", "{corridor}")),
-    Section("lost-reasons", "lost_reasons.py", ("--streams", "{nordland-dev}", "{corridor}")),
-    Section("evaluating-corridor", "eval_streams.py", ("--streams", "{corridor}")),
-    Section("evaluating-nordland-dev", "eval_streams.py", ("--streams", "{nordland-dev}")),
+    Section("lost-line", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "evidence",
+                                           "--values=-99,1,1.25,1.5,1.75,2")),
+    Section("lost-lock", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "lock",
+                                           "--values=5,6,6.5,7,7.5,8")),
+    Section("lost-unique", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "unique",
+                                             "--values=0,0.01,0.02,0.03,0.04,0.05,0.1,0.15,0.2,0.25,0.3,0.4,0.5",
+                                             "--against", "0")),
+    Section("lost-still", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "still",
+                                            "--values=0.3,0.4,0.5,0.6,0.7")),
+    Section("lost-still-memory", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary",
+                                                   "still_memory", "--values=10,30,100")),
+    Section("calibration", "calibration-check", ("--streams", "{corridor}", "{nordland-dev}", "--modes",
+                                                 "stream,single", "--fits", "logistic,isotonic")),
+    Section("one-view", "one-view-check", ("--streams", "{nordland-dev}", "{corridor}")),
+    Section("leave-one-out", "leave-one-out", ("--streams", "{nordland-dev}", "{corridor}")),
+    Section("lost-reasons", "lost-reasons", ("--streams", "{nordland-dev}", "{corridor}")),
+    Section("evaluating-corridor", "eval-streams", ("--streams", "{corridor}")),
+    Section("evaluating-nordland-dev", "eval-streams", ("--streams", "{nordland-dev}")),
     _size("nordland-dev", 2, _CODEBOOKS),
     _size("corridor", 2, _CODEBOOKS),
     _size("corridor", 1, "0x128,24x41", "-1"),
     _e2e("nordland-dev"),
     _e2e("corridor"),
-    Section("front-ends", "compare_front_ends.py", ("--streams", "{nordland-dev}", "{corridor}", "--front", "default",
-                                                    "--front", "gem={out}/models/lite0_stage5_gem_160x120.onnx",
-                                                    "--front", "head-gem={out}/models/lite0_head_gem_160x120.onnx"),
+    Section("front-ends", "compare-front-ends", ("--streams", "{nordland-dev}", "{corridor}", "--front", "default",
+                                                 "--front", "gem={out}/models/lite0_stage5_gem_160x120.onnx",
+                                                 "--front", "head-gem={out}/models/lite0_head_gem_160x120.onnx"),
             setup=(_gem("stage5"), _gem("head"))),
-    Section("drives", "compare_drives.py", ("--streams", "{nordland-dev}", "{corridor}", "--drives", "4")),
-    Section("drives-append", "compare_drives.py", ("--streams", "{nordland-dev}", "{corridor}", "--kinds",
-                                                   "aligned,speed2,speed3,variable", "--append-seeds", "4")),
-    Section("fleet", "bench_fleet.py", ("--refs", "{nordland-dev}/ref")),
-    Section("fleet-codebook-given", "bench_fleet.py", ("--refs", "{nordland-dev}/ref", "--codebook-first")),
-    Section("scale", "bench_scale.py", ("--work", "{out}/scale")),
-    Section("scale-100k-frames", "bench_scale.py", ("--work", "{out}/scale", "--skip-build", "--frames", "100000")),
-    Section("index-100k-whole", "bench_matcher.py", _INDEX_BENCH, fenced=True),
-    Section("index-100k", "bench_matcher.py", (*_INDEX_BENCH, "--index"), fenced=True),
+    Section("drives", "compare-drives", ("--streams", "{nordland-dev}", "{corridor}", "--drives", "4")),
+    Section("drives-append", "compare-drives", ("--streams", "{nordland-dev}", "{corridor}", "--kinds",
+                                                "aligned,speed2,speed3,variable", "--append-seeds", "4")),
+    Section("fleet", "bench-fleet", ("--refs", "{nordland-dev}/ref")),
+    Section("fleet-codebook-given", "bench-fleet", ("--refs", "{nordland-dev}/ref", "--codebook-first")),
+    Section("scale", "bench-scale", ("--work", "{out}/scale")),
+    Section("scale-100k-frames", "bench-scale", ("--work", "{out}/scale", "--skip-build", "--frames", "100000")),
+    Section("index-100k-whole", "bench-matcher", _INDEX_BENCH, fenced=True),
+    Section("index-100k", "bench-matcher", (*_INDEX_BENCH, "--index"), fenced=True),
 )
 
 
 def run_section(section: Section, out: Path, doc: dict) -> str:
-    """Run one section's tool (one BLAS / OpenMP thread, as the timings assume): its output, headed by the
-    command, the commit and the machine. Raises VprError naming the tool if it fails."""
+    """Run one section's experiment in a process of its own (one BLAS / OpenMP thread, as the timings assume):
+    its output, headed by the command, the commit and the machine. Raises VprError naming it if it fails."""
     places = {"{corridor}": str(out / "corridor"), "{nordland-dev}": str(out / "nordland-dev"), "{out}": str(out)}
     def placed(items: tuple[str, ...]) -> list[str]:
         out_args = list(items)
@@ -141,8 +141,9 @@ def run_section(section: Section, out: Path, doc: dict) -> str:
         return out_args
 
     args = placed(section.args)
-    shown = " ".join(["python", f"tools/{section.tool}", *[shlex.quote(places_back(a, out)) for a in args]])
-    env = os.environ | {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    shown = " ".join([PROG, section.experiment, *[shlex.quote(places_back(a, out)) for a in args]])
+    env = os.environ | {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+                        "PYTHONPATH": os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
     t0 = time.perf_counter()
     def python(argv: list[str], what: str) -> str:
         done = subprocess.run([sys.executable, *argv], capture_output=True, text=True, env=env)
@@ -157,7 +158,8 @@ def run_section(section: Section, out: Path, doc: dict) -> str:
             if a.startswith(str(out)) and a.endswith(".onnx"):
                 Path(a).parent.mkdir(parents=True, exist_ok=True)
         python(first, f"section {section.name}: python {' '.join(step[:2])}")
-    stdout = python([str(ROOT / "tools" / section.tool), *args], f"tools/{section.tool} (section {section.name})")
+    stdout = python(["-m", "vpr_edge_bench", section.experiment, *args],
+                    f"{PROG} {section.experiment} (section {section.name})")
     took = time.perf_counter() - t0
     doc.setdefault("sections", {})[section.name] = {"command": shown, "seconds": round(took, 1)}
     for step in reversed(section.setup):
@@ -194,7 +196,7 @@ def commit() -> dict:
         except (OSError, subprocess.CalledProcessError):
             return None
     return {"commit": git("rev-parse", "--short", "HEAD"),
-            "dirty": bool(git("status", "--porcelain", "--", "vpr_edge", "tools"))}
+            "dirty": bool(git("status", "--porcelain", "--", "vpr_edge", "vpr_edge_bench"))}
 
 
 def figures(report) -> dict:
@@ -208,25 +210,22 @@ def figures(report) -> dict:
 
 def measure(datasets: Path, out: Path) -> dict:
     """Every figure of the quick run (module docstring) as JSON-ready data."""
-    doc: dict = {"tool": "tools/results.py --quick", "date": datetime.date.today().isoformat(), **commit(),
+    doc: dict = {"tool": f"{PROG} results --quick", "date": datetime.date.today().isoformat(), **commit(),
                  "machine": machine(), "datasets": {}, "speed": {}}
     matchers = {m: get_matcher(m) for m in MODES}
     yard = [yardstick_ms()]
     for name in DATASETS:
-        folder = out / name
-        counts = derive_streams(datasets / name, folder)
-        map_path = folder / "map.npz"
-        write_map(plan_map(folder / "ref", map_path, BuildOptions(threads=0)))
-        rows: dict = {}
-        for kind in KINDS:
-            for tol in TOLERANCES:
-                ev = evaluate(Source(map=map_path, queries=folder / kind), Truth(gt=folder / f"{kind}.csv"),
-                              matchers, tol)
+        folder = StreamsFolder(out / name)
+        counts = derive_streams(datasets / name, folder.path)
+        write_map(plan_map(folder.ref, folder.map, BuildOptions(threads=0)))
+        rows: dict = {kind: {} for kind in KINDS}
+        for tol in TOLERANCES:
+            for kind, ev in folder.evaluate(matchers, tol):
                 for mode, report in ev.reports.items():
-                    rows.setdefault(kind, {}).setdefault(mode, {})[str(tol)] = figures(report)
+                    rows[kind].setdefault(mode, {})[str(tol)] = figures(report)
         doc["datasets"][name] = {"map_places": counts["map places"], "frames": {k: counts[k] for k in KINDS},
                                  "streams": rows}
-        doc["speed"][name] = {"ms_per_frame": round(chain_ms(map_path, folder / "aligned"), 3)}
+        doc["speed"][name] = {"ms_per_frame": round(chain_ms(folder.map, folder.frames("aligned")), 3)}
         print(f"{name}: measured", flush=True)
     yard.append(yardstick_ms())
     doc["speed"]["yardstick_ms"] = [round(y, 3) for y in yard]
@@ -257,30 +256,33 @@ def markdown(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def replace_between(text: str, start: str, end: str, body: str, where: Path) -> str:
-    """``text`` with what lies between the markers ``start`` and ``end`` replaced by ``body``."""
-    if start not in text or end not in text:
-        raise VprError(f"{where}: the markers {start.strip()} ... {end.strip()} are missing")
-    head, rest = text.split(start, 1)
-    _, tail = rest.split(end, 1)
-    return head + start + body + end + tail
+def section_markers(name: str) -> tuple[str, str]:
+    """The lines that open and close section ``name``'s generated text in a document of docs/."""
+    return f"<!-- generated: {name} -->\n", f"<!-- end of generated: {name} -->"
 
 
 def write_sections(made: dict[str, str]) -> None:
-    """docs/results.md with each section run put between its markers."""
+    """Each section run put between its markers, in the document of docs/ that holds them (VprError, before
+    anything is written, for a section no document has markers for)."""
     from vpr_edge.files import atomic_output
 
-    path = ROOT / "docs" / "results.md"
-    text = path.read_text()
+    texts = {path: path.read_text() for path in sorted((ROOT / "docs").glob("*.md"))}
+    where = {name: next((path for path, text in texts.items() if section_markers(name)[0] in text), None)
+             for name in made}
+    lost = [name for name, path in where.items() if path is None]
+    if lost:
+        raise VprError(f"docs/: no document has the markers of section {lost[0]!r} "
+                       f"({section_markers(lost[0])[0].strip()})")
     for name, body in made.items():
-        text = replace_between(text, f"<!-- generated: {name} -->\n", f"<!-- end of generated: {name} -->", body,
-                               path)
-    with atomic_output(path) as tmp:
-        tmp.write_text(text)
+        texts[where[name]] = replace_between(texts[where[name]], *section_markers(name), body, where[name])
+    for path in set(where.values()):
+        with atomic_output(path) as tmp:
+            tmp.write_text(texts[path])
 
 
 def write_docs(doc: dict) -> None:
-    """docs/generated/results.json, and the README's results table rewritten from it."""
+    """docs/generated/results.json, and the README's and docs/results.md's tables rewritten from it
+    (``doc_tables``)."""
     from vpr_edge.files import atomic_output
 
     gen = ROOT / "docs" / "generated"
@@ -289,14 +291,13 @@ def write_docs(doc: dict) -> None:
         tmp.write_text(json.dumps(doc, indent=1) + "\n")
     for doc_file, table in ((ROOT / "README.md", readme_table(doc)),
                             (ROOT / "docs" / "results.md", answers_table(doc))):
-        text = replace_between(doc_file.read_text(), "<!-- results table: tools/results.py -->\n",
-                               "<!-- end of results table -->", table + "\n", doc_file)
+        text = replace_between(doc_file.read_text(), TABLE_START, TABLE_END, table + "\n", doc_file)
         with atomic_output(doc_file) as tmp:
             tmp.write_text(text)
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
     p.add_argument("--datasets", type=Path, default=ROOT.parent / "shared" / "datasets",
                    help="the folder holding corridor/ and nordland-dev/")
     p.add_argument("--out", type=Path, required=True)
@@ -305,7 +306,7 @@ def main() -> int:
                    help="the full run's sections to run (comma-separated; default: all)")
     p.add_argument("--write-docs", action="store_true",
                    help="copy results.json to docs/generated/ and rewrite the README's results table from it")
-    a = p.parse_args()
+    a = p.parse_args(argv)
 
     def run() -> int:
         known = {s.name: s for s in SECTIONS}   # everything checked before any work
@@ -320,7 +321,7 @@ def main() -> int:
         doc = measure(a.datasets, a.out)
         made: dict[str, str] = {}
         if not a.quick:
-            doc["tool"] = "tools/results.py"
+            doc["tool"] = f"{PROG} results"
             (a.out / "sections").mkdir(exist_ok=True)
             for name in chosen:
                 made[name] = run_section(known[name], a.out, doc)
@@ -329,7 +330,7 @@ def main() -> int:
         (a.out / "results.json").write_text(json.dumps(doc, indent=1) + "\n")
         (a.out / "results.md").write_text(markdown(doc))
         if a.write_docs:
-            if not a.quick:   # the sections not re-run stay in docs/results.md as they were: so do their entries
+            if not a.quick:   # the sections not re-run stay in docs/ as they were: so do their entries
                 kept = ROOT / "docs" / "generated" / "results.json"
                 before = json.loads(kept.read_text()).get("sections", {}) if kept.exists() else {}
                 doc["sections"] = {n: v for n, v in before.items() if n in known} | doc.get("sections", {})
@@ -337,8 +338,5 @@ def main() -> int:
             write_sections(made)
         print(markdown(doc))
         return 0
-    return one_line_errors("results", run)
+    return run_checked(__name__, run)
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,10 +1,9 @@
-#!/usr/bin/env python3
 """A country-scale route end to end: build-map and localize over descriptor files, timed and scored.
 
-    python tools/bench_scale.py --work out/scale --places 1000000 --frames 10000
+    python -m vpr_edge_bench bench-scale --work out/scale --places 1000000 --frames 10000
 
 Writes (once; kept and reused while their sizes match) a synthetic route of --places unit descriptors of --dim
-dims and a hard stream over it (``evaluation.synthetic``: cold start, speed changes, two detours off the map,
+dims and a hard stream over it (``synthetic``: cold start, speed changes, two detours off the map,
 the second re-entering far away, a long stop of new exposures; a frame alone right about 1 time in 4), then:
 
 1. ``vpr-edge build-map ROUTE.npy -o MAP`` as a command: wall time and peak RSS (its index included);
@@ -27,14 +26,17 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from vpr_edge.errors import VprError
 from vpr_edge.evaluation.metrics import answered_shares, transition_delays
-from vpr_edge.evaluation.synthetic import plan_stream, write_route, write_stream
 from vpr_edge.evaluation.truth import load_csv
-from vpr_edge.evaluation.yardstick import yardstick_ms
+from vpr_edge_bench.runner import parser, run_checked
+from vpr_edge_bench.synthetic import plan_stream, write_route, write_stream
+from vpr_edge_bench.yardstick import yardstick_ms
 
 
 def status_mb(pid: int | str, field: str) -> float:
@@ -51,7 +53,7 @@ def status_mb(pid: int | str, field: str) -> float:
 
 def run_command(args: list[str]) -> dict:
     """Run ``python -m vpr_edge ARGS``: wall seconds, peak RSS (MB, from wait4) and RssAnon / RssFile sampled
-    every 0.2 s (max, last). Exits with the command's message if it fails."""
+    every 0.2 s (max, last). VprError with the command's last line of stderr if it fails."""
     t0 = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-m", "vpr_edge", *args], stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True)
@@ -73,7 +75,8 @@ def run_command(args: list[str]) -> dict:
     done.set()
     watcher.join()
     if proc.returncode != 0:
-        raise SystemExit(f"bench_scale: vpr-edge {' '.join(args[:1])} failed: {err.strip()}")
+        last = (err.strip().splitlines() or ["no message"])[-1]
+        raise VprError(f"vpr-edge {' '.join(args[:1])} failed: {last}")
     anon = [a for a, _ in samples] or [float("nan")]
     file = [f for _, f in samples] or [float("nan")]
     return {"wall_s": wall, "peak_rss_mb": usage.ru_maxrss / 1024, "anon_max_mb": max(anon),
@@ -119,8 +122,8 @@ def score(results: Path, truth_csv: Path, tolerance: int = 2) -> dict:
             "exit_frames": exits.tolist(), "relock_frames": relock.tolist()}
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
     p.add_argument("--work", type=Path, required=True, help="folder for the route, stream, map and output")
     p.add_argument("--places", type=int, default=1_000_000)
     p.add_argument("--frames", type=int, default=10_000)
@@ -130,10 +133,14 @@ def main() -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoints", default="1000,5000,10000,50000,100000")
     p.add_argument("--skip-build", action="store_true", help="use the map already in --work")
-    a = p.parse_args()
+    a = p.parse_args(argv)
+    return run_checked(__name__, lambda: _run(a))
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, its options checked first."""
     if a.places < 10 or a.frames < 100 or a.dim < 2 or not a.noise >= 0:
-        print("bench_scale: error: need --places >= 10, --frames >= 100, --dim >= 2, --noise >= 0", file=sys.stderr)
-        return 2
+        raise VprError("need --places >= 10, --frames >= 100, --dim >= 2, --noise >= 0")
     a.work.mkdir(parents=True, exist_ok=True)
     route = a.work / f"route_{a.places}x{a.dim}_s{a.seed}.npy"
     queries = a.work / f"stream_{a.places}x{a.dim}_{a.frames}_n{a.noise:g}_s{a.seed}.npy"
@@ -187,6 +194,3 @@ def main() -> int:
         print(f"| {what} | {measured} | {target} |")
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

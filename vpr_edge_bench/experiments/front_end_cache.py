@@ -1,14 +1,13 @@
-#!/usr/bin/env python3
 """Cache every derived stream's similarity matrix against a map, per dataset and front end, for matcher experiments.
 
 Beside each matrix it keeps what the streaming matcher reads, so that experiments run in seconds, encoding nothing.
 
-    python tools/derive_streams.py --dataset ../shared/datasets/corridor --out out/corridor   # (and nordland-dev)
-    python tools/front_end_cache.py --streams out/corridor out/nordland-dev --out out/fronts \\
+    python -m vpr_edge_bench derive-streams --dataset ../shared/datasets/corridor --out out/corridor   # (and nordland-dev)
+    python -m vpr_edge_bench front-end-cache --streams out/corridor out/nordland-dev --out out/fronts \\
         [--fronts ifv,ifv128,hog,pixels,gem,random,noisy] [--threads 2]
 
-For each dataset folder D (a ``tools/derive_streams.py`` output) and front end F it builds OUT/D.name/F/map.npz
-(kept if it exists) and writes, per stream kind K of ``evaluation.streams.KINDS`` and for ``foreign`` (the
+For each dataset folder D (``derive-streams`` output) and front end F it builds OUT/D.name/F/map.npz
+(kept if it exists) and writes, per stream kind K of ``streams.KINDS`` and for ``foreign`` (the
 next dataset's ``aligned/`` frames, in ``--streams`` order, against this map: no frame is mapped),
 OUT/D.name/F/K.npz (``np.savez``, no pickles; kept if it exists) with:
 
@@ -45,17 +44,16 @@ import subprocess
 import sys
 import time
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.errors import VprError, one_line_errors
+from vpr_edge.errors import VprError
 from vpr_edge.evaluation import sources
 from vpr_edge.evaluation.run import check_truth_fits, map_same_view
 from vpr_edge.evaluation.scoring import evaluate_mode
-from vpr_edge.evaluation.streams import KINDS
 from vpr_edge.evaluation.truth import Truth, one_view
 from vpr_edge.frames.frame import Frame
 from vpr_edge.frames.images import list_images
@@ -63,6 +61,8 @@ from vpr_edge.map import MapQuery
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
 from vpr_edge.matchers import get_matcher
 from vpr_edge.threads import use_threads
+from vpr_edge_bench.folder import StreamsFolder, streams_folders
+from vpr_edge_bench.runner import parser, run_checked
 
 FRONTS: tuple[str, ...] = ("ifv", "ifv128", "hog", "pixels", "gem", "random", "noisy")
 FOREIGN = "foreign"
@@ -97,19 +97,11 @@ class Encoded:
     truth: np.ndarray
 
 
-def check_streams(folders: list[Path]) -> None:
-    """VprError naming the first folder that is not a derive_streams output (ref/ and every stream with its csv)."""
-    for folder in folders:
-        missing = [n for n in ("ref", *KINDS, *(f"{k}.csv" for k in KINDS)) if not (folder / n).exists()]
-        if missing:
-            raise VprError(f"{folder}: not a tools/derive_streams.py folder (no {missing[0]})")
-
-
-def streams_of(folder: Path, other: Path | None) -> list[Stream]:
+def streams_of(folder: StreamsFolder, other: StreamsFolder | None) -> list[Stream]:
     """Every derived stream of ``folder``, then the foreign one (``other``'s aligned frames) if given."""
-    out = [Stream(k, folder / k, folder / f"{k}.csv") for k in KINDS]
+    out = [Stream(k, folder.frames(k), folder.truth(k)) for k in folder.kinds]
     if other is not None:
-        out.append(Stream(FOREIGN, other / "aligned", None))
+        out.append(Stream(FOREIGN, other.frames("aligned"), None))
     return out
 
 
@@ -182,7 +174,8 @@ def export_random(models: Path, seed: int) -> Path:
     return out
 
 
-def ensure_map(front: str, folder: Path, out: Path, models: Path, threads: int, seed: int) -> Path | None:
+def ensure_map(front: str, folder: StreamsFolder, out: Path, models: Path, threads: int, seed: int
+               ) -> Path | None:
     """OUT/D/F/map.npz of front end ``front`` for dataset ``folder`` (built unless it exists); None for a
     front end without a map of its own (pixels; noisy reads ifv's)."""
     if front in ("pixels", "noisy"):
@@ -191,11 +184,11 @@ def ensure_map(front: str, folder: Path, out: Path, models: Path, threads: int, 
     if path.is_file():
         return path
     out.mkdir(parents=True, exist_ok=True)
-    refs = folder / "ref"
+    refs = folder.ref
     t0 = time.perf_counter()
     if front == "ifv":
         tmp = path.with_name(".map.tmp.npz")
-        shutil.copyfile(folder / "map.npz", tmp)
+        shutil.copyfile(folder.map, tmp)
         os.replace(tmp, path)
     elif front == "ifv128":
         build_with(refs, path, BuildOptions(components=128, pca_dim=0, threads=threads))
@@ -375,8 +368,8 @@ def read_r1(path: Path, key: str) -> float | None:
 class DatasetRun:
     """One dataset's front ends; ``ifv``'s map and encodings opened once and shared with ``noisy``."""
 
-    def __init__(self, folder: Path, other: Path | None, out: Path, models: Path, threads: int, seed: int,
-                 noisy: tuple[float, float], tolerance: int) -> None:
+    def __init__(self, folder: StreamsFolder, other: StreamsFolder | None, out: Path, models: Path, threads: int,
+                 seed: int, noisy: tuple[float, float], tolerance: int) -> None:
         self.folder, self.out, self.models = folder, out / folder.name, models
         self.threads, self.seed, self.noisy, self.tolerance = threads, seed, noisy, tolerance
         self.streams = streams_of(folder, other)
@@ -424,7 +417,7 @@ class DatasetRun:
             t0 = time.perf_counter()
             try:
                 if front == "pixels":
-                    arrays = record(encode_pixels(self.folder / "ref", s), None, self.tolerance)
+                    arrays = record(encode_pixels(self.folder.ref, s), None, self.tolerance)
                 elif front == "noisy":
                     arrays = record(noise.apply(self.ifv_encoded(s), s.name), [noise.references], self.tolerance)
                 else:
@@ -438,7 +431,7 @@ class DatasetRun:
             print(stream_line(path, arrays, time.perf_counter() - t0), flush=True)
 
 
-def table(out: Path, datasets: list[Path], fronts: list[str], key: str) -> str:
+def table(out: Path, datasets: list[StreamsFolder], fronts: list[str], key: str) -> str:
     """Markdown: single's R@1 (``key`` of the files) on the aligned stream, dataset by front end ("-": no
     file)."""
     lines = ["| dataset | " + " | ".join(fronts) + " |", "|---|" + "---|" * len(fronts)]
@@ -463,15 +456,12 @@ def parse_fronts(text: str) -> list[str]:
 def run(a: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     fronts = parse_fronts(a.fronts)
-    check_streams(a.streams)
-    names = [d.name for d in a.streams]
-    if len(set(names)) != len(names):
-        raise VprError(f"--streams: folder names must differ (they name OUT's subfolders): {', '.join(names)}")
+    datasets = streams_folders(a.streams, map=False, ref=True, distinct=True)   # their names name OUT's subfolders
     threads = use_threads(a.threads)
     models = a.out / "models"
     failed: list[str] = []
-    for i, folder in enumerate(a.streams):
-        other = a.streams[(i + 1) % len(a.streams)] if len(a.streams) > 1 else None
+    for i, folder in enumerate(datasets):
+        other = datasets[(i + 1) % len(datasets)] if len(datasets) > 1 else None
         ds = DatasetRun(folder, other, a.out, models, threads, a.seed, (a.noisy_target, a.noisy_fraction),
                         a.tolerance)
         for front in fronts:
@@ -482,16 +472,16 @@ def run(a: argparse.Namespace) -> int:
                 print(line, flush=True)
                 failed.append(line)
     for title, key in (("tolerance 0", "single_r1"), (f"within {a.tolerance}", "single_r1_tol")):
-        print(f"\nsingle R@1 ({title}) on the aligned stream\n\n{table(a.out, a.streams, fronts, key)}")
+        print(f"\nsingle R@1 ({title}) on the aligned stream\n\n{table(a.out, datasets, fronts, key)}")
     if failed:
         print("\nfailed:\n" + "\n".join(failed))
     print(f"\ntotal {time.perf_counter() - t0:.0f} s")
     return 0
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--streams", type=Path, nargs="+", required=True, help="folders of tools/derive_streams.py")
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
+    p.add_argument("--streams", type=Path, nargs="+", required=True, help="derived-streams folders")
     p.add_argument("--out", type=Path, required=True, help="cache folder: OUT/DATASET/FRONT/STREAM.npz")
     p.add_argument("--fronts", default=",".join(FRONTS), help=f"comma-separated, of {', '.join(FRONTS)}")
     p.add_argument("--threads", type=int, default=2, help="NumPy's and onnxruntime's threads (0 = one a core)")
@@ -502,8 +492,5 @@ def main() -> int:
                    help="single's aligned-stream R@1 (at --tolerance) the noisy front end's deviation is bisected to")
     p.add_argument("--noisy-fraction", type=float, default=0.6,
                    help="... or this fraction of ifv's own R@1, where that is lower")
-    return one_line_errors("front_end_cache", lambda: run(p.parse_args()))
+    return run_checked(__name__, lambda: run(p.parse_args(argv)))
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

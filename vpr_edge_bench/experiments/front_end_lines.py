@@ -1,10 +1,11 @@
-#!/usr/bin/env python3
-"""The lost line on many front ends (docs/results.md, "The line on any front end"): each stream mode's answers
-on every derived stream and on foreign imagery, from the similarity matrices ``tools/front_end_cache.py``
+"""The lost line on many front ends, scored from the similarity matrices front-end-cache wrote.
+
+The lost line on many front ends (docs/results.md, "The line on any front end"): each stream mode's answers
+on every derived stream and on foreign imagery, from the similarity matrices the ``front-end-cache`` experiment
 wrote, scored by the library's ``scoring.evaluate_mode`` (what ``evaluate`` runs).
 
-    python tools/front_end_cache.py --streams out/corridor out/nordland-dev --out out/fronts
-    python tools/front_end_lines.py --cache out/fronts --modes stream,stream-prob,seqslam-online
+    python -m vpr_edge_bench front-end-cache --streams out/corridor out/nordland-dev --out out/fronts
+    python -m vpr_edge_bench front-end-lines --cache out/fronts --modes stream,stream-prob,seqslam-online
 
 Per dataset and front end, one row per mode and stream: the front end alone (``single``'s R@1 at the cache's
 tolerance), the best answers' R@1 (lost ignored), the precision
@@ -19,14 +20,17 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
+from vpr_edge.errors import VprError
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.verdict import TARGET_PRECISION
 from vpr_edge.threads import use_threads
+from vpr_edge_bench.runner import parser, run_checked
 
 
 def load(path: Path) -> dict[str, np.ndarray]:
@@ -43,14 +47,26 @@ def score(mode: str, case: dict[str, np.ndarray], tolerance: int, target: float)
                          one_view=case.get("one_view"), target_precision=target)
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
     p.add_argument("--cache", type=Path, required=True)
     p.add_argument("--modes", default="stream,stream-prob,seqslam-online")
     p.add_argument("--fronts", default=None, help="comma-separated front ends (default: every one cached)")
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--target-precision", type=float, default=TARGET_PRECISION)
-    a = p.parse_args()
+    a = p.parse_args(argv)
+    return run_checked(__name__, lambda: _run(a))
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, the cache and the modes checked first."""
+    if not a.cache.is_dir():
+        raise VprError(f"{a.cache}: not a folder (front-end-cache writes it)")
+    try:
+        for mode in a.modes.split(","):
+            get_matcher(mode)
+    except ValueError as e:
+        raise VprError(f"--modes: {e}") from None
     use_threads(2)
     modes = a.modes.split(",")
     seen: dict[tuple[str, str, str], list[tuple]] = {}   # (dataset, front, mode) -> per-stream figures
@@ -104,6 +120,3 @@ def print_ranges(seen: dict[tuple[str, str, str], list[tuple]]) -> None:
         cols = [span([r[i] for r in streams]) for i in range(1, 7)]
         print(f"| {ds} | {front} | `{mode}` | " + " | ".join(cols) + f" | {detour} | {foreign} |")
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

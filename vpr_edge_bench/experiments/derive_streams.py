@@ -1,7 +1,6 @@
-#!/usr/bin/env python3
 """Write the query streams a vehicle produces, derived from a frame-aligned dataset pair, with ground truth.
 
-    python tools/derive_streams.py --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
+    python -m vpr_edge_bench derive-streams --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
 
 DATASET holds ref/ and query/ whose i-th files show the same place. OUT gets ref/ (the first --map-places
 references: the map's places), and per stream kind (aligned, speed2, speed3, stop-and-go, variable, partial,
@@ -24,14 +23,15 @@ printed in a shuffled order, as a fleet's come in (``streams.cut_into_drives``):
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
 
-from vpr_edge.errors import one_line_errors
-from vpr_edge.evaluation.streams import KINDS, derive_streams, drive_order
+from vpr_edge_bench.runner import parser, run_checked
+from vpr_edge_bench.streams import KINDS, derive_streams, drive_order
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
     p.add_argument("--dataset", type=Path, required=True)
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--map-places", type=int, default=None,
@@ -43,12 +43,12 @@ def main() -> int:
                         "(stops, slow crawls), so that a stopped vehicle's frames are alike but not identical "
                         "(default 0: the same file again)")
     p.add_argument("--drives", type=int, default=0, help="also cut the map into this many drives (OUT/drives/)")
-    a = p.parse_args()
-    return one_line_errors("derive_streams", lambda: _run(a))
+    a = p.parse_args(argv)
+    return run_checked(__name__, lambda: _run(a))
 
 
 def _run(a: argparse.Namespace) -> int:
-    """The work of ``main`` (``evaluation.streams.derive_streams``: inputs checked first)."""
+    """The work of ``main`` (``streams.derive_streams``: inputs checked first)."""
     counts = derive_streams(a.dataset, a.out, a.kinds.split(","), a.map_places, a.seed, a.repeat_noise, a.drives)
     n_mapped = counts.pop("map places")
     for kind, frames in counts.items():
@@ -58,6 +58,3 @@ def _run(a: argparse.Namespace) -> int:
         print("drives, shuffled:", " ".join(drive_order(a.out, a.drives, a.seed)))
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,11 +1,12 @@
-#!/usr/bin/env python3
-"""Front ends side by side on derived streams (docs/results.md, "A global front end"): one map per model,
+"""Front ends side by side on derived streams: accuracy, bytes a place and ms a frame per model.
+
+Front ends side by side on derived streams (docs/results.md, "A global front end"): one map per model,
 evaluated by the library's ``evaluate`` on every derived stream, with the bytes a place and ms a frame.
 
-    python tools/derive_streams.py --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
+    python -m vpr_edge_bench derive-streams --dataset ../shared/datasets/nordland-dev --out out/nordland-dev
     python -m vpr_edge_export.onnx_export --architecture gem --backbone efficientnet_lite0 --tap stage5 \\
         --width 160 --height 120 --out out/models/lite0_stage5_gem_160x120.onnx
-    python tools/compare_front_ends.py --streams out/nordland-dev out/corridor \\
+    python -m vpr_edge_bench compare-front-ends --streams out/nordland-dev out/corridor \\
         --front default --front gem=out/models/lite0_stage5_gem_160x120.onnx
 
 ``--front NAME=MODEL`` builds ``OUT/map.NAME.npz`` with ``--model MODEL`` (``default``: the default build, no
@@ -17,16 +18,18 @@ beside the yardstick measured in the same run (one fp32 inference of the bundled
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from pathlib import Path
 
-from vpr_edge.errors import VprError, one_line_errors
-from vpr_edge.evaluation import Source, Truth, evaluate
-from vpr_edge.evaluation.streams import KINDS
-from vpr_edge.evaluation.yardstick import chain_ms, yardstick_ms
+from vpr_edge.errors import VprError
 from vpr_edge.map import load_map
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
 from vpr_edge.matchers import get_matcher
 from vpr_edge.threads import use_threads
+from vpr_edge_bench.folder import streams_folders
+from vpr_edge_bench.runner import parser, run_checked
+from vpr_edge_bench.streams import KINDS
+from vpr_edge_bench.yardstick import chain_ms, yardstick_ms
 
 
 def fronts(given: list[str]) -> dict[str, Path | None]:
@@ -41,32 +44,21 @@ def fronts(given: list[str]) -> dict[str, Path | None]:
     return out
 
 
-def check_streams(folders: list[Path]) -> None:
-    """VprError naming the first folder that is not a derive_streams output (ref/ and every stream with its csv)."""
-    for folder in folders:
-        missing = [n for n in ("ref", *KINDS, *(f"{k}.csv" for k in KINDS)) if not (folder / n).exists()]
-        if missing:
-            raise VprError(f"{folder}: not a tools/derive_streams.py folder (no {missing[0]})")
-
-
 def run(a: argparse.Namespace) -> int:
     use_threads(1)
     models = fronts(a.front)
-    check_streams(a.streams)
+    folders = streams_folders(a.streams, map=False, ref=True)
     matchers = {m: get_matcher(m) for m in ("single", "stream")}
-    for folder in a.streams:
+    for folder in folders:
         yard = [yardstick_ms()]
         rows: dict[str, dict] = {}
         for name, model in models.items():
-            map_path = folder / f"map.{name}.npz"
-            write_map(plan_map(folder / "ref", map_path, BuildOptions(model=model, threads=1)))
-            per_kind = {}
-            for kind in KINDS:
-                ev = evaluate(Source(map=map_path, queries=folder / kind), Truth(gt=folder / f"{kind}.csv"),
-                              matchers, a.tolerance)
-                per_kind[kind] = {m: r.as_json() for m, r in ev.reports.items()}
+            map_path = folder.path / f"map.{name}.npz"
+            write_map(plan_map(folder.ref, map_path, BuildOptions(model=model, threads=1)))
+            per_kind = {kind: {m: r.as_json() for m, r in ev.reports.items()}
+                        for kind, ev in folder.evaluate(matchers, a.tolerance, map=map_path)}
             rows[name] = {"streams": per_kind, "bytes": load_map(map_path).stored.bytes_per_place,
-                          "ms": chain_ms(map_path, folder / "aligned")}
+                          "ms": chain_ms(map_path, folder.frames("aligned"))}
         yard.append(yardstick_ms())
         ref = sum(yard) / len(yard)
         print(f"\n{folder.name}, tolerance ±{a.tolerance}: stream R@1 / answered right / mapped right / unmapped "
@@ -87,13 +79,10 @@ def run(a: argparse.Namespace) -> int:
     return 0
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--streams", type=Path, nargs="+", required=True, help="folders of tools/derive_streams.py")
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
+    p.add_argument("--streams", type=Path, nargs="+", required=True, help="derived-streams folders")
     p.add_argument("--front", action="append", required=True, help="NAME=MODEL.onnx, or default")
     p.add_argument("--tolerance", type=int, default=2)
-    return one_line_errors("compare_front_ends", lambda: run(p.parse_args()))
+    return run_checked(__name__, lambda: run(p.parse_args(argv)))
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

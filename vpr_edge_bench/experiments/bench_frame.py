@@ -1,7 +1,6 @@
-#!/usr/bin/env python3
 """Per-frame latency of the on-vehicle path, stage by stage, on real frames (batch size 1).
 
-    python tools/bench_frame.py [--map MAP] [--frames DIR] [--threads 1,2] [--blas held|default]
+    python -m vpr_edge_bench bench-frame [--map MAP] [--frames DIR] [--threads 1,2] [--blas held|default]
 
 The chain timed is ``Localizer``'s own (``push`` = ``encode`` + ``push_encoding``), split into its stages:
 decode (image file -> RGB), features (the front end: resize, normalise, ONNX tap), encode (the map's
@@ -13,8 +12,8 @@ thread count as onnxruntime (what --threads does in the CLI); --blas default lea
 """
 from __future__ import annotations
 
-import argparse
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -24,10 +23,11 @@ from vpr_edge.frames.images import list_images, load_image
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
 from vpr_edge.profiling.stages import time_stages
 from vpr_edge.resources import sample_folder
+from vpr_edge_bench.runner import parser
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def main(argv: Sequence[str] | None = None) -> int:
+    p = parser(__name__, __doc__)
     p.add_argument("--map", type=Path, default=None)
     p.add_argument("--model", type=Path, default=None)
     p.add_argument("--frames", type=Path, default=sample_folder() / "query")
@@ -35,7 +35,7 @@ def main() -> int:
     p.add_argument("--matcher", default="stream", help="registered online matcher")
     p.add_argument("--repeat", type=int, default=2, help="passes over the frames (the first is warm-up)")
     p.add_argument("--blas", choices=("held", "default"), default="held")
-    a = p.parse_args()
+    a = p.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="vpr-edge-bench-") as tmp:
         map_path = a.map
         if map_path is None:   # the bundled sample's map, as build-map makes it
@@ -57,6 +57,3 @@ def main() -> int:
             print(f"{threads:7d} " + " ".join(f"{v:7.2f}" for v in ms) + f" {ms.sum():7.2f}")
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())
