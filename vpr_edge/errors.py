@@ -1,15 +1,104 @@
-"""User-facing problems: the exception the CLI turns into one line, and warnings said once each."""
+"""User-facing problems: the exception the CLI turns into one line, and warnings said once each.
+
+A library function names its inputs as the library knows them (``BuildOptions.positions_topic``, an argument
+``topic``), never as one command line spells them: a ``Message`` writes each input ``{opt.NAME}`` and is
+rendered with the names in force (``input_names``; the library's own by default, the CLI's option flags
+while one of its commands runs). ``InputError`` is the error that says which inputs are wrong.
+"""
 from __future__ import annotations
 
 import contextlib
+import string
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 
 _said: set[str] = set()
+_naming: list[Callable[[str], str]] = [lambda name: name]   # the names in force: the last one
 
 
 class VprError(Exception):
     """A user-facing error: bad input file, mismatched map, missing dependency. Message is one line."""
+
+
+class _Names:
+    """``{opt.NAME}`` in a template: NAME as ``name_of`` gives it."""
+
+    def __init__(self, name_of: Callable[[str], str]) -> None:
+        self._name_of = name_of
+
+    def __getattr__(self, name: str) -> str:
+        return self._name_of(name)
+
+
+class Message:
+    """A line that names a library call's inputs: ``template`` writes each input ``{opt.NAME}`` (NAME: the
+    library's name for it, e.g. ``positions_topic``) and each value ``{key}`` (``values``: anything ``format``
+    takes, or a ``Message``, rendered with the same names). ``str`` renders it with the names in force."""
+
+    def __init__(self, template: str, **values: object) -> None:
+        self.template, self.values = template, values
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """The inputs it names, in order, each once (those of ``Message`` values included)."""
+        names = [field[4:] for _, field, _, _ in string.Formatter().parse(self.template)
+                 if field and field.startswith("opt.")]
+        names += [n for v in self.values.values() if isinstance(v, Message) for n in v.inputs]
+        return tuple(dict.fromkeys(names))
+
+    def line(self, name_of: Callable[[str], str]) -> str:
+        """The text, each input named by ``name_of`` (the library's name -> the caller's)."""
+        values = {k: v.line(name_of) if isinstance(v, Message) else v for k, v in self.values.items()}
+        return self.template.format(opt=_Names(name_of), **values)
+
+    def __str__(self) -> str:
+        return self.line(_naming[-1])
+
+    @classmethod
+    def join(cls, parts: Sequence["Message | str"], sep: str = ", ") -> "Message":
+        """``parts`` one after another, ``sep`` between (plain text taken as it is)."""
+        escaped = sep.replace("{", "{{").replace("}", "}}")
+        return cls(escaped.join(f"{{p{i}}}" for i in range(len(parts))), **{f"p{i}": p for i, p in enumerate(parts)})
+
+
+def said(template: str, **values: object) -> str:
+    """``Message(template, **values)`` rendered now, with the names in force (for a warning or a label)."""
+    return str(Message(template, **values))
+
+
+class InputError(VprError):
+    """Inputs that are wrong (they contradict each other, or the files they name): ``inputs`` names them as
+    the library does; the line (``Message``) names them as the caller does once rendered (``str``: the names
+    in force; ``line(name_of)``: given names), so that the CLI says ``--positions`` where a library caller
+    reads ``positions``."""
+
+    def __init__(self, template: "str | Message", **values: object) -> None:
+        self.message = template if isinstance(template, Message) else Message(template, **values)
+        super().__init__(self.message.template)
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return self.message.inputs
+
+    def line(self, name_of: Callable[[str], str]) -> str:
+        return self.message.line(name_of)
+
+    def __str__(self) -> str:
+        return str(self.message)
+
+    def __reduce__(self):   # pickled whole (a Ray worker's error), not rebuilt from args alone
+        return (type(self), (self.message,))
+
+
+@contextlib.contextmanager
+def input_names(name_of: Callable[[str], str]) -> Iterator[None]:
+    """Render every ``Message`` (errors, warnings) with ``name_of`` while the block runs: how a command line
+    puts its option flags where the library names its inputs."""
+    _naming.append(name_of)
+    try:
+        yield
+    finally:
+        _naming.remove(name_of)
 
 
 class MapChanged(VprError):
@@ -70,8 +159,10 @@ def printable(text: str) -> str:
     return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
 
 
-def warn(message: str) -> None:
-    """Print ``vpr-edge: warning: message`` on stderr, once per distinct message in this process."""
+def warn(message: "str | Message") -> None:
+    """Print ``vpr-edge: warning: message`` on stderr, once per distinct message in this process (a
+    ``Message`` rendered with the names in force)."""
+    message = str(message)
     if message not in _said:
         _said.add(message)
         print(f"vpr-edge: warning: {printable(message)}", file=sys.stderr, flush=True)

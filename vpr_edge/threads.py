@@ -24,11 +24,12 @@ def use_threads(threads: int) -> int:
     """Limit NumPy's BLAS pool, process-wide, to ``threads`` (0 = one per core) and return the count to
     give onnxruntime. Uses threadpoolctl, which finds the BLAS library NumPy actually loaded (OpenBLAS,
     MKL, BLIS) and sets its pool at run time, where environment variables act only before NumPy loads."""
-    from vpr_edge.errors import VprError
+    from vpr_edge.errors import InputError
 
     if threads > MAX_PER_CORE * cores():
-        raise VprError(f"--threads {threads}: more than {MAX_PER_CORE} per core of the {cores()} this process may "
-                       f"use only slows both pools down (0 = one per core)")
+        raise InputError("{opt.threads} {threads}: more than {most} per core of the {cores} this process may use "
+                         "only slows both pools down (0 = one per core)", threads=threads, most=MAX_PER_CORE,
+                         cores=cores())
     n = threads if threads > 0 else cores()
     try:
         from threadpoolctl import threadpool_limits

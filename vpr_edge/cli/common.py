@@ -12,7 +12,7 @@ import typer
 
 from vpr_edge import __version__
 from vpr_edge.encoders import ENCODERS
-from vpr_edge.errors import Terminated, VprError, os_error_line, printable, warn
+from vpr_edge.errors import InputError, Terminated, VprError, input_names, os_error_line, printable, warn
 from vpr_edge.features import FRONT_ENDS
 from vpr_edge.features.choice import PRECISIONS
 from vpr_edge.features.conventions import LAYOUTS
@@ -47,27 +47,37 @@ PrecisionOpt = Enum("PrecisionOpt", {name: name for name in PRECISIONS}, type=st
 EncodingOpt = Enum("EncodingOpt", {name: name for name in ENCODERS}, type=str)  # type: ignore[misc]
 
 
+def flag(name: str) -> str:
+    """The option that gives the library's input ``name`` on the command line: ``positions_topic`` ->
+    ``--positions-topic`` (``errors.InputError`` and every ``Message`` are said with these)."""
+    return "--" + name.replace("_", "-")
+
+
 @contextlib.contextmanager
 def user_errors() -> Iterator[None]:
-    """Turn VprError into one line on stderr and exit code 2; Ctrl-C into exit code 130, SIGTERM into 143
-    (temporary outputs removed on the way out)."""
-    try:
-        yield
-    except (VprError, ValueError) as e:
-        typer.echo(f"vpr-edge: error: {printable(str(e))}", err=True)
-        raise typer.Exit(2) from None
-    except BrokenPipeError:  # the reader went away (``| head``): stop quietly, as Unix tools do
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        raise typer.Exit(1) from None
-    except OSError as e:  # disk full, permission lost mid-run: name the file and the reason
-        typer.echo(f"vpr-edge: error: {printable(os_error_line(e))}", err=True)
-        raise typer.Exit(2) from None
-    except KeyboardInterrupt:
-        typer.echo("vpr-edge: interrupted", err=True)
-        raise typer.Exit(130) from None
-    except Terminated:
-        typer.echo("vpr-edge: terminated", err=True)
-        raise typer.Exit(Terminated.exit_code) from None
+    """Turn VprError into one line on stderr and exit code 2, the inputs it names said as options (``flag``);
+    Ctrl-C into exit code 130, SIGTERM into 143 (temporary outputs removed on the way out)."""
+    with input_names(flag):
+        try:
+            yield
+        except InputError as e:
+            typer.echo(f"vpr-edge: error: {printable(e.line(flag))}", err=True)
+            raise typer.Exit(2) from None
+        except (VprError, ValueError) as e:
+            typer.echo(f"vpr-edge: error: {printable(str(e))}", err=True)
+            raise typer.Exit(2) from None
+        except BrokenPipeError:  # the reader went away (``| head``): stop quietly, as Unix tools do
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            raise typer.Exit(1) from None
+        except OSError as e:  # disk full, permission lost mid-run: name the file and the reason
+            typer.echo(f"vpr-edge: error: {printable(os_error_line(e))}", err=True)
+            raise typer.Exit(2) from None
+        except KeyboardInterrupt:
+            typer.echo("vpr-edge: interrupted", err=True)
+            raise typer.Exit(130) from None
+        except Terminated:
+            typer.echo("vpr-edge: terminated", err=True)
+            raise typer.Exit(Terminated.exit_code) from None
 
 
 MODEL_HELP = ("ONNX feature model exported by vpr_edge_export (default: $VPR_EDGE_MODEL if set, else the "
