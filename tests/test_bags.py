@@ -5,85 +5,14 @@ from __future__ import annotations
 import csv
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 
-rosbags = pytest.importorskip("rosbags")
+rosbags = pytest.importorskip("rosbags")   # write_bag needs it
 
-from rosbags.rosbag1 import Writer as Writer1  # noqa: E402
-from rosbags.rosbag2 import StoragePlugin, Writer as Writer2  # noqa: E402
-from rosbags.typesys import Stores, get_typestore  # noqa: E402
-
-TS = get_typestore(Stores.ROS2_HUMBLE)
-T0 = 1_700_000_000
-
-
-def run(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "vpr_edge", *map(str, args)], capture_output=True, text=True,
-                          timeout=600)
-
-
-def _header(ts, i: int, dt: float = 0.1):
-    t = T0 + i * dt
-    Time, Header = ts.types["builtin_interfaces/msg/Time"], ts.types["std_msgs/msg/Header"]
-    extra = {"seq": i} if "seq" in Header.__dataclass_fields__ else {}
-    return Header(stamp=Time(sec=int(t), nanosec=int(round((t - int(t)) * 1e9))), frame_id="camera", **extra)
-
-
-def _image_msg(ts, i: int, path: Path, raw: bool):
-    bgr = cv2.imread(str(path))
-    if raw:
-        Image = ts.types["sensor_msgs/msg/Image"]
-        h, w = bgr.shape[:2]
-        return Image(header=_header(ts, i), height=h, width=w, encoding="bgr8", is_bigendian=0, step=w * 3,
-                     data=np.ascontiguousarray(bgr).reshape(-1))
-    Compressed = ts.types["sensor_msgs/msg/CompressedImage"]
-    return Compressed(header=_header(ts, i), format="jpeg", data=np.frombuffer(cv2.imencode(".jpg", bgr)[1], np.uint8))
-
-
-def _fix_msg(ts, i: int, odometry: bool):
-    if odometry:   # along +x: yaw 0 (heading 90, clockwise from +y)
-        m = ts.types
-        pose = m["geometry_msgs/msg/Pose"](position=m["geometry_msgs/msg/Point"](x=2.0 * i, y=1.0, z=0.0),
-                                           orientation=m["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
-        return m["nav_msgs/msg/Odometry"](
-            header=_header(ts, i, 0.2), child_frame_id="base",
-            pose=m["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36)),
-            twist=m["geometry_msgs/msg/TwistWithCovariance"](
-                twist=m["geometry_msgs/msg/Twist"](linear=m["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
-                                                   angular=m["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)),
-                covariance=np.zeros(36)))
-    Status, Fix = ts.types["sensor_msgs/msg/NavSatStatus"], ts.types["sensor_msgs/msg/NavSatFix"]
-    return Fix(header=_header(ts, i, 0.2), status=Status(status=0, service=1), latitude=60.0 + i * 2e-5,
-               longitude=10.0, altitude=5.0, position_covariance=np.zeros(9), position_covariance_type=0)
-
-
-def write_bag(path: Path, frames: list[Path], kind: str, raw: bool = False, odometry: bool = False) -> Path:
-    """A bag with /camera/image (compressed, or raw ``bgr8``) at 10 Hz and /gps/fix (NavSatFix, or Odometry on
-    /odom) at 5 Hz covering the images. ``kind``: ros1, ros2 (sqlite3) or mcap (ROS 2 MCAP storage)."""
-    image_type = "sensor_msgs/msg/Image" if raw else "sensor_msgs/msg/CompressedImage"
-    fix_topic, fix_type = ("/odom", "nav_msgs/msg/Odometry") if odometry else ("/gps/fix", "sensor_msgs/msg/NavSatFix")
-    n_fix = math.ceil(len(frames) / 2) + 1
-    if kind == "ros1":
-        ts = get_typestore(Stores.ROS1_NOETIC)
-        writer, serialize = Writer1(path), ts.serialize_ros1
-    else:
-        plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
-        ts = TS
-        writer, serialize = Writer2(path, version=9, storage_plugin=plugin), ts.serialize_cdr
-    with writer as w:
-        cam = w.add_connection("/camera/image", image_type, typestore=ts)
-        fix = w.add_connection(fix_topic, fix_type, typestore=ts)
-        for i, f in enumerate(frames):
-            w.write(cam, int((T0 + i * 0.1) * 1e9), serialize(_image_msg(ts, i, f, raw), image_type))
-        for i in range(n_fix):
-            w.write(fix, int((T0 + i * 0.2) * 1e9), serialize(_fix_msg(ts, i, odometry), fix_type))
-    return path
+from helpers import BAG_T0 as T0, run, write_bag  # noqa: E402
 
 
 @pytest.mark.slow

@@ -9,18 +9,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from vpr_edge.cli import app
+from helpers import invoke
 from vpr_edge.map import load_map
 from vpr_edge.profiling.sweep import pick
 from vpr_edge.profiling.inputs import load_frames, plan_frames
 from vpr_edge.threads import cores
-
-
-def invoke(*args: object) -> tuple[int, str, str]:
-    res = CliRunner().invoke(app, [str(a) for a in args])
-    return res.exit_code, res.stdout, res.stderr
 
 
 @pytest.fixture(scope="module")

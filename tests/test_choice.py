@@ -4,23 +4,17 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import pytest
 
+from helpers import run
 from vpr_edge.errors import VprError
 from vpr_edge.features import choice
 from vpr_edge.features.cnn import FeatureExtractor
 from vpr_edge.map import load_map, map_front_end
 from vpr_edge.resources import LARGE_MODEL_FILE, MODEL_FILES, SMALL_MODEL_FILE, bundled_model, int8_form
-
-
-def run(*args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "vpr_edge", *map(str, args)], capture_output=True, text=True,
-                          timeout=600)
 
 
 @pytest.mark.parametrize("size, expected", [((64, 32), SMALL_MODEL_FILE), ((160, 120), SMALL_MODEL_FILE),

@@ -11,23 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import assert_one_line_error, run, write_video
 from vpr_edge.map import MAP_SCHEMA, load_map
 from vpr_edge.files import read_npz, write_npz
 from vpr_edge.resources import LARGE_MODEL_FILE, bundled_model
-
-
-def run(*args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "vpr_edge", *map(str, args)], capture_output=True, text=True,
-                          timeout=600)
-
-
-def assert_one_line_error(proc: subprocess.CompletedProcess, *needles: str) -> None:
-    assert proc.returncode != 0
-    assert "Traceback" not in proc.stderr
-    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("vpr-edge: error:")]
-    assert len(lines) == 1, proc.stderr
-    for needle in needles:
-        assert needle in lines[0]
 
 
 @pytest.fixture(scope="module")
@@ -112,17 +99,6 @@ def test_localize_jsonl_file_and_reused_codebook(tmp_path: Path, small_map: Path
     assert len(lines) == 24 and list(lines[0]) == ["frame_index", "frame", "stamp", "ref_index", "ref", "drive", "x", "y",
                                                    "lat", "lon", "heading", "along_m", "score", "confidence", "lost", "lost_why"]
     assert all(m["ref_index"] is None and m["ref"] is None for m in lines if m["lost"])   # nulls when lost
-
-
-def write_video(path: Path, frames: Path, count: int) -> Path:
-    """The first ``count`` images of ``frames`` as an MJPG video at ``path``."""
-    import cv2
-
-    w = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (160, 120))
-    for f in sorted(frames.iterdir())[:count]:
-        w.write(cv2.imread(str(f)))
-    w.release()
-    return path
 
 
 @pytest.mark.slow

@@ -5,24 +5,18 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers import run
 from vpr_edge import Localizer
 from vpr_edge.evaluation.truth import write_ground_truth
 from vpr_edge.map import load_map
 
 
-def run(*args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "vpr_edge", *map(str, args)], capture_output=True, text=True,
-                          timeout=600)
-
-
-def route(rng: np.random.Generator, n: int = 60, dims: int = 32) -> tuple[np.ndarray, np.ndarray]:
+def descriptor_drives(rng: np.random.Generator, n: int = 60, dims: int = 32) -> tuple[np.ndarray, np.ndarray]:
     """A route of ``n`` places (each place's descriptor its own, neighbours a little alike, as a network's
     are along a road) and a second drive of it: each place's descriptor plus noise."""
     own = rng.normal(size=(n + 1, dims))
@@ -34,7 +28,7 @@ def route(rng: np.random.Generator, n: int = 60, dims: int = 32) -> tuple[np.nda
 @pytest.fixture(scope="module")
 def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     w = tmp_path_factory.mktemp("desc")
-    refs, queries = route(np.random.default_rng(0))
+    refs, queries = descriptor_drives(np.random.default_rng(0))
     np.save(w / "refs.npy", refs.astype(np.float16))
     np.save(w / "queries.npy", queries)
     write_ground_truth(w / "gt.csv", [[i] for i in range(len(queries))])

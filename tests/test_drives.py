@@ -10,20 +10,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from vpr_edge.cli import app
+from helpers import invoke, naive_road_over_drives, planted_drives
 from vpr_edge.map import load_map
 from vpr_edge.map.drives import Drives
 from vpr_edge.matchers import MATCHERS
 from vpr_edge.matchers.road import RoadMatcher
 from vpr_edge.matchers.route import RouteGraph, max_outside, merge, minus, places
 from vpr_edge.positions import Positions
-
-
-def invoke(*args: object) -> tuple[int, str, str]:
-    res = CliRunner().invoke(app, [str(a) for a in args])
-    return res.exit_code, res.stdout, res.stderr
 
 
 # --- the route graph ----------------------------------------------------------------------------------------
@@ -85,46 +79,6 @@ def test_a_single_drive_is_a_line() -> None:
 # --- the matcher across drives, against a naive recursion ------------------------------------------------------
 
 
-def naive_road(sim: np.ndarray, graph: RouteGraph, grid: int, vmax: float, decay: float, bias: float,
-               turn: float, stop_gain: float, stop_decay: float) -> np.ndarray:
-    """The road matcher's state after every row (whole route, no running means, no motion cue), by loops
-    over a predecessor list: in-drive ``c - v`` plus each junction's virtual predecessors."""
-    r = sim.shape[1]
-    n_speeds = int(round(vmax * grid)) + 1
-    cols = r * grid
-    first_col = np.array([graph.bounds(c // grid)[0] * grid for c in range(cols)])
-    preds: dict[tuple[int, int], list[int]] = {}
-    for c in range(cols):
-        for v in range(1, n_speeds):
-            p = c - v
-            preds[(v, c)] = [p] if p >= first_col[c] else []
-    for sources, targets in graph.junctions:
-        for t in targets:
-            for v in range(1, n_speeds):
-                for i in range(v):
-                    c = t * grid + i
-                    if c >= (graph.bounds(t)[1] + 1) * grid:
-                        continue
-                    for s in sources:
-                        p = s * grid + grid - (v - i)
-                        if p >= graph.bounds(s)[0] * grid:
-                            preds[(v, c)].append(p)
-    h = np.zeros((n_speeds, cols))
-    for row in sim:
-        z = np.repeat((row - row.mean()) / row.std(), grid) - bias
-        m = np.array([[max(h[u, c] - turn * abs(v - u) for u in range(n_speeds)) for c in range(cols)]
-                      for v in range(n_speeds)])
-        new = np.zeros_like(h)
-        for c in range(cols):
-            new[0, c] = max(0.0, stop_decay * m[0, c]) + (stop_gain * max(z[c], 0.0) + min(z[c], 0.0))
-            for v in range(1, n_speeds):
-                ps = preds[(v, c)]
-                before = max([m[v, p] for p in ps], default=0.0)
-                new[v, c] = max(0.0, decay * before) + z[c]
-        h = np.maximum(new, 0.0)
-    return h
-
-
 @pytest.mark.parametrize("grid,vmax", [(1, 2.0), (2, 1.5)])
 def test_matcher_across_drives_against_naive_recursion(grid: int, vmax: float) -> None:
     rng = np.random.default_rng(1)
@@ -138,28 +92,10 @@ def test_matcher_across_drives_against_naive_recursion(grid: int, vmax: float) -
                     graph=graph, **params)
     for row in sim:
         m.update(row)
-    np.testing.assert_allclose(m.h, naive_road(sim, graph, **params), atol=1e-4)
+    np.testing.assert_allclose(m.h, naive_road_over_drives(sim, graph, **params), atol=1e-4)
 
 
 # --- planted routes ---------------------------------------------------------------------------------------------
-
-
-def planted(order: list[int], counts: list[int], noise: float, seed: int, speed: float = 1.0
-            ) -> tuple[np.ndarray, np.ndarray, Drives]:
-    """A route driven through drives in ``order`` (indices into ``counts``), the map holding them in index
-    order: similarities (Q, R) peaked at the true place, and each frame's true place."""
-    drives = Drives.of([f"d{i}" for i in range(len(counts))], counts)
-    route = np.concatenate([np.arange(drives.items[k].first, drives.items[k].last + 1) for k in order])
-    at = np.arange(0, len(route), speed).astype(int)
-    truth = route[at]
-    rng = np.random.default_rng(seed)
-    sim = rng.normal(0.0, noise, (len(truth), drives.n_refs))
-    for i, t in enumerate(truth):
-        first, last = drives.items[drives.index(t)].first, drives.items[drives.index(t)].last
-        sim[i, t] += 1.0
-        sim[i, max(first, t - 1)] += 0.5
-        sim[i, min(last, t + 1)] += 0.5
-    return sim, truth, drives
 
 
 @pytest.mark.parametrize("speed", [1.0, 2.0])
@@ -169,7 +105,7 @@ def test_a_vehicle_follows_the_route_across_shuffled_drives(speed: float, window
     frames wrong or lost in the 15 after each join; without the drives (the map read as one route, the false
     joins) they cost more."""
     order = [2, 0, 3, 1]
-    sim, truth, drives = planted(order, [150, 150, 150, 150], noise=0.5, seed=3, speed=speed)
+    sim, truth, drives = planted_drives(order, [150, 150, 150, 150], noise=0.5, seed=3, speed=speed)
     stream = MATCHERS["stream"].with_params(window=window)
     graph = RouteGraph(drives.n_refs, drives.starts, tuple(drives.junctions()))
     route = np.concatenate([np.arange(drives.items[k].first, drives.items[k].last + 1) for k in order])
@@ -191,7 +127,7 @@ def test_a_vehicle_follows_the_route_across_shuffled_drives(speed: float, window
 def test_two_experiences_of_one_road_and_a_detour() -> None:
     """Drive 1 repeats drive 0's road; the vehicle drives it, leaves the map, comes back: either experience
     is an answer, as right as with one experience, and the off-map frames are lost."""
-    sim, truth, drives = planted([0], [200, 200], noise=0.3, seed=4)
+    sim, truth, drives = planted_drives([0], [200, 200], noise=0.3, seed=4)
     sim[:, 200:] = sim[:, :200] + np.random.default_rng(5).normal(0, 0.2, (len(sim), 200))
     sim[80:110] = np.random.default_rng(6).normal(0.0, 0.3, (30, 400))   # off the map
     graph = RouteGraph(drives.n_refs, drives.starts, tuple(drives.junctions()))

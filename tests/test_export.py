@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import run
 from vpr_edge.resources import sample_folder
 
 torch = pytest.importorskip("torch")
@@ -211,7 +212,6 @@ def test_quantize_qoperator_writes_qlinear_operators(tmp_path: Path, model_path:
     assert cos.min() > 0.9, cos                           # ~0.95 on Corridor (7-bit weights)
 
     # the int8 model may reuse the codebook of the fp32 model it was made from (not another model's)
-    from test_cli import run
     cb = tmp_path / "cb.npz"
     assert run("build-map", small_refs, "-o", tmp_path / "fp32.npz", "--components", "4",
                "--save-codebook", cb).returncode == 0

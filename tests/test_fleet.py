@@ -7,17 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from vpr_edge.cli import app
+from helpers import invoke
 from vpr_edge.map import load_map
 
 ray = pytest.importorskip("ray")
-
-
-def invoke(*args: object) -> tuple[int, str, str]:
-    res = CliRunner().invoke(app, [str(a) for a in args])
-    return res.exit_code, res.stdout, res.stderr
 
 
 @pytest.fixture(scope="module", autouse=True)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from helpers import invoke
 from vpr_edge.cli import app
 from vpr_edge.encoders import ENCODERS
 from vpr_edge.features import FRONT_ENDS, grey
@@ -125,11 +126,6 @@ def test_pixel_patches_are_seqslam_image(images: list[np.ndarray]) -> None:
 
 
 # ------------------------------------------------------------------------------- the grid through the CLI
-def invoke(*args: object) -> tuple[int, str, str]:
-    res = CliRunner().invoke(app, [str(a) for a in args])
-    return res.exit_code, res.stdout, res.stderr
-
-
 @pytest.fixture(scope="module")
 def gt(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("gt") / "gt.csv"

@@ -7,9 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from vpr_edge.cli import app
+from helpers import invoke
 from vpr_edge.files import read_npz, write_npz
 from vpr_edge.index.encodings import Encodings
 from vpr_edge.index.ivf import IvfIndex, fit_ivf
@@ -18,12 +17,7 @@ from vpr_edge.matchers import MATCHERS, step
 from vpr_edge.matchers.road import RoadMatcher
 
 
-def invoke(*args: object) -> tuple[int, str, str]:
-    res = CliRunner().invoke(app, [str(a) for a in args])
-    return res.exit_code, res.stdout, res.stderr
-
-
-def route(n: int, dim: int, rho: float = 0.9, seed: int = 0) -> np.ndarray:
+def alike_refs(n: int, dim: int, rho: float = 0.9, seed: int = 0) -> np.ndarray:
     """Unit references along a route: each place like the one before."""
     rng = np.random.default_rng(seed)
     x = rng.normal(size=(n, dim)).astype(np.float32)
@@ -33,7 +27,7 @@ def route(n: int, dim: int, rho: float = 0.9, seed: int = 0) -> np.ndarray:
 
 
 def test_index_lists_every_place_once_and_finds_what_an_exhaustive_search_finds() -> None:
-    refs = route(3000, 32)
+    refs = alike_refs(3000, 32)
     stored = Encodings.pack(refs, "int8")
     index = fit_ivf(stored, lists=40)
     assert np.array_equal(np.sort(index.order), np.arange(3000)) and index.offsets[-1] == 3000
@@ -48,7 +42,7 @@ def test_index_lists_every_place_once_and_finds_what_an_exhaustive_search_finds(
 
 
 def test_index_from_arrays_refuses_what_does_not_fit() -> None:
-    index = fit_ivf(Encodings.pack(route(200, 8), "float32"), lists=5)
+    index = fit_ivf(Encodings.pack(alike_refs(200, 8), "float32"), lists=5)
     arrays = index.to_arrays()
     IvfIndex.from_arrays(arrays, 200, 8)
     for bad in ({"index_order": arrays["index_order"][:-1]}, {"index_order": arrays["index_order"] + 500},
@@ -85,10 +79,10 @@ def test_compact_pass_equals_one_pass_per_window() -> None:
         np.testing.assert_allclose(a.h, b.h, atol=1e-5)
 
 
-def planted(n_refs: int, frames: int, noise: float, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def driven_encodings(n_refs: int, frames: int, noise: float, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """References along a route, a vehicle driving part of it at changing speeds with a detour: (refs,
     query encodings, true places (-1 off the map))."""
-    refs = route(n_refs, 64, seed=seed)
+    refs = alike_refs(n_refs, 64, seed=seed)
     rng = np.random.default_rng(seed + 1)
     pos, truth, queries = 100.0, [], []
     for t in range(frames):
@@ -105,7 +99,7 @@ def planted(n_refs: int, frames: int, noise: float, seed: int) -> tuple[np.ndarr
 
 
 def test_searching_around_candidates_answers_as_the_dense_matcher() -> None:
-    refs, queries, truth = planted(5000, 400, noise=1.0, seed=3)
+    refs, queries, truth = driven_encodings(5000, 400, noise=1.0, seed=3)
     stored = Encodings.pack(refs, "int8")
     index = fit_ivf(stored, lists=70)
     answers = {}
@@ -126,7 +120,7 @@ def test_searching_around_candidates_answers_as_the_dense_matcher() -> None:
 
 
 def test_build_map_indexes_and_localize_uses_it(tmp_path: Path) -> None:
-    refs, queries, truth = planted(3000, 300, noise=1.0, seed=4)
+    refs, queries, truth = driven_encodings(3000, 300, noise=1.0, seed=4)
     np.save(tmp_path / "refs.npy", refs)
     np.save(tmp_path / "stream.npy", queries)
     indexed, plain = tmp_path / "i.npz", tmp_path / "p.npz"

@@ -17,6 +17,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from helpers import run
 from vpr_edge.api import FIELDS, Match
 from vpr_edge.errors import VprError
 from vpr_edge.frames.frame import Frame
@@ -267,17 +268,12 @@ def test_view_streams_to_a_listening_viewer(tmp_path: Path) -> None:
     assert got["/answer"] == 5 and got["/reference/image"] == 5 and got["/route/vehicle"] == 5
 
 
-def _cli(*args: str | Path, **kw) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "vpr_edge", *map(str, args)], capture_output=True, text=True,
-                          timeout=600, **kw)
-
-
 @pytest.fixture(scope="module")
 def sample_map(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The bundled sample and a map of its references, as the quick start makes them (no positions)."""
     work = tmp_path_factory.mktemp("live")
-    assert _cli("sample", "corridor", cwd=work).returncode == 0
-    made = _cli("build-map", "corridor/ref", "-o", "m.npz", cwd=work)
+    assert run("sample", "corridor", cwd=work).returncode == 0
+    made = run("build-map", "corridor/ref", "-o", "m.npz", cwd=work)
     assert made.returncode == 0, made.stderr
     return work
 
@@ -287,7 +283,7 @@ def test_localize_rerun_and_mcap_on_the_sample(sample_map: Path) -> None:
     """Each of the sample's 111 frames recorded: a query frame, a reference, a position and a lost flag; the
     MCAP record one answer per frame, at the frames' own times."""
     w = sample_map
-    proc = _cli("localize", "-m", "m.npz", "-s", "corridor/query", "--rerun", "run.rrd", cwd=w)
+    proc = run("localize", "-m", "m.npz", "-s", "corridor/query", "--rerun", "run.rrd", cwd=w)
     assert proc.returncode == 0, proc.stderr
     assert len(proc.stdout.splitlines()) == 112                      # the log still on stdout
     rows = _rows(w / "run.rrd")
@@ -303,8 +299,8 @@ def test_localize_rerun_and_mcap_on_the_sample(sample_map: Path) -> None:
     names = sorted(p.name for p in (w / "corridor" / "query").iterdir())
     (w / "stamps.csv").write_text("frame,stamp\n" + "".join(f"{n},{1_700_000_000 + 0.1 * i:.1f}\n"
                                                              for i, n in enumerate(names)))
-    proc = _cli("localize", "-m", "m.npz", "-s", "corridor/query", "--timestamps", "stamps.csv", "-o", "run.mcap",
-                cwd=w)
+    proc = run("localize", "-m", "m.npz", "-s", "corridor/query", "--timestamps", "stamps.csv", "-o", "run.mcap",
+               cwd=w)
     assert proc.returncode == 0 and proc.stdout == "", proc.stderr        # the answers go to the record
     got, summary = _mcap(w / "run.mcap")
     answers = got["/vpr/answer"]

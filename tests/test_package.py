@@ -3,18 +3,13 @@
 from __future__ import annotations
 
 import ast
-import subprocess
-import sys
 from pathlib import Path
 
+from helpers import run
 from vpr_edge.matchers import MATCHERS
 from vpr_edge.resources import DEFAULT_MODEL_FILE, SMALL_MODEL_FILE, bundled_model, copy_sample, sample_folder
 
 PACKAGE = Path(__file__).resolve().parent.parent / "vpr_edge"
-
-
-def _cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "vpr_edge", *args], capture_output=True, text=True, cwd=cwd)
 
 
 def test_bundled_files_are_inside_the_package() -> None:
@@ -36,7 +31,7 @@ def test_copy_sample_never_writes_over(tmp_path: Path) -> None:
     before = sorted(p.name for p in out.rglob("*"))
     for args, problem in ((["c"], "already exists"), (["missing/c"], "does not exist"),
                           (["d", "--name", "nope"], "unknown sample")):
-        proc = _cli("sample", *args, cwd=tmp_path)
+        proc = run("sample", *args, cwd=tmp_path)
         assert proc.returncode == 2 and problem in proc.stderr, proc.stderr
         assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
     assert sorted(p.name for p in out.rglob("*")) == before and not (tmp_path / "d").exists()
@@ -46,15 +41,15 @@ def test_copy_sample_never_writes_over(tmp_path: Path) -> None:
 def test_python_m_and_list_params(tmp_path: Path) -> None:
     import vpr_edge
 
-    version = _cli("--version", cwd=tmp_path)
+    version = run("--version", cwd=tmp_path)
     assert version.returncode == 0 and version.stdout.strip() == f"vpr-edge {vpr_edge.__version__}"
-    listed = _cli("localize", "--list-params", cwd=tmp_path)
+    listed = run("localize", "--list-params", cwd=tmp_path)
     assert listed.returncode == 0
     for m in MATCHERS.values():
         assert listed.stdout.count(f"\n{m.name} (") + listed.stdout.startswith(f"{m.name} (") == 1
         for key, value in m.params.items():
             assert f"  {key} = {value!r}: {m.definitions[key].meaning}" in listed.stdout
-    assert _cli("evaluate", "--list-params").stdout == listed.stdout
+    assert run("evaluate", "--list-params").stdout == listed.stdout
 
 
 def test_every_parameter_is_defined_once_and_constructors_take_them() -> None:
@@ -109,22 +104,34 @@ def test_no_import_cycles() -> None:
     assert not cycles, cycles
 
 
+def test_no_test_module_imports_another() -> None:
+    """Each test module runs (or skips) on its own: what modules share comes from ``helpers`` (and fixtures from
+    conftest), never from another test module, whose skip (a missing extra) would skip the importer too."""
+    tests = Path(__file__).resolve().parent
+    names = {p.stem for p in tests.glob("*.py")}
+    wrong = []
+    for path in sorted(tests.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            found = [node.module or ""] if isinstance(node, ast.ImportFrom) else \
+                [a.name for a in node.names] if isinstance(node, ast.Import) else []
+            for module in found:
+                head = module.split(".")[0]
+                if head == "tests" or (head in names and (head.startswith("test_") or head == "conftest")):
+                    wrong.append(f"{path.name}: {module}")
+    assert not wrong, wrong
+
+
 def test_docstrings_name_only_what_exists() -> None:
-    """Every ``module.name`` a docstring or comment of the package or of the lab beside it (vpr_edge_bench)
-    cites, whose first part is a module of either, resolves (a renamed or removed module leaves no stale
-    pointer)."""
+    """Every ``module.name`` a docstring or comment of the package or the tools cites, whose first part is a
+    module of the package, resolves (a renamed or removed module leaves no stale pointer)."""
     import importlib
     import pkgutil
     import re
 
     import vpr_edge
-    import vpr_edge_bench
 
     root = Path(vpr_edge.__file__).parent
-    modules = {m.name.rsplit(".", 1)[-1]: m.name for m in pkgutil.walk_packages(vpr_edge_bench.__path__,
-                                                                                 "vpr_edge_bench.")}
-    modules.pop("__main__", None)   # running it runs the experiments' runner
-    modules |= {m.name.rsplit(".", 1)[-1]: m.name for m in pkgutil.walk_packages(vpr_edge.__path__, "vpr_edge.")}
+    modules = {m.name.rsplit(".", 1)[-1]: m.name for m in pkgutil.walk_packages(vpr_edge.__path__, "vpr_edge.")}
     modules["vpr_edge"] = "vpr_edge"
 
     def resolves(ref: str) -> bool:
@@ -140,7 +147,7 @@ def test_docstrings_name_only_what_exists() -> None:
                 return False
         return True
 
-    files = [*root.rglob("*.py"), *Path(vpr_edge_bench.__file__).parent.rglob("*.py")]
+    files = [*root.rglob("*.py"), *(root.parent / "tools").glob("*.py")]
     cited = {ref for f in files for ref in re.findall(r"``([A-Za-z_][\w]*(?:\.[A-Za-z_]\w*)+)``", f.read_text())}
     files_named = {"csv", "json", "npz", "npy", "onnx", "jpg", "png", "gpx", "bag", "mcap", "h5", "yaml"}
     stale = sorted(ref for ref in cited if ref.split(".")[0] in modules and ref.rsplit(".", 1)[-1] not in files_named

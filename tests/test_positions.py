@@ -5,23 +5,17 @@ from __future__ import annotations
 import csv
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers import run, write_video
 from vpr_edge.errors import VprError
 from vpr_edge.map import load_map
 from vpr_edge.positions import Positions, distances, read_csv
 
 NAMES = ["a.jpg", "b.jpg", "c.jpg", "d.jpg"]
-
-
-def run(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "vpr_edge", *map(str, args)], capture_output=True, text=True,
-                          timeout=600)
 
 
 def _pos(coords, frame="local", heading=None) -> Positions:
@@ -135,8 +129,6 @@ def test_append_extends_positions(positioned: Path, small_refs: Path, tmp_path: 
 
 @pytest.mark.slow
 def test_video_frames_carry_their_time(positioned: Path, small_queries: Path, tmp_path: Path) -> None:
-    from test_cli import write_video
-
     video = write_video(tmp_path / "q.avi", small_queries, 5)          # 10 frames a second
     proc = run("localize", "-m", positioned / "map.npz", "-s", video, "--mode", "single")
     assert proc.returncode == 0, proc.stderr
