@@ -122,16 +122,21 @@ def test_no_test_module_imports_another() -> None:
 
 
 def test_docstrings_name_only_what_exists() -> None:
-    """Every ``module.name`` a docstring or comment of the package or the tools cites, whose first part is a
-    module of the package, resolves (a renamed or removed module leaves no stale pointer)."""
+    """Every ``module.name`` a docstring or comment of the package or of the lab beside it (vpr_edge_bench)
+    cites, whose first part is a module of either, resolves (a renamed or removed module leaves no stale
+    pointer)."""
     import importlib
     import pkgutil
     import re
 
     import vpr_edge
+    import vpr_edge_bench
 
     root = Path(vpr_edge.__file__).parent
-    modules = {m.name.rsplit(".", 1)[-1]: m.name for m in pkgutil.walk_packages(vpr_edge.__path__, "vpr_edge.")}
+    modules = {m.name.rsplit(".", 1)[-1]: m.name for m in pkgutil.walk_packages(vpr_edge_bench.__path__,
+                                                                                 "vpr_edge_bench.")}
+    modules.pop("__main__", None)   # running it runs the experiments' runner
+    modules |= {m.name.rsplit(".", 1)[-1]: m.name for m in pkgutil.walk_packages(vpr_edge.__path__, "vpr_edge.")}
     modules["vpr_edge"] = "vpr_edge"
 
     def resolves(ref: str) -> bool:
@@ -147,7 +152,7 @@ def test_docstrings_name_only_what_exists() -> None:
                 return False
         return True
 
-    files = [*root.rglob("*.py"), *(root.parent / "tools").glob("*.py")]
+    files = [*root.rglob("*.py"), *Path(vpr_edge_bench.__file__).parent.rglob("*.py")]
     cited = {ref for f in files for ref in re.findall(r"``([A-Za-z_][\w]*(?:\.[A-Za-z_]\w*)+)``", f.read_text())}
     files_named = {"csv", "json", "npz", "npy", "onnx", "jpg", "png", "gpx", "bag", "mcap", "h5", "yaml"}
     stale = sorted(ref for ref in cited if ref.split(".")[0] in modules and ref.rsplit(".", 1)[-1] not in files_named
