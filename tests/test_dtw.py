@@ -1,10 +1,13 @@
-"""DTW (both variants), best single match and streaming DTW against naive loop implementations."""
+"""DTW (both variants, open ends, hub removal), best single match and streaming DTW against plain loops and on
+planted routes."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from vpr_edge.matchers.dtw import dtw_accumulate, dtw_align
+from helpers import places_at_speeds, planted
+from vpr_edge.matchers import get_matcher
+from vpr_edge.matchers.dtw import dtw_accumulate, dtw_align, remove_hubs
 from vpr_edge.matchers.stream_dtw import StreamingDTW
 
 
@@ -16,8 +19,6 @@ def cosine_similarity(queries: np.ndarray, refs: np.ndarray) -> np.ndarray:
 
 
 def best_match(sim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    from vpr_edge.matchers import get_matcher
-
     result = get_matcher("single").run(sim, k=1)
     return result.refs, result.scores
 
@@ -176,3 +177,38 @@ def test_streaming_dtw_state_does_not_grow() -> None:
         dtw.update(np.zeros(49))
     with pytest.raises(ValueError):
         StreamingDTW(10, decay=1.0)
+
+
+def test_remove_hubs_against_plain_loops() -> None:
+    rng = np.random.default_rng(5)
+    sim = rng.normal(size=(7, 9))
+    want = np.empty_like(sim)
+    for i, row in enumerate(sim):
+        want[i] = (row - row.mean()) / row.std()
+    for j in range(sim.shape[1]):
+        want[:, j] -= want[:, j].mean()
+    np.testing.assert_allclose(remove_hubs(sim), want, atol=1e-12)
+
+
+def test_open_ends_dtw_is_not_caught_by_a_hub() -> None:
+    """A reference alike to every query (stronger than the true matches): without hub removal the path
+    stands on it, with it (the dtw-open preset) the path follows the vehicle."""
+    rng = np.random.default_rng(6)
+    places = places_at_speeds([(1.0, 30), (2.0, 30)], start=40)
+    sim = planted(rng, 200, places, noise=0.3)
+    sim[:, 5] += 1.3
+    res = get_matcher("dtw-open").run(sim)
+    assert np.mean(np.abs(res.refs - places) <= 1) > 0.9
+    parked = get_matcher("dtw-open").with_params(hubs=False).run(sim)
+    assert np.mean(parked.refs == 5) > 0.9
+
+
+@pytest.mark.parametrize("speed", [2.0, 3.0])
+def test_open_ends_dtw_follows_fast_vehicle(speed: float) -> None:
+    rng = np.random.default_rng(int(speed))
+    places = places_at_speeds([(speed, 40)], start=60)
+    sim = planted(rng, 400, places, noise=0.5)
+    res = get_matcher("dtw-open").run(sim)
+    assert np.mean(np.abs(res.refs - places) <= 1) >= 0.85     # the first frames fix the start
+    fixed = get_matcher("dtw").run(sim)
+    assert np.mean(np.abs(fixed.refs - places) <= 1) < 0.5     # fixed ends cannot: the route is partial
