@@ -162,7 +162,7 @@ class RoadMatcher:
         # (``_kept``; ``_cols``, their state columns; ``_vals``, (speeds, columns)), so that on a large map
         # searched around candidates it costs memory for the candidates' neighbourhoods, not for every place.
         # float32: the per-frame passes over (speeds x positions) are memory-bound; halving the bytes halved
-        # the time at 100,000 references (tools/bench_matcher.py)
+        # the time at 100,000 references (python -m vpr_edge_bench bench-matcher)
         self._full: np.ndarray | None = None   # made at the first whole-route frame, kept (with its buffers)
         self._kept: Intervals | None = []      # None: the state is ``_full``
         self._cols = np.zeros(0, np.int64)
