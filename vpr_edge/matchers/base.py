@@ -139,7 +139,8 @@ def run_online(matcher: OnlineMatcher, sim: np.ndarray, k: int = 10, still: np.n
 def run_rows(matcher: OnlineMatcher, rows: Callable[[int, np.ndarray | None], np.ndarray], q: int, r: int,
              k: int = 10, still: np.ndarray | None = None) -> Result:
     """``run_online`` with frame i's similarities to references ``idx`` (None: all R) given by
-    ``rows(i, idx)``, for rows computed on demand (a coarse whole-route search, the ``coarse-check`` experiment of ``vpr_edge_bench``)."""
+    ``rows(i, idx)``, for rows computed on demand (a coarse whole-route search, ``python -m vpr_edge_bench
+    coarse-check``)."""
     if still is not None and len(still) != q:
         raise ValueError(f"need a motion cue per frame: {len(still)} for {q} frames")
     refs = np.empty(q, np.int64)
