@@ -54,6 +54,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--fronts", default=None, help="comma-separated front ends (default: every one cached)")
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--target-precision", type=float, default=TARGET_PRECISION)
+    p.add_argument("--ranges", action="store_true", help="print the ranges over the streams only (docs/results.md)")
     a = p.parse_args(argv)
     return run_checked(__name__, lambda: _run(a))
 
@@ -71,9 +72,10 @@ def _run(a: argparse.Namespace) -> int:
     modes = a.modes.split(",")
     seen: dict[tuple[str, str, str], list[tuple]] = {}   # (dataset, front, mode) -> per-stream figures
     print(f"tolerance {a.tolerance}, target precision {a.target_precision}")
-    print("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
-          "best line @P | line gap | unmapped lost (first) |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    row = (lambda text: None) if a.ranges else (lambda text: print(text, flush=True))   # the per-stream rows
+    row("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
+        "best line @P | line gap | unmapped lost (first) |")
+    row("|---|---|---|---|---|---|---|---|---|---|---|")
     for ds in sorted(d for d in a.cache.iterdir() if d.is_dir() and d.name != "models"):
         fronts = sorted(f.name for f in ds.iterdir() if f.is_dir())
         if a.fronts:
@@ -88,15 +90,15 @@ def _run(a: argparse.Namespace) -> int:
                     r = score(mode, case, a.tolerance, a.target_precision)
                     single = float(case.get("single_r1_tol", np.nan))
                     if f.stem == "foreign":
-                        print(f"| {ds.name} | {front} | {mode} | foreign | - | - | - | - | - | - | "
-                              f"{r.lost_unmapped:.3f} |")
+                        row(f"| {ds.name} | {front} | {mode} | foreign | - | - | - | - | - | - | "
+                            f"{r.lost_unmapped:.3f} |")
                         seen.setdefault((ds.name, front, mode), []).append(("foreign", r.lost_unmapped))
                         continue
                     first = f" ({r.exit_frames[0]:.0f})" if r.exit_frames else ""
                     unm = "-" if np.isnan(r.lost_unmapped) else f"{r.lost_unmapped:.3f}{first}"
-                    print(f"| {ds.name} | {front} | {mode} | {f.stem} | {single:.3f} | {r.recall[1]:.3f} | "
-                          f"{r.answered_right:.3f} | {r.mapped_right:.3f} | {r.best_line_recall:.3f} | "
-                          f"{r.line_gap:.3f} | {unm} |", flush=True)
+                    row(f"| {ds.name} | {front} | {mode} | {f.stem} | {single:.3f} | {r.recall[1]:.3f} | "
+                        f"{r.answered_right:.3f} | {r.mapped_right:.3f} | {r.best_line_recall:.3f} | "
+                        f"{r.line_gap:.3f} | {unm} |")
                     seen.setdefault((ds.name, front, mode), []).append(
                         (f.stem, single, r.recall[1], r.answered_right, r.mapped_right, r.best_line_recall,
                          r.line_gap, unm if f.stem == "detour" else None))
