@@ -1,5 +1,5 @@
 """``descriptors``: the front end of a map built from global descriptors computed elsewhere (a NetVLAD,
-CosPlace, EigenPlaces or MixVPR network; ``frames.descriptors`` reads them). Each place is one D-dim vector,
+CosPlace, EigenPlaces or MixVPR network; ``frames.descriptor_files`` reads them). Each place is one D-dim vector,
 its own single local descriptor (N = 1), encoded as it is (L2-normalised: encoding ``none``); queries must
 be descriptors of the same D from the same network, never images."""
 from __future__ import annotations

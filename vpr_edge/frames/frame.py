@@ -13,7 +13,7 @@ class Frame:
     """One frame of a stream: its position, a name for reports, the RGB image or the decode error, and its
     time in seconds (``stamp``: a video's presentation time, a live source's arrival time (Unix), a folder's
     from a timestamps file; None when unknown). A frame of a descriptor file has no image but its global
-    ``descriptor`` (D,) float32 (``frames.descriptors``)."""
+    ``descriptor`` (D,) float32 (``frames.descriptor_files``)."""
 
     index: int
     name: str

@@ -154,7 +154,7 @@ def open_stream(source: str | os.PathLike[str], stamps: str | os.PathLike[str] |
     """
     text = str(source)
     from vpr_edge.frames.bags import is_bag, open_bag
-    from vpr_edge.frames.descriptors import descriptor_frames, is_descriptor_file
+    from vpr_edge.frames.descriptor_files import descriptor_frames, is_descriptor_file
 
     if is_descriptor_file(text):
         if stamps or topic:
