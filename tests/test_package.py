@@ -24,13 +24,33 @@ def test_bundled_files_are_inside_the_package() -> None:
     assert (sample / "ground_truth.csv").read_text().count("\n") == 112
 
 
+def test_sample_copies_what_it_names_where_it_says(tmp_path: Path) -> None:
+    """``vpr-edge sample corridor`` makes ./corridor holding the Corridor sample and says so in one line; --to
+    names another folder; a name that is no bundled sample is refused before anything is written."""
+    proc = run("sample", "corridor", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == ("copied the bundled sample corridor (the Corridor dataset, Milford 2013: 111 reference "
+                           "and 111 query frames, 160x120) to corridor/: ref/ (111 frames), query/ (111 frames), "
+                           "ground_truth.csv, positions.csv (synthetic, see ReadMe.txt)\n")
+    copied = sorted(p.name for p in (tmp_path / "corridor").iterdir())
+    assert copied == sorted(p.name for p in sample_folder().iterdir())
+    proc = run("sample", "corridor", "--to", "mine", cwd=tmp_path)
+    assert proc.returncode == 0 and "to mine/:" in proc.stderr, proc.stderr
+    assert len(list((tmp_path / "mine" / "query").iterdir())) == 111
+    for args in (["nordland"], ["nordland", "--to", "n"]):
+        proc = run("sample", *args, cwd=tmp_path)
+        assert proc.returncode == 2 and proc.stderr == "vpr-edge: error: unknown sample 'nordland'; choose from " \
+            "corridor\n", proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["corridor", "mine"]
+
+
 def test_copy_sample_never_writes_over(tmp_path: Path) -> None:
-    out = copy_sample(tmp_path / "c")
+    out = copy_sample("corridor", tmp_path / "c")
     assert sorted(p.name for p in out.iterdir()) == ["ReadMe.txt", "ground_truth.csv", "positions.csv", "query",
                                                      "ref"]
     before = sorted(p.name for p in out.rglob("*"))
-    for args, problem in ((["c"], "already exists"), (["missing/c"], "does not exist"),
-                          (["d", "--name", "nope"], "unknown sample")):
+    for args, problem in ((["--to", "c"], "already exists"), (["--to", "missing/c"], "does not exist"),
+                          (["nope", "--to", "d"], "unknown sample")):
         proc = run("sample", *args, cwd=tmp_path)
         assert proc.returncode == 2 and problem in proc.stderr, proc.stderr
         assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr

@@ -17,7 +17,8 @@ SMALL_MODEL_FILE = "efficientnet_lite0_stage5_160x120.onnx"
 MODEL_FILES = {(160, 120): SMALL_MODEL_FILE, (320, 240): LARGE_MODEL_FILE}
 # without a camera frame to go by (build-map chooses by the references' size: features.choice)
 DEFAULT_MODEL_FILE = SMALL_MODEL_FILE
-SAMPLES = ("corridor",)
+# the bundled samples: the name ``vpr-edge sample NAME`` copies (and the folder it makes) -> what it holds
+SAMPLES = {"corridor": "the Corridor dataset, Milford 2013: 111 reference and 111 query frames, 160x120"}
 
 
 def _path(*parts: str) -> Path:
@@ -45,10 +46,12 @@ def sample_folder(name: str = "corridor") -> Path:
     return _path("samples", name)
 
 
-def copy_sample(dest: str | os.PathLike[str], name: str = "corridor") -> Path:
-    """Copy the bundled sample ``name`` to the new folder ``dest`` (refused if it exists: nothing is ever
-    written over); returns ``dest``. The copy is made beside ``dest`` and renamed into place."""
-    dest = Path(dest)
+def copy_sample(name: str = "corridor", dest: str | os.PathLike[str] | None = None) -> Path:
+    """Copy the bundled sample ``name`` to the new folder ``dest`` (default: ``./NAME``; refused if it exists:
+    nothing is ever written over); returns the folder. The copy is made beside ``dest`` and renamed into
+    place. VprError for an unknown sample, before anything is written."""
+    source = sample_folder(name)
+    dest = Path(name if dest is None else dest)
     if dest.exists():
         raise VprError(f"{dest}: already exists; give a new folder name (nothing is written over)")
     if not dest.parent.is_dir():
@@ -56,7 +59,7 @@ def copy_sample(dest: str | os.PathLike[str], name: str = "corridor") -> Path:
     tmp = dest.with_name(f".{dest.name}.tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     try:
-        shutil.copytree(sample_folder(name), tmp)
+        shutil.copytree(source, tmp)
         os.replace(tmp, dest)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
