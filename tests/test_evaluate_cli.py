@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -66,6 +67,28 @@ def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_qu
     lost = round(doc["modes"]["stream"]["lost_mapped"] * 24)   # every frame here is mapped
     assert sum(w["mapped"] for w in why.values()) == lost and all(w["unmapped"] == 0 for w in why.values())
     assert doc["modes"]["single"]["lost_why"] == {} and doc["modes"]["dtw"]["lost_why"] == {}
+
+
+@pytest.mark.slow
+def test_evaluate_counts_the_frames_where_the_map_shows_one_view(tmp_path: Path, small_refs: Path,
+                                                                 small_queries: Path, aligned_gt: Path) -> None:
+    """A map whose drive stood at reference 8 for references 9-13 (the same image again): the aligned frames
+    whose truth is 8-13 (6 of 24) are counted as at one view, in every mode; the console says what counted as
+    correct (the ground truth's one reference a frame, and the tolerance beside it)."""
+    refs = tmp_path / "refs"
+    refs.mkdir()
+    files = sorted(small_refs.glob("*.jpg"))
+    for i, f in enumerate(files):
+        shutil.copy(files[8] if 9 <= i <= 13 else f, refs / f.name)
+    assert run("build-map", refs, "-o", tmp_path / "m.npz", "--components", "4").returncode == 0
+    proc = run("evaluate", "--map", tmp_path / "m.npz", "--queries", small_queries, "--gt", aligned_gt,
+               "--modes", "single,stream", "--json", tmp_path / "r.json")
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert {m["one_view_frames"] for m in doc["modes"].values()} == {6}
+    assert proc.stdout.splitlines()[0].startswith("24 queries (24 of mapped places), 24 references; correct: a "
+                                                  "reference the ground truth lists (up to 1 a query) or within 1 "
+                                                  "of one; encoding ")
 
 
 def test_evaluate_similarity_needs_no_model_nor_torch(tmp_path: Path) -> None:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from enum import Enum
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import typer
 
@@ -20,6 +20,9 @@ from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.matchers.verdict import TARGET_PRECISION
 from vpr_edge.threads import use_threads
 
+if TYPE_CHECKING:   # numpy is imported where the command runs
+    import numpy as np
+
 
 class FeaturesOpt(str, Enum):
     map = "map"
@@ -27,6 +30,15 @@ class FeaturesOpt(str, Enum):
 
 
 FitOpt = Enum("FitOpt", {m: m for m in METHODS}, type=str)   # the calibration fits, by name
+
+
+def counted_correct(truth: np.ndarray | None, tolerance: int) -> str:
+    """What an answer had to be to count as correct, for the console: a reference the ground truth lists (at
+    most how many it lists a query: the truth's own slack, e.g. the frame +-2) or within ``tolerance`` of one,
+    which adds to that slack. ``truth``: (Q, T) the rows scored, -1 padded."""
+    listed = 0 if truth is None or not truth.size else int((truth >= 0).sum(axis=1).max())
+    what = f"correct: a reference the ground truth lists (up to {listed} a query)"
+    return what + (f" or within {tolerance} of one" if tolerance else ", exactly")
 
 
 @app.command("evaluate")
@@ -58,7 +70,9 @@ def evaluate_cmd(
     modes: Optional[str] = typer.Option(None, help="Comma-separated matchers to run on the same "
                                         "similarity matrix: " + ", ".join(MATCHERS) + " (default: all that "
                                         "apply; svm with a map built with --svm)."),
-    tolerance: int = typer.Option(1, min=0, help="Frames of slack around the true references (thesis: 1)."),
+    tolerance: int = typer.Option(1, min=0, help="Frames of slack around each reference the ground truth lists "
+                                  "(thesis: 1): added to the truth's own, so a truth that lists the frame +-2 "
+                                  "counts +-3 at 1."),
     window: Optional[int] = typer.Option(None, min=0, help="stream: local search window, as localize's "
                                          "(default %d; 0 = every reference every frame)."
                                          % MATCHERS["stream"].params["window"]),
@@ -159,7 +173,7 @@ def evaluate_cmd(
                 np.save(f, sim.astype(np.float32), allow_pickle=False)
         ms = result.encode_ms
         typer.echo(f"{sim.shape[0]} queries ({result.n_mapped} of mapped places), {sim.shape[1]} references; "
-                   f"correct within {tolerance} frame(s); encoding {'-' if ms != ms else f'{ms:.1f}'} ms/frame"
+                   f"{counted_correct(result.truth, tolerance)}; encoding {'-' if ms != ms else f'{ms:.1f}'} ms/frame"
                    + (f"; model {result.front['model']} ({result.front['form']})" if result.front and
                       "model" in result.front else ""))
         typer.echo(report.table(result.reports))
