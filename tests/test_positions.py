@@ -13,7 +13,8 @@ import pytest
 from helpers import run, write_video
 from vpr_edge.errors import VprError
 from vpr_edge.map import load_map
-from vpr_edge.positions import Positions, distances, read_csv
+from vpr_edge.positions import Positions, distances
+from vpr_edge.positions.csv import read_csv
 
 NAMES = ["a.jpg", "b.jpg", "c.jpg", "d.jpg"]
 
@@ -225,7 +226,7 @@ def _jpeg_with_gps(path: Path, lat: float, lon: float, direction: float | None =
 
 def test_positions_from_exif_gps(tmp_path: Path) -> None:
     pytest.importorskip("exifread")
-    from vpr_edge.positions import from_exif
+    from vpr_edge.positions.exif import from_exif
 
     files = [tmp_path / f"{i}.jpg" for i in range(4)]
     _jpeg_with_gps(files[0], 52.5, 13.25, direction=90.0)
@@ -309,7 +310,7 @@ T_GPX = 1767225600.0     # 2026-01-01T00:00:00Z
 
 def test_gpx_track_matched_by_time_worked_by_hand(tmp_path: Path) -> None:
     pytest.importorskip("gpxpy")
-    from vpr_edge.positions import from_gpx
+    from vpr_edge.positions.gpx import from_gpx
 
     (tmp_path / "t.gpx").write_text(GPX)
     p = from_gpx(tmp_path / "t.gpx", np.array([0.0, 5.0, 10.0, 15.0]) + T_GPX)

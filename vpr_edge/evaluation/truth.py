@@ -24,7 +24,7 @@ import numpy as np
 from vpr_edge.errors import VprError
 from vpr_edge.files import atomic_output, read_csv_rows
 from vpr_edge.positions import Positions, distances
-from vpr_edge.positions import read_csv as read_positions
+from vpr_edge.positions.csv import read_csv
 
 
 def pad(sets: Sequence[Sequence[int]]) -> np.ndarray:
@@ -109,7 +109,7 @@ def load_matrix(path: str | os.PathLike[str]) -> np.ndarray:
 def from_positions(refs_csv: str | os.PathLike[str], queries_csv: str | os.PathLike[str],
                    radius_m: float, chunk: int = 512) -> np.ndarray:
     """References within ``radius_m`` metres of each query -> (Q, T) padded truth."""
-    refs, queries = read_positions(refs_csv), read_positions(queries_csv)
+    refs, queries = read_csv(refs_csv), read_csv(queries_csv)
     refs.check_frame(queries, str(queries_csv), f"{refs_csv}'s (the same columns needed)")
     return within(queries, refs, radius_m, chunk)
 
@@ -160,7 +160,7 @@ class Truth:
             if map_positions is None:
                 raise VprError("--gt-positions map ...: the references' positions come from --map, which must be "
                                "built with --positions")
-            queries = read_positions(self.positions[1])
+            queries = read_csv(self.positions[1])
             map_positions.check_frame(queries, str(self.positions[1]), "the map's frame's")
             return within(queries, map_positions, self.radius), None
         if self.positions is not None:

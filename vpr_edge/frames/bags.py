@@ -2,24 +2,20 @@
 MCAP files, read with ``rosbags`` (pure Python, no ROS install; the ``ros`` extra).
 
 Images come from one ``sensor_msgs/Image`` or ``sensor_msgs/CompressedImage`` topic, stamped with their
-header's time; positions from a ``sensor_msgs/NavSatFix`` (lat, lon, alt) or ``nav_msgs/Odometry`` (x, y, z and
-the yaw of its orientation) topic, interpolated in time to each image's stamp.
+header's time (a bag's positions: ``positions.bag``, through ``open_reader`` and ``topic_connections``).
 """
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.errors import VprError, warn
+from vpr_edge.errors import InputError, VprError, warn
 from vpr_edge.frames.frame import MIN_SIDE, Frame
-from vpr_edge.positions import Positions, at_times
 
 IMAGE_TYPES = ("sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/Image")
-POSITION_TYPES = ("sensor_msgs/msg/NavSatFix", "nav_msgs/msg/Odometry")
 _CHANNELS = {"rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4, "mono8": 1, "8UC1": 1, "8UC3": 3}
 
 
@@ -29,7 +25,8 @@ def is_bag(path: str | os.PathLike[str]) -> bool:
     return (p.is_file() and p.suffix.lower() in (".bag", ".mcap")) or (p.is_dir() and (p / "metadata.yaml").is_file())
 
 
-def _reader(path: Path):
+def open_reader(path: Path):
+    """The bag opened with rosbags' ``AnyReader`` (VprError: rosbags missing, or not a readable bag)."""
     try:
         from rosbags.highlevel import AnyReader
     except ImportError:
@@ -42,12 +39,13 @@ def _reader(path: Path):
     return reader
 
 
-def _connections(reader, path: Path, topic: str | None, kinds: tuple[str, ...], option: str) -> list:
-    """The connections of ``topic``, checked to carry one of ``kinds`` (VprError listing what the bag has)."""
+def topic_connections(reader, path: Path, topic: str | None, kinds: tuple[str, ...], given_as: str) -> list:
+    """The connections of ``topic``, checked to carry one of ``kinds`` (VprError listing what the bag has;
+    ``InputError`` naming the input ``given_as`` when no topic is given)."""
     if not topic:
         have = sorted({c.topic for c in reader.connections if c.msgtype in kinds})
-        raise VprError(f"{path}: a ROS bag needs {option} TOPIC (its {' / '.join(k.split('/')[-1] for k in kinds)} "
-                       f"topics: {', '.join(have) or 'none'})")
+        raise InputError("{path}: a ROS bag needs {opt.%s} TOPIC (its {kinds} topics: {have})" % given_as,
+                         path=path, kinds=" / ".join(k.split("/")[-1] for k in kinds), have=", ".join(have) or "none")
     found = [c for c in reader.connections if c.topic == topic]
     if not found:
         topics = sorted({c.topic for c in reader.connections})
@@ -58,7 +56,8 @@ def _connections(reader, path: Path, topic: str | None, kinds: tuple[str, ...], 
     return found
 
 
-def _stamp(msg, t_ns: int) -> float:
+def header_stamp(msg, t_ns: int) -> float:
+    """A message's header time in seconds, else its recording time ``t_ns`` (nanoseconds)."""
     header = getattr(msg, "header", None)
     if header is not None:
         s = header.stamp
@@ -98,9 +97,9 @@ def open_bag(path: str | os.PathLike[str], topic: str | None) -> tuple[Iterator[
     """The image frames of ``topic`` in the bag, in time order, each named ``BAG#N`` and stamped with its
     header's time (seconds); checked before any frame is read (VprError: no such topic, another type)."""
     path = Path(path)
-    reader = _reader(path)
+    reader = open_reader(path)
     try:
-        conns = _connections(reader, path, topic, IMAGE_TYPES, "--topic")
+        conns = topic_connections(reader, path, topic, IMAGE_TYPES, "topic")
     except BaseException:
         reader.close()
         raise
@@ -115,7 +114,7 @@ def open_bag(path: str | os.PathLike[str], topic: str | None) -> tuple[Iterator[
                 except Exception as e:    # a damaged message: reported and skipped like a bad frame
                     yield Frame(i, name, None, f"{path}#{i}: cannot deserialize ({str(e)[:80]})", t_ns * 1e-9)
                     continue
-                stamp = _stamp(msg, t_ns)
+                stamp = header_stamp(msg, t_ns)
                 rgb = _rgb(msg, conn.msgtype)
                 if isinstance(rgb, str):
                     yield Frame(i, name, None, f"{path}#{i}: {rgb}", stamp)
@@ -131,40 +130,6 @@ def open_bag(path: str | os.PathLike[str], topic: str | None) -> tuple[Iterator[
         reader.close()
         raise VprError(f"{path}: topic {topic} holds no messages")
     return frames(), count
-
-
-def _yaw_deg(q) -> float:
-    """A quaternion's yaw as a heading: degrees clockwise from +y (0 = along +y, 90 = along +x)."""
-    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))   # from +x, anticlockwise
-    return (90.0 - math.degrees(yaw)) % 360.0
-
-
-def bag_positions(path: str | os.PathLike[str], topic: str, stamps: np.ndarray) -> Positions:
-    """Positions at the times ``stamps`` (seconds) from a NavSatFix or Odometry ``topic``: each coordinate
-    interpolated linearly in time between the fixes either side (VprError for a stamp before the first fix
-    or after the last, or a topic with no usable fix)."""
-    path = Path(path)
-    reader = _reader(path)
-    try:
-        (conn, *_) = _connections(reader, path, topic, POSITION_TYPES, "--positions-topic")
-        geo = conn.msgtype.endswith("NavSatFix")
-        rows = []
-        for c, t_ns, raw in reader.messages(connections=[conn]):
-            msg = reader.deserialize(raw, c.msgtype)
-            if geo:
-                if int(getattr(msg.status, "status", 0)) < 0:   # STATUS_NO_FIX
-                    continue
-                rows.append((_stamp(msg, t_ns), msg.latitude, msg.longitude, msg.altitude, math.nan))
-            else:
-                p = msg.pose.pose.position
-                rows.append((_stamp(msg, t_ns), p.x, p.y, p.z, _yaw_deg(msg.pose.pose.orientation)))
-    finally:
-        reader.close()
-    fix = np.array(sorted(rows), np.float64) if rows else np.zeros((0, 5))
-    fix = fix[np.isfinite(fix[:, :3]).all(axis=1)]
-    if len(fix) == 0:
-        raise VprError(f"{path}: topic {topic} holds no usable position")
-    return at_times(fix, stamps, "wgs84" if geo else "local", str(path), f"topic {topic}")
 
 
 def extract_images(path: str | os.PathLike[str], topic: str | None, folder: Path

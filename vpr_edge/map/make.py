@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.frames.bags import bag_positions, extract_images, is_bag
+from vpr_edge.frames.bags import extract_images, is_bag
 from vpr_edge.encoders import ENCODERS, Encoder, FitSettings, load_codebook
 from vpr_edge.encoders.registry import DEFAULT_ENCODING
 from vpr_edge.errors import VprError, warn
@@ -35,8 +35,11 @@ from vpr_edge.map.build import Progress, build_map, check_codebook_fits, map_fro
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map, save_map
 from vpr_edge.map.model import PlaceMap
-from vpr_edge.positions import Positions, from_exif, from_gpx, require_gpxpy
-from vpr_edge.positions import read_csv as read_positions
+from vpr_edge.positions import Positions
+from vpr_edge.positions.bag import bag_positions
+from vpr_edge.positions.csv import read_csv as read_positions
+from vpr_edge.positions.exif import from_exif
+from vpr_edge.positions.gpx import from_gpx, require_gpxpy
 from vpr_edge.threads import use_threads
 
 
