@@ -162,7 +162,7 @@ def test_csv_readers_take_any_bytes(tmp_path: Path, data: bytes) -> None:
             read(path)
         except VprError as e:
             assert str(path) in str(e) and "\n" not in str(e)
-    from vpr_edge.frames.descriptors import read_descriptors
+    from vpr_edge.frames.descriptor_files import read_descriptors
 
     for name in ("d.npy", "d.h5"):   # the same bytes as a descriptor file
         (tmp_path / name).write_bytes(data)
@@ -242,7 +242,7 @@ def test_codebook_mutations(valid_codebook: tuple[dict, dict], tmp_path: Path, e
 def test_descriptor_npy_files(tmp_path: Path, dtype: str, shape: list, fill: float) -> None:
     """Descriptor .npy files of any dtype (objects included, saved with pickle), shape and fill: read as a
     (N, D) float array of finite rows, or one VprError line naming the file; never unpickled."""
-    from vpr_edge.frames.descriptors import read_descriptors
+    from vpr_edge.frames.descriptor_files import read_descriptors
 
     path = tmp_path / "d.npy"
     kind = np.dtype(dtype).kind
