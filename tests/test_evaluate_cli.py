@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 from helpers import assert_one_line_error, run
-from vpr_edge.evaluation.truth import write_ground_truth
+from vpr_edge.evaluation.run import map_same_view
+from vpr_edge.evaluation.truth import one_view, write_ground_truth
+from vpr_edge.map import load_map
 
 JSON_KEYS = {"recall_at_1", "recall_at_5", "recall_at_10", "auc", "ap", "precision_at_full_recall",
              "recall_at_full_precision", "median_error", "lost_unmapped", "lost_mapped", "ms_per_frame", "lock_frames",
@@ -61,7 +63,11 @@ def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_qu
     assert np.load(sim).shape == (24, 24)
     assert "R@1" in proc.stdout and "seqslam-online" in proc.stdout
     assert "away from where the map shows one view" in proc.stdout       # a map: its views are known
-    assert all(m["one_view_frames"] >= 0 for m in doc["modes"].values())
+    # the mapped frames whose truth lies where the map shows one view: read from the map's own references, the
+    # same count for every mode
+    same_view = map_same_view(load_map(eval_map).stored.in_order())
+    one_view_frames = int(one_view(np.array([[i] for i in range(24)]), same_view).sum())
+    assert {m["one_view_frames"] for m in doc["modes"].values()} == {one_view_frames}
     why = doc["modes"]["stream"]["lost_why"]   # the stream matcher says why each lost frame is lost
     assert set(why) == {"weak-view", "no-trajectory", "ambiguous"} and "lost frames by why" in proc.stdout
     lost = round(doc["modes"]["stream"]["lost_mapped"] * 24)   # every frame here is mapped

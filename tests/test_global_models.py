@@ -147,31 +147,37 @@ def test_global_model_localize_evaluate_and_localizer_agree(tmp_path: Path, smal
     assert res.exit_code == 0, res.stderr
 
 
-def _refused(tmp_path: Path, args: list[str], *needles: str) -> None:
+def _refused(tmp_path: Path, args: list[str], *needles: str, first: str = "vpr-edge: error: ") -> None:
+    """The command exits 2 with one error line that starts with ``first`` and holds every needle; nothing
+    written."""
     before = sorted(p.name for p in tmp_path.iterdir())
     res = CliRunner().invoke(app, args)
     assert res.exit_code == 2, res.stderr
     lines = [ln for ln in res.stderr.splitlines() if ln.startswith("vpr-edge: error:")]
     assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert lines[0].startswith(first), (first, lines[0])
     for n in needles:
         assert n in lines[0], lines[0]
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
-@pytest.mark.parametrize("extra, needles", [
-    ([], ["no vpr_edge metadata", "--mean"]),                                             # conventions unknown
-    (["--mean", "0.5,0.5", "--std", "imagenet"], ["--mean", "three numbers"]),           # wrong length
-    (["--mean", "imagenet", "--std", "0,1,1"], ["--std", "positive"]),
-    (["--mean", "imagenet", "--std", "imagenet", "--input-size", "320x240"], ["contradicts", "64x48"]),
-    (["--mean", "imagenet", "--std", "imagenet", "--layout", "nhwc"], ["channels, not 3"]),
-    (["--mean", "imagenet", "--std", "imagenet", "--input-size", "64by48"], ["WIDTHxHEIGHT"]),
-    (["--mean", "imagenet", "--std", "imagenet", "--encoding", "ifv"], ["global-descriptor", "--encoding ifv"]),
+@pytest.mark.parametrize("extra, named, needles", [
+    ([], "model", ["no vpr_edge metadata", "--mean"]),                                    # conventions unknown
+    (["--mean", "0.5,0.5", "--std", "imagenet"], "option", ["--mean", "three numbers"]),   # wrong length
+    (["--mean", "imagenet", "--std", "0,1,1"], "option", ["--std", "positive"]),
+    (["--mean", "imagenet", "--std", "imagenet", "--input-size", "320x240"], "model", ["contradicts", "64x48"]),
+    (["--mean", "imagenet", "--std", "imagenet", "--layout", "nhwc"], "model", ["channels, not 3"]),
+    (["--mean", "imagenet", "--std", "imagenet", "--input-size", "64by48"], "option", ["WIDTHxHEIGHT"]),
+    (["--mean", "imagenet", "--std", "imagenet", "--encoding", "ifv"], "model", ["global-descriptor", "--encoding ifv"]),
 ])
 def test_bad_conventions_refused(tmp_path: Path, small_refs: Path, models: dict[str, Path], extra: list[str],
-                                 needles: list[str]) -> None:
-    _refused(tmp_path, ["build-map", str(small_refs), "-o", str(tmp_path / "m.npz"), "--model",
-                        str(models["nchw"]), *extra], str(models["nchw"]) if not extra or "ifv" in extra
-             or "contradicts" in needles or "channels, not 3" in needles else "", *needles)
+                                 named: str, needles: list[str]) -> None:
+    """Each refusal names what is wrong: the model file where the model and the options disagree, the option
+    where its value alone is wrong."""
+    model = str(models["nchw"])
+    first = f"vpr-edge: error: {model}: " if named == "model" else "vpr-edge: error: --"
+    _refused(tmp_path, ["build-map", str(small_refs), "-o", str(tmp_path / "m.npz"), "--model", model, *extra],
+             *needles, first=first)
 
 
 def test_output_of_rank_3_refused(tmp_path: Path, small_refs: Path, models: dict[str, Path]) -> None:
