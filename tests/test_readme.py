@@ -2,6 +2,7 @@
 runs, the parameter table is the registry's, and nothing in them points at one machine or one issue."""
 from __future__ import annotations
 
+import csv
 import os
 import re
 import subprocess
@@ -49,7 +50,15 @@ def test_quick_start_and_every_python_block_run_as_written(tmp_path: Path) -> No
         proc = subprocess.run(["bash", "-c", command], cwd=tmp_path, capture_output=True, text=True, env=_env(),
                               timeout=300)
         assert proc.returncode == 0, (command, proc.stderr)
-    assert (tmp_path / "corridor.matches.csv").read_text().count("\n") == 112
+    written = (tmp_path / "corridor.matches.csv").read_text()
+    assert written.count("\n") == 112
+    # the README's example line is the line the quick start writes for that frame (its score to within the
+    # rounding a machine's thread count moves: 2e-5 measured)
+    (example,) = [b for b in blocks(section(README, "Quick start"), "") if b.startswith("frame_index")]
+    want = dict(zip(*(line.split(",") for line in example.strip().splitlines())))
+    got = next(row for row in csv.DictReader(written.splitlines()) if row["frame_index"] == want["frame_index"])
+    assert {k: v for k, v in got.items() if k != "score"} == {k: v for k, v in want.items() if k != "score"}
+    assert float(got["score"]) == pytest.approx(float(want["score"]), abs=1e-3)
     python = blocks(README, "python")
     assert python, "the README has a Python example"
     for code in python:
@@ -76,6 +85,94 @@ def test_the_two_commands_are_what_ci_runs() -> None:
     assert steps[-3:] == ["vpr-edge sample corridor", "vpr-edge build-map corridor/ref -o corridor.map.npz",
                           "vpr-edge localize -m corridor.map.npz -s corridor/query -o corridor.matches.csv"]
     assert " && ".join(steps[-3:]) in ci
+
+
+def readme_commands(text: str) -> list[list[str]]:
+    """Every command the README shows, as words: each ``&&`` step of each line of its bash blocks (comments
+    dropped), and each inline code span that starts with a command or an option (wrapped lines joined)."""
+    pieces = [step for block in blocks(text, "bash") for line in block.splitlines()
+              for step in line.split("  #")[0].split("&&")]
+    prose = re.sub(r"```.*?```", "", text, flags=re.S)
+    pieces += [" ".join(span.split()) for span in re.findall(r"`([^`]+)`", prose)]
+    return [piece.split() for piece in pieces if piece.strip()]
+
+
+def _help(program: str, command: str) -> str:
+    """The -h text of ``vpr-edge COMMAND`` or ``python -m vpr_edge_bench COMMAND``."""
+    if program == "vpr-edge":
+        from typer.testing import CliRunner
+
+        from vpr_edge.cli import app
+
+        res = CliRunner().invoke(app, [command, "-h"], terminal_width=200)
+        assert res.exit_code == 0, (program, command, res.stderr)
+        return res.stdout
+    proc = subprocess.run([sys.executable, "-m", program, command, "-h"], cwd=ROOT, capture_output=True, text=True,
+                          env=_env(), timeout=120)
+    assert proc.returncode == 0, (program, command, proc.stderr)
+    return proc.stdout
+
+
+def _lists(help_text: str, option: str) -> bool:
+    """``option`` is one of the options a -h text lists (at a line's start, alone or after a short form)."""
+    return re.search(rf"^\s*(?:-\w+, )*{re.escape(option)}(?=[\s,=/]|$)", help_text, re.M) is not None
+
+
+def test_every_readme_command_names_options_its_command_has() -> None:
+    """Each vpr-edge or vpr_edge_bench command the README shows (a block's line, a code span such as
+    ``localize --threads 1``) names only options its -h lists; an option shown alone (``--min-confidence``)
+    is one some vpr-edge command, or an experiment the README runs, lists."""
+    from vpr_edge.cli import app
+
+    commands = [c.name for c in app.registered_commands]
+    shown: list[tuple[tuple[str, str] | None, list[str]]] = []
+    for words in readme_commands(README):
+        if words[:3] == ["python", "-m", "vpr_edge_bench"] and len(words) > 3:
+            shown.append((("vpr_edge_bench", words[3]), words[4:]))
+        elif words[:3] == ["python", "-m", "vpr_edge"] and len(words) > 3 and words[3] in commands:
+            shown.append((("vpr-edge", words[3]), words[4:]))
+        elif words[0] == "vpr-edge" and len(words) > 1 and words[1] in commands:
+            shown.append((("vpr-edge", words[1]), words[2:]))
+        elif words[0] in commands:
+            shown.append((("vpr-edge", words[0]), words[1:]))
+        elif words[0].startswith("-"):
+            shown.append((None, words))
+    assert len(shown) > 30, shown
+    helps = {key: _help(*key) for key in {k for k, _ in shown if k is not None} | {("vpr-edge", c) for c in commands}}
+    wrong = []
+    for key, args in shown:
+        for option in (a.split("=")[0] for a in args if re.fullmatch(r"--?[A-Za-z][\w-]*(=.*)?", a)):
+            where = [helps[key]] if key is not None else list(helps.values())
+            if not any(_lists(h, option) for h in where):
+                wrong.append(f"{' '.join(key) if key else 'any command'}: {option}")
+    assert not wrong, wrong
+
+
+def test_every_extra_the_readme_names_is_in_pyproject() -> None:
+    import tomllib
+
+    extras = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"])
+    named = {e for group in re.findall(r"\.\[([\w,]+)\]", README) for e in group.split(",")}
+    named |= set(re.findall(r"^\| `(\w+)` \|", README, re.M))          # the extras table's first column
+    assert named and named <= extras, named - extras
+
+
+def test_the_results_command_reads_only_what_it_is_given(tmp_path: Path) -> None:
+    """The README's command that re-measures its results table, run as written from the repository root with
+    DATASETS an empty folder: it reads its datasets from DATASETS (it names DATASETS/corridor as what is
+    missing, in one line, exit 2, before any work), so in a fresh clone it needs nothing the README does not
+    say; nothing is written."""
+    (command,) = {" ".join(w) for w in readme_commands(section(README, "Results"))
+                  if w[:4] == ["python", "-m", "vpr_edge_bench", "results"]}
+    assert "--datasets DATASETS" in command
+    argv = command.replace("DATASETS", str(tmp_path / "data")).replace("out/results", str(tmp_path / "out")).split()
+    (tmp_path / "data").mkdir()
+    before = (ROOT / "README.md").read_bytes()
+    proc = subprocess.run([sys.executable, *argv[1:]], cwd=ROOT, capture_output=True, text=True, env=_env(),
+                          timeout=120)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert str(tmp_path / "data" / "corridor") in proc.stderr, proc.stderr
+    assert not (tmp_path / "out").exists() and (ROOT / "README.md").read_bytes() == before
 
 
 def test_readme_is_a_front_door() -> None:
