@@ -165,7 +165,7 @@ CASES = [
     Case("bm-positions-unparsable", BM + " --positions {w}/pos_bad.csv", ("pos_bad.csv", "'north' is not a number")),
     Case("bm-positions-missing", BM + " --positions {w}/nopos.csv", ("nopos.csv", "cannot read positions")),
     Case("bm-append-positions-to-plain-map", "build-map again={w}/refs -o {w}/good.npz --append --positions {w}/pos_two.csv",
-         ("pos_two.csv", "two frames")),
+         ("good.npz", "no positions", "--positions cannot be given to --append")),   # before the file is read
     Case("loc-bag-no-rosbags", "localize -m {w}/good.npz -s {w}/d.bag --topic /camera/image",
          ("d.bag", "vpr-edge[ros]"), hide=("rosbags",)),
     Case("loc-bag-wrong-topic", "localize -m {w}/good.npz -s {w}/d.bag --topic /gps/fix", ("d.bag", "NavSatFix"),

@@ -10,7 +10,8 @@ import cv2
 import pytest
 
 from helpers import run
-from vpr_edge.errors import VprError
+from vpr_edge.cli.common import flag
+from vpr_edge.errors import InputError, VprError
 from vpr_edge.features import choice
 from vpr_edge.features.cnn import FeatureExtractor
 from vpr_edge.map import load_map, map_front_end
@@ -88,8 +89,9 @@ def test_build_map_chooses_by_camera_and_localize_by_precision(tmp_path: Path, s
     assert fast.path.name == int8_form(SMALL_MODEL_FILE) and fast.form == "int8: asked for"
     given = map_front_end(pm, out, bundled_model(int8_form(SMALL_MODEL_FILE)))
     assert given.form == "int8: given"
-    with pytest.raises(VprError, match="pass --model with the map's model"):
+    with pytest.raises(InputError, match="pass model with the map's model") as wrong:   # named as the library does
         map_front_end(pm, out, bundled_model(int8_form(LARGE_MODEL_FILE)))
+    assert wrong.value.inputs == ("model",) and wrong.value.line(flag).endswith("pass --model with the map's model")
     for precision in ("fp32", "int8", "auto"):
         proc = run("localize", "-m", out, "-s", small_queries, "--precision", precision, "--mode", "single")
         assert proc.returncode == 0 and len(proc.stdout.splitlines()) == 25, proc.stderr

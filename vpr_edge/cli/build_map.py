@@ -1,4 +1,5 @@
-"""``vpr-edge build-map``: options in, ``map.make.plan_map`` and ``write_map`` called, a summary line out."""
+"""``vpr-edge build-map``: options in, ``map.plan.plan_map`` (every check, no work), ``map.gather.gather`` and
+``write_map`` (the work) called, a summary line out."""
 from __future__ import annotations
 
 import sys
@@ -20,7 +21,10 @@ from vpr_edge.encoders.registry import DEFAULT_ENCODING
 from vpr_edge.features.registry import DEFAULT_FRONT_END
 from vpr_edge.index.encodings import DEFAULT_STORAGE
 from vpr_edge.index.ivf import IVF_MIN_REFS
-from vpr_edge.map.make import BuildOptions, plan_map, write_map
+from vpr_edge.map.gather import gather
+from vpr_edge.map.make import write_map
+from vpr_edge.map.options import BuildOptions
+from vpr_edge.map.plan import plan_map
 
 _FIT = FitSettings()
 
@@ -136,7 +140,7 @@ def build_map_cmd(
         if index not in (None, "ivf", "none"):
             raise VprError(f"--index {index}: choose ivf or none")
         plan = plan_map(refs, output_path(out), options)
-        with typer.progressbar(length=len(plan.files), label="extracting", file=sys.stderr,
-                               hidden=not sys.stderr.isatty()) as bar:
-            line = write_map(plan, progress=bar.update)
+        with gather(plan) as inputs, typer.progressbar(length=len(inputs.files), label="extracting",
+                                                       file=sys.stderr, hidden=not sys.stderr.isatty()) as bar:
+            line = write_map(inputs, progress=bar.update)
         typer.echo(line, err=True)

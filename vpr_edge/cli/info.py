@@ -1,4 +1,4 @@
-"""``vpr-edge info``: a map's size and settings as JSON (``map.make.summary``)."""
+"""``vpr-edge info``: a map's size and settings as JSON (``map.summary.summary``)."""
 from __future__ import annotations
 
 import json
@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from vpr_edge.cli.common import app, user_errors
-from vpr_edge.map.make import summary
+from vpr_edge.map.summary import summary
 
 
 @app.command("info")

@@ -17,7 +17,7 @@ from urllib.parse import urlparse
 import numpy as np
 
 from vpr_edge.encoders import Encoder
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, VprError
 from vpr_edge.features import FrontEnd
 
 SHARD_BATCHES = 8       # batches a task describes and encodes (a shard of SHARD_BATCHES x batch_size frames)
@@ -30,17 +30,20 @@ def check_ray(address: str) -> None:
     try:
         import ray  # noqa: F401
     except ImportError:
-        raise VprError(f"--ray {address}: building on Ray needs Ray: pip install 'vpr-edge[ray]'") from None
+        raise InputError("{opt.ray} {address}: building on Ray needs Ray: pip install 'vpr-edge[ray]'",
+                         address=address) from None
     if address in ("local", "auto"):
         return
     url = urlparse(address if "://" in address else f"ray://{address}")
     if not url.hostname or url.port is None:
-        raise VprError(f"--ray {address}: expected local, auto or HOST:PORT (ray://HOST:PORT for Ray Client)")
+        raise InputError("{opt.ray} {address}: expected local, auto or HOST:PORT (ray://HOST:PORT for Ray Client)",
+                         address=address)
     try:
         with socket.create_connection((url.hostname, url.port), timeout=CONNECT_TIMEOUT_S):
             pass
     except OSError as e:
-        raise VprError(f"--ray {address}: no Ray cluster answers there ({e.strerror or e})") from None
+        raise InputError("{opt.ray} {address}: no Ray cluster answers there ({why})", address=address,
+                         why=e.strerror or e) from None
 
 
 def _connect(address: str):
@@ -53,7 +56,8 @@ def _connect(address: str):
             else:
                 ray.init(address=address, log_to_driver=False, configure_logging=False)
         except Exception as e:   # noqa: BLE001 - Ray raises many kinds; each is one line here
-            raise VprError(f"--ray {address}: cannot join the Ray cluster ({str(e).splitlines()[0][:160]})") from None
+            raise InputError("{opt.ray} {address}: cannot join the Ray cluster ({why})", address=address,
+                             why=str(e).splitlines()[0][:160]) from None
     return ray
 
 
@@ -102,11 +106,11 @@ def encode_on_ray(address: str, files: Sequence[Path], order: np.ndarray, front:
         cause = getattr(e, "cause", None)
         if isinstance(cause, VprError):
             raise VprError(str(cause)) from None
-        raise VprError(f"--ray {address}: a task failed on a worker ({str(e).splitlines()[0][:160]}); nothing "
-                       f"written") from None
+        raise InputError("{opt.ray} {address}: a task failed on a worker ({why}); nothing written",
+                         address=address, why=str(e).splitlines()[0][:160]) from None
     except RayError as e:
-        raise VprError(f"--ray {address}: a Ray worker failed mid-build ({type(e).__name__}); nothing "
-                       f"written") from None
+        raise InputError("{opt.ray} {address}: a Ray worker failed mid-build ({why}); nothing written",
+                         address=address, why=type(e).__name__) from None
     finally:
         for ref in pending:
             ray.cancel(ref, force=True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, VprError
 from vpr_edge.features import FrontEnd, make_front_end
 from vpr_edge.features.choice import DEFAULT_PRECISION, bundled_for_sha256, choose_form, int8_sibling
 from vpr_edge.features.cnn import resolve_model
@@ -48,8 +48,8 @@ def _front_end(place_map: PlaceMap, map_path: str | os.PathLike[str], model: Pat
     name = place_map.features["name"]
     if name != "cnn":
         if model is not None:
-            raise VprError(f"{map_path}: map was built with the {name} front end, which takes no model; "
-                           f"drop --model")
+            raise InputError("{map}: map was built with the {name} front end, which takes no model; drop {opt.model}",
+                             map=map_path, name=name)
         return make_front_end(name, spec=place_map.features)
     path, recorded = map_model_path(place_map, model), place_map.meta.get("model_sha256")
     # an int8 form to run instead: only its session is opened (the fp32 file is checked by its hash)
@@ -61,21 +61,22 @@ def _front_end(place_map: PlaceMap, map_path: str | os.PathLike[str], model: Pat
             if fast.source_fingerprint == recorded:
                 return fast.as_run(why)
             if precision == "int8":
-                raise VprError(f"{chosen}: not quantised from {path.name} (its metadata names another "
-                               f"source); --precision int8 cannot be met")
+                raise InputError("{chosen}: not quantised from {name} (its metadata names another source); "
+                                 "{opt.precision} int8 cannot be met", chosen=chosen, name=path.name)
             why = f"fp32: {chosen.name} was quantised from another model"
         return make_front_end("cnn", path, threads, spec=place_map.features).as_run(why)
     front = make_front_end("cnn", path, threads, spec=place_map.features)
     if front.fingerprint == recorded and front.source_fingerprint is None:
         return front.as_run(choose_form(path, precision)[1])    # fp32 (VprError: int8 asked, no int8 form)
     if front.source_fingerprint is not None and front.source_fingerprint == recorded:
-        return front.as_run("int8: given")      # an int8 form of the map's model, named by --model
+        return front.as_run("int8: given")      # an int8 form of the map's model, given as the model
     if front.fingerprint != recorded:
         m, given = place_map.meta.get("model", {}), front.identity()
         info = given.get("model", {})
-        raise VprError(
-            f"{map_path}: map was built with model {m.get('backbone')}/{m.get('tap')} "
-            f"({place_map.meta.get('model_file')}, sha256 {str(place_map.meta.get('model_sha256'))[:12]}) but "
-            f"{given.get('model_path', '?')} is {info.get('backbone')}/{info.get('tap')} "
-            f"(sha256 {front.fingerprint[:12]}); pass --model with the map's model")
+        raise InputError(
+            "{map}: map was built with model {built} ({file}, sha256 {sha}) but {given} is {other} (sha256 "
+            "{given_sha}); pass {opt.model} with the map's model", map=map_path,
+            built=f"{m.get('backbone')}/{m.get('tap')}", file=place_map.meta.get("model_file"),
+            sha=str(place_map.meta.get("model_sha256"))[:12], given=given.get("model_path", "?"),
+            other=f"{info.get('backbone')}/{info.get('tap')}", given_sha=front.fingerprint[:12])
     return front

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.encoders import Encoder
-from vpr_edge.errors import VprError, warn
+from vpr_edge.errors import InputError, Message, VprError, warn
 from vpr_edge.index.encodings import Encodings
 from vpr_edge.index.ivf import IvfIndex
 from vpr_edge.map.drives import Drives
@@ -80,7 +80,7 @@ class PlaceMap:
         """VprError naming the map file ``source`` unless this map can give ``kind`` scores (``svm``: a map
         built with build-map --svm); checked before the work by every caller that scores a map."""
         if kind == "svm" and self.svm is None:
-            raise VprError(f"{source}: mode svm needs a map built with build-map --svm")
+            raise InputError("{source}: mode svm needs a map built with build-map {opt.svm}", source=source)
 
     def scores(self, queries: np.ndarray, kind: str = "cosine", rows: np.ndarray | None = None) -> np.ndarray:
         """(B, R): ``cosine`` similarities, or ``svm`` decision values (VprError if the map has no SVM); of
@@ -88,7 +88,7 @@ class PlaceMap:
         if kind == "cosine":
             return self.similarity(queries, rows)
         if self.svm is None:
-            raise VprError("this map has no SVM (build it with build-map --svm)")
+            raise InputError("this map has no SVM (build it with build-map {opt.svm})")
         self.similarity(queries[:0], rows)  # dimension check
         return self.svm.scores(queries, rows)
 
@@ -111,12 +111,13 @@ class PlaceMap:
                            "model and codebook")
         drives = self.drives.then(more.drives)
         if (self.positions is None) != (more.positions is None):
-            raise VprError("the map has positions: give --positions for the appended drives too"
-                           if self.positions is not None else
-                           "the map has no positions: appended drives cannot bring some")
+            raise InputError("the map has positions: give {opt.positions} for the appended drives too"
+                             if self.positions is not None else
+                             "the map has no positions: appended drives cannot bring some")
         positions = None if self.positions is None else self.positions.concat(more.positions)
         if self.svm is not None:
-            warn("the map's SVM is dropped by --append (rebuild with --svm to train it on the whole route)")
+            warn(Message("the map's SVM is dropped by {opt.append} (rebuild with {opt.svm} to train it on the "
+                         "whole route)"))
         meta = {k: v for k, v in self.meta.items() if k != "svm"}
         return PlaceMap(self.stored.concat(more.stored), self.names + more.names, self.encoder,
                         meta | {"vpr_edge_version": more.meta.get("vpr_edge_version")}, positions=positions,
