@@ -193,7 +193,7 @@ DESCRIPTOR_BLOCK = 65_536   # descriptors encoded and stored a block at a time (
 def map_from_descriptors(values: np.ndarray | Sequence[np.ndarray], names: list[str],
                          source: str | Sequence[str], storage: str = DEFAULT_STORAGE) -> PlaceMap:
     """The map of places given as global descriptors ``values`` (R, D) computed elsewhere (a memory-mapped
-    ``.npy`` or an hloc ``.h5``, ``frames.descriptors``; or several such arrays, one per drive, taken one
+    ``.npy`` or an hloc ``.h5``, ``frames.descriptor_files``; or several such arrays, one per drive, taken one
     after another, each from its ``source``): the ``descriptors`` front end of D dims, each vector
     L2-normalised (encoding ``none``) and stored as ``storage``, a block at a time, so that memory holds the
     stored map and one block whatever the route's length."""

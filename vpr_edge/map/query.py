@@ -14,7 +14,7 @@ from vpr_edge.features import FrontEnd
 from vpr_edge.features.base import check_finite
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.features.descriptors import GivenDescriptors
-from vpr_edge.frames.descriptors import descriptor_dims, is_descriptor_file
+from vpr_edge.frames.descriptor_files import descriptor_dims, is_descriptor_file
 from vpr_edge.frames.frame import Frame
 from vpr_edge.map.front import map_front_end
 from vpr_edge.map.io import load_map
