@@ -51,8 +51,9 @@ def test_choose_form_by_precision_and_cpu(tmp_path: Path, monkeypatch: pytest.Mo
     shutil.copy(fp32, alone)
     with pytest.raises(VprError, match="no int8 form"):
         choice.choose_form(alone, "int8")
-    with pytest.raises(VprError, match="--precision"):
+    with pytest.raises(VprError, match="^precision fp16: choose from") as wrong:   # the library's name
         choice.choose_form(fp32, "fp16")
+    assert wrong.value.line(flag).startswith("--precision fp16: choose from")   # the CLI's
 
 
 def test_cpu_flags_read_from_cpuinfo(monkeypatch: pytest.MonkeyPatch) -> None:

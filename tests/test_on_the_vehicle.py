@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from vpr_edge.cli.common import flag
 from vpr_edge.api import FIELDS, Match
 from vpr_edge.errors import VprError
 from vpr_edge.frames.frame import Frame
@@ -86,7 +87,8 @@ def test_limits_stop_reading_the_source() -> None:
             yield Frame(i, str(i), None, "x")
 
     limited = Limited(source(), max_frames=7)
-    assert len(list(limited)) == 7 and read == list(range(7)) and limited.reason == "--max-frames 7"
+    assert len(list(limited)) == 7 and read == list(range(7)) and str(limited.reason) == "max_frames 7"
+    assert limited.reason.line(flag) == "--max-frames 7"   # the CLI's words
     now = [0.0]
 
     def clock() -> float:
@@ -95,7 +97,7 @@ def test_limits_stop_reading_the_source() -> None:
 
     read.clear()
     timed = Limited(source(), duration=3.5, clock=clock)
-    assert len(list(timed)) == 3 and timed.reason == "--duration 3.5 s"
+    assert len(list(timed)) == 3 and timed.reason.line(flag) == "--duration 3.5 s"
     whole = Limited(iter([Frame(0, "a", None, "x")]), max_frames=5)
     assert len(list(whole)) == 1 and whole.reason is None
 

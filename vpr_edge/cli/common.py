@@ -47,10 +47,16 @@ PrecisionOpt = Enum("PrecisionOpt", {name: name for name in PRECISIONS}, type=st
 EncodingOpt = Enum("EncodingOpt", {name: name for name in ENCODERS}, type=str)  # type: ignore[misc]
 
 
+# the library's inputs whose option is not their name with dashes: ``Source.pixels`` is ``--features pixels``,
+# a matcher's ``params`` are each ``--param KEY=VALUE``, bench's ``max_threads`` is ``--threads``
+# (``Truth.positions`` is said ``gt_positions``, apart from a map's positions: ``--gt-positions`` as it is)
+FLAGS = {"pixels": "--features pixels", "params": "--param", "max_threads": "--threads"}
+
+
 def flag(name: str) -> str:
     """The option that gives the library's input ``name`` on the command line: ``positions_topic`` ->
-    ``--positions-topic`` (``errors.InputError`` and every ``Message`` are said with these)."""
-    return "--" + name.replace("_", "-")
+    ``--positions-topic``, or ``FLAGS[name]`` (``errors.InputError`` and every ``Message`` are said with these)."""
+    return FLAGS.get(name) or "--" + name.replace("_", "-")
 
 
 @contextlib.contextmanager

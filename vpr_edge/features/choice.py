@@ -7,7 +7,7 @@ import platform
 from functools import lru_cache
 from pathlib import Path
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, VprError
 from vpr_edge.resources import MODEL_FILES, bundled_model, int8_form
 
 PRECISIONS = ("fp32", "int8", "auto")
@@ -73,7 +73,8 @@ def choose_form(fp32: Path, precision: str = DEFAULT_PRECISION) -> tuple[Path, s
     has int8 dot products and the form exists, fp32 keeps the model, int8 demands the form (VprError if
     there is none). Returns (path, reason), e.g. (X.int8.onnx, "int8: AVX512-VNNI")."""
     if precision not in PRECISIONS:
-        raise VprError(f"--precision {precision}: choose from {', '.join(PRECISIONS)}")
+        raise InputError("{opt.precision} {precision}: choose from {names}", precision=precision,
+                         names=", ".join(PRECISIONS))
     if precision == "fp32":
         return fp32, "fp32: asked for"
     sibling = int8_sibling(fp32)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.errors import VprError, warn
+from vpr_edge.errors import InputError, Message, VprError, warn
 from vpr_edge.features.conventions import GivenConventions, InputConventions
 from vpr_edge.features.resize import RESIZE, content_cells, fit_to_input
 from vpr_edge.files import file_sha256
@@ -109,7 +109,7 @@ class FeatureExtractor:
 
         self.path = Path(model_path)
         if not self.path.is_file():
-            raise VprError(f"{self.path}: model file not found (pass --model PATH)")
+            raise InputError("{path}: model file not found (pass {opt.model} PATH)", path=self.path)
         ort.set_default_logger_severity(3)   # errors only: no warnings of its own on the tool's stderr
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = max(0, int(threads))
@@ -132,8 +132,8 @@ class FeatureExtractor:
         if raw is not None:
             if stated is not None or (isinstance(conventions, GivenConventions) and conventions.given):
                 given = conventions.options() if isinstance(conventions, GivenConventions) else ["the map's"]
-                raise VprError(f"{self.path}: the model records its input conventions in its vpr_edge metadata; "
-                               f"drop {', '.join(given)}")
+                raise InputError("{path}: the model records its input conventions in its vpr_edge metadata; "
+                                 "drop {given}", path=self.path, given=Message.join(given))
             info = _checked_info(self.path, raw)
             self.conventions = InputConventions.from_record(info, str(self.path))
             self.stated = False
@@ -165,9 +165,10 @@ class FeatureExtractor:
         try:
             shape = self.feature_maps(blank).shape
         except Exception as e:  # onnxruntime's own errors: an input that contradicts the model
-            raise VprError(f"{self.path}: the model does not run on a {self.conventions.width}x"
-                           f"{self.conventions.height} {self.conventions.layout} input "
-                           f"({str(e).splitlines()[0][:120]}); check --input-size and --layout") from None
+            raise InputError("{path}: the model does not run on a {w}x{h} {layout} input ({why}); check "
+                             "{opt.input_size} and {opt.layout}", path=self.path, w=self.conventions.width,
+                             h=self.conventions.height, layout=self.conventions.layout,
+                             why=str(e).splitlines()[0][:120]) from None
         grid = (1, 1) if self.output == "global" else (int(shape[3]), int(shape[2]))
         return {"schema": MODEL_SCHEMA, "backbone": self.path.stem, "tap": self.session.get_outputs()[0].name,
                 "output": self.output, "channels": int(shape[1]), "grid_width": grid[0], "grid_height": grid[1],
@@ -238,9 +239,10 @@ class FeatureExtractor:
     def preprocess(self, rgb: np.ndarray) -> np.ndarray:
         """RGB uint8 (H, W, 3) -> normalised float32 (3, input_height, input_width)."""
         if 4 * rgb.shape[1] < self.size[0] or 4 * rgb.shape[0] < self.size[1]:
-            warn(f"{rgb.shape[1]}x{rgb.shape[0]} images are upsampled more than 4x per side to the model's "
-                 f"{self.size[0]}x{self.size[1]} input ({self.path.name}); a model with a smaller input suits them"
-                 + (f" (bundled: --model {bundled_model(SMALL_MODEL_FILE)})" if self.size[0] > 160 else ""))
+            warn(Message(f"{rgb.shape[1]}x{rgb.shape[0]} images are upsampled more than 4x per side to the model's "
+                         f"{self.size[0]}x{self.size[1]} input ({{name}}); a model with a smaller input suits them"
+                         + (" (bundled: {opt.model} {small})" if self.size[0] > 160 else ""),
+                         name=self.path.name, small=bundled_model(SMALL_MODEL_FILE)))
         x = fit_to_input(rgb, self.size, self.resize, self._fill)
         out = np.empty((3,) + x.shape[:2], np.float32)
         for c, src in enumerate(self._planes):  # one plane at a time, in place: 4x faster than float temporaries

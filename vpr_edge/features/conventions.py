@@ -11,13 +11,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, Message, VprError
 
 LAYOUTS = {"nchw": "batch, channels, height, width (PyTorch's)", "nhwc": "batch, height, width, channels (TF's)"}
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
-NORMALISATIONS = {"imagenet": (IMAGENET_MEAN, IMAGENET_STD)}   # names --mean / --std also take
-OPTIONS = "--input-size WxH, --mean and --std; --bgr and --layout nhwc where the model takes those"
+NORMALISATIONS = {"imagenet": (IMAGENET_MEAN, IMAGENET_STD)}   # names mean / std also take
+OPTIONS = Message("{opt.input_size} WxH, {opt.mean} and {opt.std}; {opt.bgr} and {opt.layout} nhwc where the "
+                  "model takes those")
 
 
 @dataclass(frozen=True)
@@ -41,11 +42,11 @@ class InputConventions:
             v = getattr(self, key)
             if not (isinstance(v, tuple) and len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
                                                                and math.isfinite(x) for x in v)):
-                raise VprError(f"--{key} must be three finite numbers (one per channel), got {v!r}")
+                raise InputError(f"{{opt.{key}}} must be three finite numbers (one per channel), got {{v!r}}", v=v)
         if min(self.std) <= 0:
-            raise VprError(f"--std must be positive, got {self.std!r}")
+            raise InputError("{opt.std} must be positive, got {std!r}", std=self.std)
         if self.layout not in LAYOUTS:
-            raise VprError(f"--layout {self.layout!r}: choose from {', '.join(LAYOUTS)}")
+            raise InputError("{opt.layout} {layout!r}: choose from {names}", layout=self.layout, names=", ".join(LAYOUTS))
 
     def describe(self) -> dict:
         """The JSON a map records (``from_record`` reads it back)."""
@@ -65,25 +66,26 @@ class InputConventions:
 
 
 def parse_size(text: str) -> tuple[int, int]:
-    """``"WxH"`` -> (width, height); VprError naming ``--input-size`` otherwise."""
+    """``"WxH"`` -> (width, height); InputError naming ``input_size`` otherwise."""
     parts = text.lower().split("x")
     if len(parts) != 2 or not all(p.strip().isdigit() and int(p) > 0 for p in parts):
-        raise VprError(f"--input-size {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 320x240")
+        raise InputError("{opt.input_size} {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 320x240", text=text)
     return int(parts[0]), int(parts[1])
 
 
 def parse_triple(text: str, option: str) -> tuple[float, float, float]:
-    """``"a,b,c"`` or a name of ``NORMALISATIONS`` -> three numbers; VprError naming ``option`` otherwise."""
+    """``"a,b,c"`` or a name of ``NORMALISATIONS`` -> three numbers; InputError naming ``option`` (``mean`` or
+    ``std``) otherwise."""
     name = text.strip().lower()
     if name in NORMALISATIONS:
-        return NORMALISATIONS[name][0 if option == "--mean" else 1]
+        return NORMALISATIONS[name][0 if option == "mean" else 1]
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
     if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise VprError(f"{option} {text!r}: expected three numbers, one per channel on the [0, 1] scale "
-                       f"(e.g. 0.485,0.456,0.406), or {', '.join(NORMALISATIONS)}")
+        raise InputError(f"{{opt.{option}}} {{text!r}}: expected three numbers, one per channel on the [0, 1] scale "
+                         "(e.g. 0.485,0.456,0.406), or {names}", text=text, names=", ".join(NORMALISATIONS))
     return values  # type: ignore[return-value]
 
 
@@ -102,20 +104,22 @@ class GivenConventions:
     def given(self) -> bool:
         return any(v not in (None, False) for v in (self.size, self.mean, self.std, self.bgr, self.layout))
 
-    def options(self) -> list[str]:
-        """The options stated, by name (for messages)."""
-        return [k for k, v in (("--input-size", self.size), ("--mean", self.mean), ("--std", self.std),
-                               ("--bgr", self.bgr or None), ("--layout", self.layout)) if v is not None]
+    def options(self) -> list[Message]:
+        """The options stated, each ``{opt.NAME}`` (for messages)."""
+        return [Message(f"{{opt.{k}}}") for k, v in (("input_size", self.size), ("mean", self.mean),
+                                                     ("std", self.std), ("bgr", self.bgr or None),
+                                                     ("layout", self.layout)) if v is not None]
 
     def resolve(self, input_shape: list, source: str) -> InputConventions:
         """The conventions, checked against the model's input shape (B, 3, H, W) / (B, H, W, 3), whose
-        fixed sizes fill in an unstated ``--input-size``; VprError naming ``source`` and the options missing
+        fixed sizes fill in an unstated ``input_size``; InputError naming ``source`` and the options missing
         or contradicting the model."""
         if self.mean is None or self.std is None:
-            missing = [k for k, v in (("--mean", self.mean), ("--std", self.std)) if v is None]
-            raise VprError(f"{source}: the model has no vpr_edge metadata and {' and '.join(missing)} "
-                           f"{'is' if len(missing) == 1 else 'are'} not given: state its input conventions "
-                           f"({OPTIONS}), or export it with vpr_edge_export")
+            missing = [Message(f"{{opt.{k}}}") for k, v in (("mean", self.mean), ("std", self.std)) if v is None]
+            raise InputError("{source}: the model has no vpr_edge metadata and {missing} {verb} not given: state its "
+                             "input conventions ({options}), or export it with vpr_edge_export", source=source,
+                             missing=Message.join(missing, " and "), verb="is" if len(missing) == 1 else "are",
+                             options=OPTIONS)
         shape = list(input_shape)
         if len(shape) != 4:
             raise VprError(f"{source}: model input has rank {len(shape)} ({shape}); an image input is "
@@ -123,16 +127,18 @@ class GivenConventions:
         layout = self.layout or _layout_of(shape)
         channels, h, w = (shape[1], shape[2], shape[3]) if layout == "nchw" else (shape[3], shape[1], shape[2])
         if isinstance(channels, int) and channels != 3:
-            raise VprError(f"{source}: --layout {layout} reads the model's input {shape} as {channels} channels, "
-                           f"not 3" + (" (try --layout nhwc)" if layout == "nchw" else " (try --layout nchw)"))
+            raise InputError("{source}: {opt.layout} {layout} reads the model's input {shape} as {channels} channels, "
+                             "not 3 (try {opt.layout} {other})", source=source, layout=layout, shape=shape,
+                             channels=channels, other="nhwc" if layout == "nchw" else "nchw")
         fixed = (w, h) if isinstance(w, int) and isinstance(h, int) else None
         if self.size is None and fixed is None:
-            raise VprError(f"{source}: the model's input size is not fixed ({shape}): give --input-size WxH")
+            raise InputError("{source}: the model's input size is not fixed ({shape}): give {opt.input_size} WxH",
+                             source=source, shape=shape)
         size = parse_size(self.size) if self.size is not None else fixed
         if fixed is not None and size != fixed:
-            raise VprError(f"{source}: --input-size {size[0]}x{size[1]} contradicts the model's fixed input "
-                           f"{fixed[0]}x{fixed[1]} ({shape})")
-        return InputConventions(size[0], size[1], parse_triple(self.mean, "--mean"), parse_triple(self.std, "--std"),
+            raise InputError("{source}: {opt.input_size} {w}x{h} contradicts the model's fixed input {fw}x{fh} ({shape})",
+                             source=source, w=size[0], h=size[1], fw=fixed[0], fh=fixed[1], shape=shape)
+        return InputConventions(size[0], size[1], parse_triple(self.mean, "mean"), parse_triple(self.std, "std"),
                                 self.bgr, layout)
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, VprError
 from vpr_edge.features.base import FrontEnd
 from vpr_edge.features.conventions import GivenConventions
 
@@ -45,7 +45,7 @@ def make_front_end(name: str, model: Path | None = None, threads: int = 0, spec:
         stated = InputConventions.from_record(recorded, "the map's input conventions") if recorded else conventions
         return FeatureExtractor(resolve_model(model), threads, resize, stated)
     if model is not None:
-        raise VprError(f"{model}: front end {name} takes no model; drop --model")
+        raise InputError("{model}: front end {name} takes no model; drop {opt.model}", model=model, name=name)
     try:
         if name == "hog":
             from vpr_edge.features.hog import Hog

@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from vpr_edge.errors import VprError, warn
+from vpr_edge.errors import InputError, VprError, warn
 from vpr_edge.frames.frame import MIN_SIDE, Frame
 
 IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm"})
@@ -158,24 +158,28 @@ def open_stream(source: str | os.PathLike[str], stamps: str | os.PathLike[str] |
 
     if is_descriptor_file(text):
         if stamps or topic:
-            raise VprError(f"{text}: --timestamps and --topic apply to images; a descriptor file is frames in order")
+            raise InputError("{text}: {opt.timestamps} and {opt.topic} apply to images; a descriptor file is frames "
+                             "in order", text=text)
         return descriptor_frames(text)
     if is_bag(text):
         if stamps:
-            raise VprError(f"{stamps}: --timestamps applies to a folder of frames; {text} stamps its own frames")
+            raise InputError("{stamps}: {opt.timestamps} applies to a folder of frames; {text} stamps its own frames",
+                             stamps=stamps, text=text)
         return open_bag(text, topic)
     if topic:
-        raise VprError(f"{text}: --topic applies to a ROS bag or MCAP file, not to this source")
+        raise InputError("{text}: {opt.topic} applies to a ROS bag or MCAP file, not to this source", text=text)
     if text.isdigit() and not Path(text).exists() or text.startswith("/dev/video") or "://" in text:
         if stamps:
-            raise VprError(f"{stamps}: --timestamps applies to a folder of frames; {text} is stamped as it arrives")
+            raise InputError("{stamps}: {opt.timestamps} applies to a folder of frames; {text} is stamped as it "
+                             "arrives", stamps=stamps, text=text)
         return _live(text)
     source = Path(source)
     if source.is_dir():
         files = list_images(source)
         return _folder_frames(files, read_stamps(stamps, [f.name for f in files]) if stamps else None), len(files)
     if stamps:
-        raise VprError(f"{stamps}: --timestamps applies to a folder of frames; {source} stamps its own frames")
+        raise InputError("{stamps}: {opt.timestamps} applies to a folder of frames; {source} stamps its own frames",
+                         stamps=stamps, source=source)
     if source.is_file() and source.suffix.lower() in VIDEO_SUFFIXES:
         return _video(source)
     if source.is_file():
