@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, VprError
 from vpr_edge.files import atomic_output
 
 CALIBRATION_SCHEMA = 1
@@ -146,7 +146,7 @@ def _read(path: str | os.PathLike[str]) -> dict:
     except json.JSONDecodeError as e:
         raise VprError(f"{path}: not a vpr-edge calibration (not JSON: {e})") from None
     if not isinstance(doc, dict) or doc.get("kind") != "calibration":
-        raise VprError(f"{path}: not a vpr-edge calibration (evaluate --save-calibration writes one)")
+        raise InputError("{path}: not a vpr-edge calibration (evaluate {opt.save_calibration} writes one)", path=path)
     if doc.get("schema") != CALIBRATION_SCHEMA:
         raise VprError(f"{path}: calibration schema {doc.get('schema')} is not supported (this vpr-edge reads "
                        f"{CALIBRATION_SCHEMA})")
@@ -172,8 +172,8 @@ def _curve(path: str | os.PathLike[str], modes: dict, mode: str) -> Curve:
     """Mode ``mode``'s curve out of a file's ``modes`` (``_read``), every field checked."""
     if mode not in modes:
         have = ", ".join(modes) or "none"
-        raise VprError(f"{path}: no calibration for mode {mode} (it has {have}); run evaluate --modes {mode} "
-                       f"--save-calibration")
+        raise InputError("{path}: no calibration for mode {mode} (it has {have}); run evaluate {opt.modes} {mode} "
+                         "{opt.save_calibration}", path=path, mode=mode, have=have)
     m = modes[mode]
     try:
         x, y = np.asarray(m["scores"], np.float64), np.asarray(m["confidence"], np.float64)

@@ -11,7 +11,7 @@ import warnings
 import numpy as np
 
 from vpr_edge.encoders.base import FitSettings, Pca
-from vpr_edge.errors import VprError, warn
+from vpr_edge.errors import InputError, VprError, warn
 
 
 def require_sklearn() -> None:
@@ -25,8 +25,8 @@ def require_sklearn() -> None:
     except (ImportError, ValueError):
         found = False
     if not found:
-        raise VprError("fitting a codebook needs scikit-learn (sklearn is missing): pip install 'vpr-edge[fit]', "
-                       "or pass --codebook FILE")
+        raise InputError("fitting a codebook needs scikit-learn (sklearn is missing): pip install 'vpr-edge[fit]', "
+                         "or pass {opt.codebook} FILE")
     threading.Thread(target=_import_sklearn, daemon=True, name="import-sklearn").start()
 
 

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError
 from vpr_edge.evaluation.scoring import ModeReport
 from vpr_edge.files import atomic_output
 from vpr_edge.positions import Positions
@@ -112,11 +112,11 @@ def write_answers(path: str | os.PathLike[str], reports: dict[str, ModeReport]) 
 
 
 def require_matplotlib() -> None:
-    """Raise VprError unless matplotlib can be imported (checked before any work)."""
+    """Raise InputError unless matplotlib can be imported (checked before any work)."""
     try:
         import matplotlib  # noqa: F401
     except ImportError:
-        raise VprError("--plot needs matplotlib: pip install 'vpr-edge[plot]'") from None
+        raise InputError("{opt.plot} needs matplotlib: pip install 'vpr-edge[plot]'") from None
 
 
 def figure_title(shape: tuple[int, int], *, map_path: str | os.PathLike[str] | None = None,

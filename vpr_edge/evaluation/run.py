@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.calibration import Curve
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, VprError
 from vpr_edge.evaluation import sources
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
 from vpr_edge.evaluation.truth import Truth, one_view
@@ -46,12 +46,12 @@ class Source:
     def check(self) -> None:
         """VprError unless exactly one source is complete (called before any work)."""
         if sum([self.similarity is not None, self.map is not None, self.pixels]) != 1:
-            raise VprError("give one source: --similarity S.npy, or --map MAP --queries Q, or --features "
-                           "pixels --refs R --queries Q")
+            raise InputError("give one source: {opt.similarity} S.npy, or {opt.map} MAP {opt.queries} Q, or "
+                             "{opt.pixels} {opt.refs} R {opt.queries} Q")
         if self.similarity is None and self.queries is None:
-            raise VprError("--queries is needed with --map or --features pixels")
+            raise InputError("{opt.queries} is needed with {opt.map} or {opt.pixels}")
         if self.pixels and self.refs is None:
-            raise VprError("--features pixels needs --refs (the reference folder)")
+            raise InputError("{opt.pixels} needs {opt.refs} (the reference folder)")
 
     @property
     def name(self) -> str:
@@ -128,10 +128,10 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
         query = MapQuery(source.map, source.model, use_threads(source.threads), source.precision)
     chosen = default_matchers(source, query and query.map) if matchers is None else matchers
     if not chosen:
-        raise VprError("--modes names no matcher")
+        raise InputError("{opt.modes} names no matcher")
     with_svm = any(m.scores == "svm" for m in chosen.values())
     if with_svm and query is None:
-        raise VprError("mode svm needs --map (a map built with build-map --svm)")
+        raise InputError("mode svm needs {opt.map} (a map built with build-map {opt.svm})")
     rows, gt_shape = truth.load(query.map.positions if query is not None else None,
                                 None if query is None else query.map.labels)
     if query is not None:   # the queries are the map's kind and the ground truth fits it, before any encoding

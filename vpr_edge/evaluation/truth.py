@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, VprError
 from vpr_edge.files import atomic_output, read_csv_rows
 from vpr_edge.positions import Positions, distances
 from vpr_edge.positions.csv import read_csv
@@ -82,8 +82,8 @@ def _resolver(labels: Callable[[], dict[str, int]] | None, path: str | os.PathLi
 
     def resolve(token: str, line: int) -> int:
         if labels is None:
-            raise VprError(f"{path}: line {line}: reference {token!r} is a name; names are read against a map "
-                           f"(--map)")
+            raise InputError("{path}: line {line}: reference {token!r} is a name; names are read against a map "
+                             "({opt.map})", path=path, line=line, token=token)
         if not table:
             table.update(labels())
         if token not in table:
@@ -155,11 +155,11 @@ class Truth:
         ``positions`` ("map", QUERIES.csv) the references' positions are ``map_positions`` (the map's own);
         a CSV's references named ``DRIVE/NAME`` are looked up in ``labels()`` (the map's)."""
         if (self.gt is None) == (self.positions is None):
-            raise VprError("give ground truth: --gt FILE (.csv or .npy) or --gt-positions REFS.csv QUERIES.csv")
+            raise InputError("give ground truth: {opt.gt} FILE (.csv or .npy) or {opt.gt_positions} REFS.csv QUERIES.csv")
         if self.positions is not None and str(self.positions[0]) == "map":
             if map_positions is None:
-                raise VprError("--gt-positions map ...: the references' positions come from --map, which must be "
-                               "built with --positions")
+                raise InputError("{opt.gt_positions} map ...: the references' positions come from {opt.map}, which "
+                                 "must be built with {opt.positions}")
             queries = read_csv(self.positions[1])
             map_positions.check_frame(queries, str(self.positions[1]), "the map's frame's")
             return within(queries, map_positions, self.radius), None

@@ -32,7 +32,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, Message, VprError
 from vpr_edge.matchers.likeness import LikenessSample
 from vpr_edge.matchers.motion import MEMORY, MotionCue, cue_at, route_stands, stillness
 from vpr_edge.matchers.params import Param, read_items
@@ -220,7 +220,9 @@ class Matcher:
             try:
                 self.with_params(**out).run(np.random.default_rng(0).random((3, 3)), 1)
             except ValueError as e:
-                raise ValueError(f"--param {' '.join(items)}: {self.name}: {e}") from None
+                said = e.args[0] if len(e.args) == 1 and isinstance(e.args[0], Message) else str(e)
+                raise ValueError(Message("{opt.params} {items}: {name}: {e}", items=" ".join(items), name=self.name,
+                                         e=said)) from None
         return out
 
     def stream(self, n_refs: int) -> OnlineMatcher:
@@ -289,7 +291,7 @@ def check_lost_line(min_confidence: float | None) -> float | None:
     """A lost threshold given by the user (``--min-confidence``), checked: VprError unless it is a finite
     number (None: not given)."""
     if min_confidence is not None and not math.isfinite(min_confidence):
-        raise VprError(f"--min-confidence {min_confidence}: the lost threshold must be a finite number")
+        raise InputError("{opt.min_confidence} {v}: the lost threshold must be a finite number", v=min_confidence)
     return min_confidence
 
 
@@ -297,7 +299,8 @@ def check_target_precision(target: float | None) -> float | None:
     """A target precision given by the user (``--target-precision``), checked: VprError unless it lies in
     (0, 1) (None: not given)."""
     if target is not None and not (math.isfinite(target) and 0.0 < target < 1.0):
-        raise VprError(f"--target-precision {target}: the target precision must lie between 0 and 1 (exclusive)")
+        raise InputError("{opt.target_precision} {v}: the target precision must lie between 0 and 1 (exclusive)",
+                         v=target)
     return None if target is None else float(target)
 
 

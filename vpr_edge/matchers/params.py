@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from vpr_edge.errors import Message
 from vpr_edge.matchers.motion import MEMORY
 
 
@@ -108,8 +109,8 @@ def read_items(items: Sequence[str], current: dict[str, Any], owner: str) -> dic
         _, sep, text = item.partition("=")
         key = param_key(item)
         if not sep or key not in current:
-            raise ValueError(f"--param {item!r}: {owner} takes KEY=VALUE with KEY one of "
-                             f"{', '.join(current) or '(none)'}")
+            raise ValueError(Message("{opt.params} {item!r}: {owner} takes KEY=VALUE with KEY one of {keys}",
+                                     item=item, owner=owner, keys=", ".join(current) or "(none)"))
         out[key] = _read_value(text.strip(), current[key], item)
     return out
 
@@ -136,4 +137,5 @@ def _read_value(text: str, default: Any, item: str) -> Any:
         return text
     except ValueError:
         kind = {"bool": "a bool (true/false)", "int": "an int", "float": "a number"}.get(type(default).__name__, "text")
-        raise ValueError(f"--param {item!r}: {text!r} is not {kind}") from None
+        raise ValueError(Message("{opt.params} {item!r}: {text!r} is not {kind}", item=item, text=text,
+                                 kind=kind)) from None

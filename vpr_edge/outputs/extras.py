@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import importlib.util
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, Message
 
 # extra -> (the module it provides, the distribution pip installs)
 EXTRAS = {"view": ("rerun", "rerun-sdk"), "mcap": ("mcap", "mcap")}
 
 
-def require(extra: str, option: str) -> None:
-    """VprError (one line naming ``option`` and the pip command) unless the extra's module is installed."""
+def require(extra: str, option: "str | Message") -> None:
+    """InputError (one line naming ``option`` and the pip command) unless the extra's module is installed."""
     module, dist = EXTRAS[extra]
     if importlib.util.find_spec(module) is None:
-        raise VprError(f"{option} needs {dist}: pip install 'vpr-edge[{extra}]'")
+        raise InputError("{option} needs {dist}: pip install 'vpr-edge[{extra}]'", option=option, dist=dist, extra=extra)

@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 
 from vpr_edge.api import Localizer
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, Message
 from vpr_edge.outputs.sink import ResultSink
 from vpr_edge.outputs.extras import require
 
@@ -24,10 +24,11 @@ def check_live(out: Path | None, fmt: str | None, view: bool, record: Path | Non
     MCAP ``--out``."""
     if is_mcap(out):
         if fmt:
-            raise VprError(f"{out}: --format {fmt} contradicts the file's {out.suffix} suffix (an MCAP record)")
+            raise InputError("{out}: {opt.format} {fmt} contradicts the file's {suffix} suffix (an MCAP record)",
+                             out=out, fmt=fmt, suffix=out.suffix)
         require("mcap", "-o FILE.mcap")
     if view or record is not None:
-        require("view", "--view" if view else "--rerun")
+        require("view", Message("{opt.view}") if view else Message("{opt.rerun}"))
 
 
 def live_sinks(localizer: Localizer, map_path: str | os.PathLike[str], stream: str, out: Path | None,

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import IO
 
 from vpr_edge.api import FIELDS, Match
-from vpr_edge.errors import VprError, warn
+from vpr_edge.errors import InputError, VprError, warn
 from vpr_edge.files import adopt_mode, is_special, output_target
 from vpr_edge.frames.frame import Frame
 
@@ -115,8 +115,8 @@ def claim(target: Path) -> tuple[Path, int]:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            raise VprError(f"{target}: another vpr-edge is writing it (its log {part.name} is held); "
-                           f"give this run another --out") from None
+            raise InputError("{target}: another vpr-edge is writing it (its log {part} is held); give this run "
+                             "another {opt.out}", target=target, part=part.name) from None
         try:
             same = os.path.samestat(os.fstat(fd), os.stat(part))
         except FileNotFoundError:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 
+from vpr_edge.errors import said
 from vpr_edge.api import Match
 from vpr_edge.frames.frame import Frame
 
@@ -65,7 +66,7 @@ class RunSummary:
                 size = f"; frames are {self._size_text()}" if "size" in self.warned else ""
                 due.append(self._say("lost", f"{lost} of the first {FIRST_STRETCH} frames lost: this stream "
                                              f"hardly fits the map (check that it is the map's route, camera and "
-                                             f"model{size}; the lost line: --min-confidence)"))
+                                             f"model{size}; the lost line: " + said("{opt.min_confidence}") + ")"))
         return [d for d in due if d]
 
     def _say(self, key: str, text: str) -> str:

@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError
 
 PORT = 9876            # Rerun's default Viewer port
 READY_S = 20.0         # how long a starting Viewer is waited for
@@ -51,7 +51,7 @@ def viewer_env(home: Path) -> dict[str, str]:
 
 def viewer_binary() -> str:
     """The Rerun Viewer executable installed with rerun-sdk (its ``rerun_cli`` package), else ``rerun`` on
-    PATH; VprError when there is none."""
+    PATH; InputError when there is none."""
     import importlib.util
 
     spec = importlib.util.find_spec("rerun_cli")
@@ -61,7 +61,7 @@ def viewer_binary() -> str:
             return str(exe)
     found = shutil.which("rerun")
     if found is None:
-        raise VprError("--view: the Rerun Viewer (rerun) is not installed: pip install 'vpr-edge[view]'")
+        raise InputError("{opt.view}: the Rerun Viewer (rerun) is not installed: pip install 'vpr-edge[view]'")
     return found
 
 
@@ -83,13 +83,15 @@ def start_viewer(port: int = PORT, extra: list[str] | None = None) -> str:
         viewer = subprocess.Popen(argv, env=viewer_env(viewer_home()), stdin=subprocess.DEVNULL,
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     except OSError as e:
-        raise VprError(f"--view: cannot start the Rerun Viewer {argv[0]} ({e.strerror or e})") from None
+        raise InputError("{opt.view}: cannot start the Rerun Viewer {exe} ({why})", exe=argv[0],
+                         why=e.strerror or e) from None
     deadline = time.monotonic() + READY_S
     while not listening(port):
         if viewer.poll() is not None:
-            raise VprError(f"--view: the Rerun Viewer exited at start (status {viewer.returncode}; no display? "
-                           "record with --rerun FILE.rrd and open it where there is one)")
+            raise InputError("{opt.view}: the Rerun Viewer exited at start (status {status}; no display? record "
+                             "with {opt.rerun} FILE.rrd and open it where there is one)", status=viewer.returncode)
         if time.monotonic() > deadline:
-            raise VprError(f"--view: the Rerun Viewer did not listen on port {port} within {READY_S:.0f} s")
+            raise InputError("{opt.view}: the Rerun Viewer did not listen on port {port} within {s:.0f} s",
+                             port=port, s=READY_S)
         time.sleep(0.1)
     return url

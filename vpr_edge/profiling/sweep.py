@@ -17,7 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from vpr_edge.errors import VprError
+from vpr_edge.errors import InputError, VprError
 from vpr_edge.profiling.inputs import FramePlan, plan_frames
 
 DEFAULT_FRAMES = 50
@@ -56,13 +56,13 @@ def plan_bench(map_path: str | os.PathLike[str], frames: int = DEFAULT_FRAMES, m
     from vpr_edge.threads import cores
 
     if fps is not None and not fps > 0:
-        raise VprError(f"--fps {fps:g}: give the camera's frame rate, above 0 (e.g. --fps 20)")
+        raise InputError("{opt.fps} {fps:g}: give the camera's frame rate, above 0 (e.g. {opt.fps} 20)", fps=fps)
     if frames < 1:
-        raise VprError(f"--frames {frames}: time at least one frame")
+        raise InputError("{opt.frames} {frames}: time at least one frame", frames=frames)
     n = cores()
     if max_threads is not None and not 1 <= max_threads <= n:
-        raise VprError(f"--threads {max_threads}: this process may use {n} core(s); bench times 1 to {n} threads "
-                       f"(more threads than cores only take turns)")
+        raise InputError("{opt.max_threads} {m}: this process may use {n} core(s); bench times 1 to {n} threads "
+                         "(more threads than cores only take turns)", m=max_threads, n=n)
     path = Path(map_path)
     place_map = load_map(path, mmap=True)
     precisions: tuple[str | None, ...] = (None,)
