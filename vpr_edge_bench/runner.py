@@ -56,8 +56,13 @@ def parser(module: str, doc: str | None) -> argparse.ArgumentParser:
 
 def run_checked(module: str, work: Callable[[], int]) -> int:
     """Run an experiment's ``work``: a VprError or a refused file becomes ``NAME: error: message`` on stderr
-    and exit code 2 (``errors.one_line_errors``)."""
-    return one_line_errors(experiment_name(module), work)
+    and exit code 2 (``errors.one_line_errors``); the library's inputs are said as the experiment's options
+    (an experiment is a command line, as ``vpr-edge``'s commands are: ``cli.common.flag``)."""
+    from vpr_edge.cli.common import flag
+    from vpr_edge.errors import input_names
+
+    with input_names(flag):
+        return one_line_errors(experiment_name(module), work)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
