@@ -346,3 +346,19 @@ def test_a_stream_that_fails_half_way_keeps_its_lines(ws: Path, small_queries: P
     assert len(_rows(out)) == 5 and not part_path(out).exists()
     err = capsys.readouterr().err
     assert "stream ended: failed (the error below)" in err and f"5 lines kept in {out}" in err
+
+
+def test_ctrl_c_inside_an_image_read_is_still_ctrl_c(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """NumPy's file read hands a Ctrl-C on as a SystemError caused by it; the frame reader gives it back as
+    KeyboardInterrupt, so that localize exits 130 with its lines kept, not 1 with a traceback."""
+    from vpr_edge.frames import images
+
+    def interrupted(*args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as e:
+            raise SystemError("<built-in function fromfile> returned a result with an exception set") from e
+
+    monkeypatch.setattr(np, "fromfile", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        images.load_image(tmp_path / "frame.jpg")
