@@ -349,8 +349,13 @@ def test_a_stream_that_fails_half_way_keeps_its_lines(ws: Path, small_queries: P
 
 
 def test_ctrl_c_inside_an_image_read_is_still_ctrl_c(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    """NumPy's file read hands a Ctrl-C on as a SystemError caused by it; the frame reader gives it back as
-    KeyboardInterrupt, so that localize exits 130 with its lines kept, not 1 with a traceback."""
+    """NumPy's file read hands a Ctrl-C on as a SystemError caused by it (``errors.ctrl_c``); the commands
+    read it as Ctrl-C, so that localize exits 130 with its lines kept, not 1 with a traceback. A SystemError
+    of its own stays one."""
+    import typer
+
+    from vpr_edge.cli.common import user_errors
+    from vpr_edge.errors import ctrl_c, one_line_errors
     from vpr_edge.frames import images
 
     def interrupted(*args, **kwargs):
@@ -360,5 +365,17 @@ def test_ctrl_c_inside_an_image_read_is_still_ctrl_c(monkeypatch: pytest.MonkeyP
             raise SystemError("<built-in function fromfile> returned a result with an exception set") from e
 
     monkeypatch.setattr(np, "fromfile", interrupted)
-    with pytest.raises(KeyboardInterrupt):
-        images.load_image(tmp_path / "frame.jpg")
+    frame = tmp_path / "frame.jpg"
+    with pytest.raises(SystemError) as raised:
+        images.load_image(frame)
+    assert isinstance(ctrl_c(raised.value), KeyboardInterrupt)
+    assert one_line_errors("x", lambda: images.load_image(frame)) == 130
+    with pytest.raises(typer.Exit) as ended:
+        with user_errors():
+            images.load_image(frame)
+    assert ended.value.exit_code == 130
+    own = SystemError("a bug")
+    assert ctrl_c(own) is own
+    with pytest.raises(SystemError):
+        with user_errors():
+            raise own

@@ -173,13 +173,26 @@ def os_error_line(e: OSError) -> str:
     return f"{e.filename}: {e.strerror or e}" if e.filename else str(e.strerror or e)
 
 
+def ctrl_c(e: BaseException) -> BaseException:
+    """``e`` as it should be handled: a SystemError that a C extension (NumPy's file read, ...) raised because
+    Ctrl-C came while it ran is the KeyboardInterrupt that caused it; anything else is itself."""
+    if isinstance(e, SystemError) and isinstance(e.__cause__ or e.__context__, KeyboardInterrupt):
+        return e.__cause__ or e.__context__   # type: ignore[return-value]
+    return e
+
+
 def one_line_errors(prog: str, main: Callable[[], int]) -> int:
     """Run a command-line ``main``; a VprError, or a file the system refuses (OSError), becomes
     ``prog: error: message`` on stderr and exit code 2 instead of a traceback (for the tools run by
     ``python``; the ``vpr-edge`` CLI does the same through typer). SIGTERM and Ctrl-C end it cleanly (143 / 130)."""
     terminate_cleanly()
     try:
-        return main()
+        try:
+            return main()
+        except SystemError as e:   # Ctrl-C inside a C extension: Ctrl-C
+            if ctrl_c(e) is e:
+                raise
+            raise ctrl_c(e) from None
     except Terminated:
         print(f"{prog}: terminated", file=sys.stderr)
         return Terminated.exit_code

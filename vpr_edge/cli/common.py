@@ -12,7 +12,8 @@ import typer
 
 from vpr_edge import __version__
 from vpr_edge.encoders import ENCODERS
-from vpr_edge.errors import InputError, Terminated, VprError, input_names, os_error_line, printable, warn
+from vpr_edge.errors import (InputError, Terminated, VprError, ctrl_c, input_names, os_error_line, printable,
+                             warn)
 from vpr_edge.features import FRONT_ENDS
 from vpr_edge.features.choice import PRECISIONS
 from vpr_edge.features.conventions import LAYOUTS
@@ -78,7 +79,9 @@ def user_errors() -> Iterator[None]:
         except OSError as e:  # disk full, permission lost mid-run: name the file and the reason
             typer.echo(f"vpr-edge: error: {printable(os_error_line(e))}", err=True)
             raise typer.Exit(2) from None
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, SystemError) as e:   # Ctrl-C, also inside a C extension (``ctrl_c``)
+            if isinstance(e, SystemError) and ctrl_c(e) is e:   # a SystemError of its own
+                raise
             typer.echo("vpr-edge: interrupted", err=True)
             raise typer.Exit(130) from None
         except Terminated:

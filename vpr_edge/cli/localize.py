@@ -12,7 +12,7 @@ import typer
 from vpr_edge.api import Localizer
 from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, PRECISION_HELP, THREADS_HELP, ModeOpt,
                                  PrecisionOpt, app, params_for, user_errors, with_param_options)
-from vpr_edge.errors import Terminated, VprError, held_signals, printable
+from vpr_edge.errors import Terminated, VprError, ctrl_c, held_signals, printable
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files import check_not_input, check_writable, output_path
 from vpr_edge.frames.images import Frame, open_stream
@@ -181,7 +181,7 @@ def run_stream(localizer: Localizer, frames: Limited, sinks: list[ResultSink], l
     except BrokenPipeError:       # the reader went away (``| head``): the stream's end, said quietly
         piped = True
     except BaseException as e:    # Ctrl-C, SIGTERM, a failure: the sinks are closed, what is written kept
-        failure = e
+        failure = ctrl_c(e)
     wall = time.monotonic() - start
     complete = failure is None and not piped and frames.reason is None
     with held_signals():          # a second Ctrl-C acts once the log is in place

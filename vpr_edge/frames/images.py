@@ -44,10 +44,6 @@ def load_image(path: str | os.PathLike[str]) -> np.ndarray:
         data = np.fromfile(str(path), dtype=np.uint8)
     except OSError as e:
         raise VprError(f"{path}: cannot read ({e.strerror or e})") from None
-    except SystemError as e:   # Ctrl-C inside NumPy's read comes out wrapped: it is still Ctrl-C (exit 130)
-        if isinstance(e.__cause__ or e.__context__, KeyboardInterrupt):
-            raise KeyboardInterrupt from None
-        raise
     image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
     if image is None:
         raise VprError(f"{path}: cannot decode image (corrupt or unsupported format)")
