@@ -16,7 +16,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from vpr_edge.errors import one_line_errors
+from vpr_edge.errors import VprError, one_line_errors
 
 PROG = "python -m vpr_edge_bench"
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
@@ -52,6 +52,13 @@ def parser(module: str, doc: str | None) -> argparse.ArgumentParser:
     rest = (doc or "").strip().partition("\n\n")[2]
     return argparse.ArgumentParser(prog=f"{PROG} {experiment_name(module)}", description=summary(doc),
                                    epilog=rest.strip() or None, formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def check_tolerance(tolerance: int) -> int:
+    """An experiment's ``--tolerance`` (frames either side counted right): VprError below 0."""
+    if tolerance < 0:
+        raise VprError(f"--tolerance must be >= 0, got {tolerance}")
+    return tolerance
 
 
 def run_checked(module: str, work: Callable[[], int]) -> int:

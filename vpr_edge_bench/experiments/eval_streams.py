@@ -22,7 +22,7 @@ from vpr_edge.errors import VprError
 from vpr_edge.evaluation import report
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge_bench.folder import StreamsFolder
-from vpr_edge_bench.runner import parser, run_checked
+from vpr_edge_bench.runner import check_tolerance, parser, run_checked
 
 FRONTS = ("map", "pixels")   # the folder's map.npz; SeqSLAM's pixels against its ref/
 
@@ -45,8 +45,7 @@ def _run(a: argparse.Namespace) -> int:
     if unknown or not modes:
         raise VprError(f"--modes {a.modes!r}: unknown {', '.join(unknown) or '(none)'}; choose from "
                        f"{', '.join(MATCHERS)}")
-    if a.tolerance < 0:
-        raise VprError(f"--tolerance must be >= 0, got {a.tolerance}")
+    check_tolerance(a.tolerance)
     folder = StreamsFolder(a.streams).check(map=True, ref=True)
     if a.plot:
         report.require_matplotlib()

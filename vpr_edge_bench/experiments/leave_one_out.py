@@ -25,12 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.errors import VprError
 from vpr_edge.evaluation.scoring import ModeReport
 from vpr_edge.matchers import Matcher, get_matcher
 from vpr_edge.matchers.params import STREAM
 from vpr_edge_bench.folder import StreamsFolder, streams_folders
-from vpr_edge_bench.runner import parser, run_checked
+from vpr_edge_bench.runner import check_tolerance, parser, run_checked
 from vpr_edge_bench.streams import KINDS
 
 Table = dict[float, dict[str, ModeReport]]   # a parameter's value -> stream kind -> the stream matcher's report
@@ -119,8 +118,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, inputs checked first."""
-    if a.tolerance < 0:
-        raise VprError(f"--tolerance must be >= 0, got {a.tolerance}")
+    check_tolerance(a.tolerance)
     folders = streams_folders(a.streams, distinct=True)
     names = [f.name for f in folders]
     chosen = {f.name: choose(f, a.tolerance) for f in folders}

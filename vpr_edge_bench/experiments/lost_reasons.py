@@ -19,10 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from vpr_edge.errors import VprError
 from vpr_edge.matchers import LOST_WHY, get_matcher
 from vpr_edge_bench.folder import streams_folders
-from vpr_edge_bench.runner import parser, run_checked
+from vpr_edge_bench.runner import check_tolerance, parser, run_checked
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -35,8 +34,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, inputs checked first."""
-    if a.tolerance < 0:
-        raise VprError(f"--tolerance must be >= 0, got {a.tolerance}")
+    check_tolerance(a.tolerance)
     folders = streams_folders(a.streams)
     print(f"default stream matcher, tolerance {a.tolerance}; lost frames by why: unmapped / mapped places "
           "(mapped frames whose truth lies at one view in brackets)\n")
