@@ -9,12 +9,12 @@ import pytest
 
 from helpers import exposures, naive_road, places_at_speeds, planted, stop_cues, unit_rows
 from vpr_edge.matchers import MATCHERS, get_matcher
-from vpr_edge.matchers.motion import MEMORY, MIN_STEPS, PRIOR_STEP, route_stands, stillness
+from vpr_edge.matchers.motion import MEMORY, MIN_STEPS, route_stands, stillness
 
 
 def naive_cue(enc: np.ndarray, threshold: float | None, memory: int = MEMORY) -> list[float]:
     """The motion cue as plain loops, from ``motion``'s docstring: 1 - (1 - cosine to the anchor) / the
-    median step of the last ``memory`` moving frames (PRIOR_STEP until MIN_STEPS of them)."""
+    median step of the last ``memory`` moving frames (until MIN_STEPS of them, those frames move with cue 0)."""
     anchor, steps, out = None, [], []
     for e in enc:
         if anchor is None or not np.linalg.norm(e) or not np.linalg.norm(anchor):
@@ -22,8 +22,8 @@ def naive_cue(enc: np.ndarray, threshold: float | None, memory: int = MEMORY) ->
             out.append(np.nan)
             continue
         d = 1 - e @ anchor / (np.linalg.norm(e) * np.linalg.norm(anchor))
-        typical = np.median(steps[-memory:]) if len(steps) >= min(MIN_STEPS, memory) else PRIOR_STEP
-        out.append(1 - d / typical)
+        typical = np.median(steps[-memory:]) if len(steps) >= min(MIN_STEPS, memory) else None
+        out.append(0.0 if typical is None else 1 - d / typical)
         if threshold is None or not out[-1] >= threshold:
             anchor = e
             steps.append(d)
@@ -49,6 +49,40 @@ def test_stillness_against_a_loop(threshold: float | None, memory: int) -> None:
         for cuts in ([40], [9, 26, 31], [1] * 40):
             blocks = np.split(enc, np.cumsum(cuts)[:-1])
             np.testing.assert_array_equal(route_stands(blocks, threshold, memory), want)
+
+
+
+def test_narrow_band_front_end_moves_and_stands() -> None:
+    """A front end whose cosines all lie in 0.999-1.0 (a network with random weights sees every image alike):
+    moving frames 0.9995 alike, stops 0.99999. Read on its own scale from its first moving frames, every stop
+    stands and every moving frame moves, along a map and in a stream; a fixed first step in cosine units (0.02,
+    as once) read the whole stream as standing, so a matcher never moved."""
+    rng = np.random.default_rng(11)
+
+    def walk(n: int, angle: float, stop_angle: float, stops: bool) -> tuple[np.ndarray, np.ndarray]:
+        frames, standing = [], []
+        view = rng.normal(size=32)
+        view /= np.linalg.norm(view)
+        for t in range(n):
+            stop = stops and t % 30 >= 22
+            turn = rng.normal(size=32)
+            turn -= (turn @ view) * view
+            turn /= np.linalg.norm(turn)
+            if stop:
+                frames.append(np.cos(stop_angle) * view + np.sin(stop_angle) * turn)
+            else:
+                view = np.cos(angle) * view + np.sin(angle) * turn
+                frames.append(view)
+            standing.append(stop)
+        return np.array(frames), np.array(standing)
+
+    refs, _ = walk(100, np.arccos(0.9995), 0.0, False)
+    assert not route_stands([refs[:40], refs[40:]], 0.5).any()
+    enc, standing = walk(150, np.arccos(0.9995), np.arccos(0.99999), True)
+    cue = stillness(enc, 0.5)
+    assert (cue[1:1 + MIN_STEPS] == 0.0).all()      # the first moving frames set the scale
+    settled = np.arange(len(enc)) >= 1 + MIN_STEPS
+    assert (cue[standing & settled] >= 0.5).all() and (cue[~standing & settled] < 0.5).all()
 
 
 def test_motion_cue_sets_its_threshold_from_the_stream() -> None:

@@ -15,8 +15,16 @@ A frame *stands* when its cue is at least the matcher's threshold ``still`` (0.5
 anchor by at most half a typical moving step). A standing frame keeps the anchor and adds nothing to the
 moving steps, so a stop of any length is judged against the steps of the motion before it; a camera creeping
 by steps too small to tell apart still shows motion once it has crept far enough from the anchor, and its
-steps then set the typical step. Until ``MIN_STEPS`` moving frames have been seen the typical step is
-``PRIOR_STEP`` (a cosine of 0.98 between moving frames): only a frame almost identical to the anchor stands.
+steps then set the typical step.
+
+Until ``MIN_STEPS`` moving frames have been seen there is no typical step of the stream's own, and those
+first frames are taken as moving steps (cue 0), whatever they show. No step in cosine units is fixed in the
+code: a front end whose cosines all lie in 0.999-1.0 (a network with random weights) and one whose cosines
+spread over 0-1 are each read on their own scale. (A fixed first step of 0.02 once read every frame of the
+first as standing, so nothing was ever followed. The map's own moving step as the first one was tried too: a
+stream whose frames all look alike to that front end, imagery of somewhere else, then stood for ever.) A
+stream that starts standing reads its first frames as motion, and its stop then as a mix of both, until the
+median of its moving steps is motion's.
 
 ``route_stands`` reads the same cue along the map's references (the mapping drive's own stops: references
 that show one view, e.g. a train standing at a station).
@@ -30,7 +38,6 @@ from collections.abc import Iterable
 import numpy as np
 
 MIN_STEPS = 3        # moving frames seen before their median step is trusted
-PRIOR_STEP = 0.02    # the typical moving step (1 - cosine) before that
 MEMORY = 30          # moving frames whose median step is the typical one (the ``still_memory`` parameter)
 
 
@@ -54,11 +61,11 @@ class _Steps:
         self._order.append(d)
         insort(self._sorted, d)
 
-    def typical(self) -> float:
-        """The median step (``PRIOR_STEP`` until ``MIN_STEPS`` steps, or ``memory`` if fewer)."""
+    def typical(self) -> float | None:
+        """The median step (None until ``MIN_STEPS`` steps, or ``memory`` if fewer)."""
         n = len(self._sorted)
         if n < min(MIN_STEPS, self.memory):
-            return PRIOR_STEP
+            return None
         mid = n // 2
         median = self._sorted[mid] if n % 2 else 0.5 * (self._sorted[mid - 1] + self._sorted[mid])
         return max(median, 1e-12)
@@ -71,9 +78,10 @@ class _Steps:
 class MotionCue:
     """The motion cue of a stream, frame by frame (module docstring): each encoding's distance from the anchor
     (the last frame that did not stand by ``threshold``; None: no frame stands, the anchor is always the
-    previous frame) relative to the median step of the last ``memory`` frames that moved. None for the first
-    frame and next to an all-zero encoding (such a frame becomes the anchor and adds no step). What
-    ``Localizer`` runs per frame, ``stillness`` over a whole stream and ``route_stands`` along a map."""
+    previous frame) relative to the median step of the last ``memory`` frames that moved (before ``MIN_STEPS``
+    of them, a frame moves, cue 0). None for the first frame and next to an all-zero encoding (such a frame
+    becomes the anchor and adds no step). What ``Localizer`` runs per frame, ``stillness`` over a whole stream
+    and ``route_stands`` along a map."""
 
     def __init__(self, threshold: float | None = None, memory: int = MEMORY) -> None:
         if memory < 1:
@@ -83,15 +91,20 @@ class MotionCue:
         self._norm = 0.0
         self._steps = _Steps(self.memory)
 
-    def typical_step(self) -> float:
+    def typical_step(self) -> float | None:
         """The median distance (1 - cosine) between a moving frame and its anchor, over the last ``memory``
-        moving frames (``PRIOR_STEP`` until ``MIN_STEPS`` of them, or ``memory`` if fewer)."""
+        moving frames (None until ``MIN_STEPS`` of them, or ``memory`` if fewer)."""
         return self._steps.typical()
 
     def judge(self, d: float) -> tuple[float, bool]:
         """A frame at distance ``d`` (1 - cosine) from the anchor -> (its cue, whether it stands); a frame
-        that does not stand adds its step (the caller makes it the anchor)."""
-        still = 1.0 - d / self._steps.typical()
+        that does not stand adds its step (the caller makes it the anchor). Without a typical step yet (fewer
+        than ``MIN_STEPS`` moving frames): cue 0, a moving step."""
+        typical = self.typical_step()
+        if typical is None:
+            self._steps.add(d)
+            return 0.0, False
+        still = 1.0 - d / typical
         standing = stands(still, self.threshold)
         if not standing:
             self._steps.add(d)
