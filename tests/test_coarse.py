@@ -58,10 +58,10 @@ def test_localizer_whole_route_frames_go_through_it(api_map_small: Path, small_q
     files = sorted(small_queries.iterdir())
     plain = Localizer(api_map_small, threads=1)
     coarse = Localizer(api_map_small, threads=1, coarse=True)
-    assert plain._coarse is None and coarse._coarse is not None
+    assert plain._search.coarse is None and coarse._search.coarse is not None
     calls = []
-    real = coarse._coarse.similarity
-    coarse._coarse.similarity = lambda q: calls.append(1) or real(q)   # type: ignore[method-assign]
+    real = coarse._search.coarse.similarity
+    coarse._search.coarse.similarity = lambda q: calls.append(1) or real(q)   # type: ignore[method-assign]
     a = [plain.push(load_image(f)) for f in files]
     b = [coarse.push(load_image(f)) for f in files]
     assert len(calls) == len(files)

@@ -148,3 +148,42 @@ def test_build_map_indexes_and_localize_uses_it(tmp_path: Path) -> None:
     assert code == 2 and err.count("\n") == 1 and "bad.npz" in err and "index" in err
     code, _, err = invoke("build-map", tmp_path / "refs.npy", "-o", tmp_path / "x.npz", "--index", "hnsw")
     assert code == 2 and err.count("\n") == 1 and "--index hnsw" in err and not (tmp_path / "x.npz").exists()
+
+
+@pytest.mark.parametrize("mode, search", [("stream", "index"), ("stream-prob", "index"), ("stream", "coarse")])
+def test_evaluate_answers_as_localize(tmp_path: Path, mode: str, search: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``evaluate`` runs the per-frame search ``localize`` runs (``map.search``): on a map with an index its
+    whole-route frames go through the index's candidates, on a long map (here: the length made short) through
+    the coarse rows; every frame's answer and score are localize's, and evaluate asks the index or the coarse
+    search as often as localize does (a plain count of the calls)."""
+    from vpr_edge.index.coarse import CoarseSearch
+
+    refs, queries, truth = driven_encodings(3000, 300, noise=1.0, seed=5)
+    np.save(tmp_path / "refs.npy", refs)
+    np.save(tmp_path / "stream.npy", queries)
+    (tmp_path / "gt.csv").write_text("query,references\n" + "".join(
+        f"{i},{'' if t < 0 else t}\n" for i, t in enumerate(truth)))
+    path = tmp_path / "m.npz"
+    assert invoke("build-map", tmp_path / "refs.npy", "-o", path, *(["--index", "ivf"] if search == "index" else []))[0] == 0
+    calls: list[str] = []
+    owner, name = (IvfIndex, "candidates") if search == "index" else (CoarseSearch, "similarity")
+    real = getattr(owner, name)
+    monkeypatch.setattr(owner, name, lambda self, *a, **k: calls.append("x") or real(self, *a, **k))
+    if search == "coarse":
+        monkeypatch.setattr("vpr_edge.map.search.COARSE_MIN_REFS", 1000)
+    code, out, err = invoke("localize", "-m", path, "-s", tmp_path / "stream.npy", "--mode", mode, "--format", "jsonl")
+    assert code == 0, err
+    asked_by_localize = len(calls)
+    got = [json.loads(x) for x in out.splitlines()]
+    code, _, err = invoke("evaluate", "-m", path, "-q", tmp_path / "stream.npy", "--gt", tmp_path / "gt.csv",
+                          "--modes", mode, "--answers", tmp_path / "answers.csv")
+    assert code == 0, err
+    assert asked_by_localize > 0 and len(calls) == 2 * asked_by_localize
+    rows = (tmp_path / "answers.csv").read_text().splitlines()[1:]
+    assert len(rows) == len(got) == len(queries)
+    for line, row in zip(got, rows):
+        frame, _, ref, score, _, lost = row.split(",")[:6]
+        assert float(score) == pytest.approx(line["score"], rel=1e-5, abs=1e-6), frame
+        assert bool(int(lost)) == (line["ref_index"] is None), frame
+        if line["ref_index"] is not None:
+            assert int(ref) == line["ref_index"], frame

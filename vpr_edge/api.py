@@ -26,9 +26,8 @@ from vpr_edge.errors import VprError, printable
 from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.frames.images import MIN_SIDE, Frame
-from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
-from vpr_edge.index.ivf import SequenceQuery
 from vpr_edge.map import MapQuery, PlaceMap
+from vpr_edge.map.search import FrameSearch, uses_coarse
 from vpr_edge.matchers import Matcher, get_matcher, is_lost, lost_why, step
 from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.threads import use_threads
@@ -117,15 +116,14 @@ class Localizer:
 
             self._calibration = load(calibration, self.matcher.name)
         self._online = self.matcher.stream(len(self.map.names)) if self.matcher.online else None
-        if coarse is None:
-            coarse = len(self.map.names) >= COARSE_MIN_REFS
-        self._coarse = CoarseSearch(self.map.stored) if (coarse and self.matcher.scores == "cosine" and
-                                                         self._online is not None and
-                                                         self._online.searches_locally) else None
+        # what each frame reads from the map: the rows asked for, coarse whole-route rows on a long map, the
+        # index's candidates (``map.search``: evaluate runs the same)
+        self._search = FrameSearch(self.query, self.matcher.scores, self.matcher.params.get("seek_frames", 1),
+                                   uses_coarse(len(self.map.names), coarse, self.matcher.scores,
+                                               self._online is not None and self._online.searches_locally))
         self._lock = threading.Lock()
         self._count = 0
         self._cue = self.matcher.motion_cue()   # each frame's likeness to the last that moved
-        self._seq = SequenceQuery(self.matcher.params.get("seek_frames", 1))   # what the index is asked
 
     @property
     def map(self) -> PlaceMap:
@@ -165,17 +163,8 @@ class Localizer:
         frame reads the signs and the best candidates; on a map with an index, a whole-route frame searches
         around the index's candidates instead, ``index.ivf``)."""
         self.query.check_unchanged()   # a memory-mapped map rewritten under us: stop before reading it
-
-        def similarity(refs: np.ndarray | None) -> np.ndarray:
-            if refs is None and self._coarse is not None:
-                return self._coarse.similarity(enc)
-            return self.similarity(enc[None], refs)[0]
-
-        index = self.map.index
-        self._seq.push(enc)
-        candidates = None if index is None or self.matcher.scores != "cosine" else \
-            (lambda: index.candidates(self.map.stored, self._seq.query()))
-        ref, score = step(self._online, similarity, self._cue(enc), candidates)
+        self._search.push(enc)
+        ref, score = step(self._online, self._search.rows, self._cue(enc), self._search.candidates())
         return ref, score, self._online.position(), self._online.why()
 
     def _line(self, index: int, name: str, ref: int, score: float, stamp: float | None = None,
@@ -250,4 +239,4 @@ class Localizer:
                 self._online.reset()
             self._count = 0
             self._cue.reset()
-            self._seq.reset()
+            self._search.reset()

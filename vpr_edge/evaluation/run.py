@@ -20,6 +20,7 @@ from vpr_edge.matchers.motion import MEMORY, route_stands
 from vpr_edge.matchers.params import STREAM
 from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.map import MapQuery, PlaceMap, load_map
+from vpr_edge.map.search import FrameSearch, StreamSearch, uses_coarse
 from vpr_edge.positions import Positions
 from vpr_edge.threads import use_threads
 
@@ -111,6 +112,22 @@ def map_same_view(blocks: Iterable[np.ndarray]) -> np.ndarray:
     return route_stands(blocks, STREAM["still"].default, MEMORY)
 
 
+def stream_search(query: MapQuery | None, matcher: Matcher, encodings: np.ndarray | None, sim: np.ndarray
+                  ) -> StreamSearch | None:
+    """The rows ``matcher`` reads over the stream of ``encodings`` (Q, D) on ``query``'s map as ``Localizer``
+    reads them (``map.search``: the index's candidates, coarse whole-route rows on a long map), exact rows from
+    ``sim`` (Q, R); None where that is ``sim``'s rows alone (an offline matcher, no map, no index and no coarse
+    rows)."""
+    if query is None or encodings is None or not matcher.online:
+        return None
+    coarse = uses_coarse(len(query.map.names), None, matcher.scores,
+                         bool(getattr(matcher.start, "searches_locally", False)))
+    search = FrameSearch(query, matcher.scores, matcher.params.get("seek_frames", 1), coarse)
+    if search.index is None and search.coarse is None:
+        return None
+    return StreamSearch(search, encodings, sim)
+
+
 def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None = None, tolerance: int = 1,
              min_confidence: float | None = None, on_skip: sources.OnSkip = lambda frame: None,
              calibration: dict[str, Curve] | None = None, target_precision: float | None = None) -> Evaluation:
@@ -164,7 +181,8 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions,
                                    (calibration or {}).get(name),
                                    None if sims.encodings is None else m.cue(sims.encodings), drive,
-                                   None if same_view is None else one_view(rows, same_view), target_precision)
+                                   None if same_view is None else one_view(rows, same_view), target_precision,
+                                   stream_search(query, m, sims.encodings, by_kind[m.scores]))
                for name, m in chosen.items()}
     return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms, rows,
                       sims.positions, sims.front)

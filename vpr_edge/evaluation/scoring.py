@@ -9,6 +9,7 @@ import numpy as np
 
 from vpr_edge.calibration import Curve
 from vpr_edge.matchers import LOST_WHY, Matcher, Result, is_lost, lost_why
+from vpr_edge.matchers.base import StreamRows
 from vpr_edge.matchers.verdict import TARGET_PRECISION
 from vpr_edge.evaluation import metrics
 from vpr_edge.positions import Positions
@@ -83,7 +84,7 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
                   min_confidence: float | None = None, positions: Positions | None = None,
                   calibration: Curve | None = None, still: np.ndarray | None = None,
                   drive: np.ndarray | None = None, one_view: np.ndarray | None = None,
-                  target_precision: float | None = None) -> ModeReport:
+                  target_precision: float | None = None, search: StreamRows | None = None) -> ModeReport:
     """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics); with the
     references' ``positions``, the error in metres too; with a ``calibration`` (score -> probability right,
     ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error over the answers
@@ -93,9 +94,10 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     ``one_view`` (Q,) bool: the frames whose truth lies where the map shows one view (``truth.one_view``): the
     answered / mapped right shares are also given over the other frames. ``target_precision``: the line of a
     matcher whose score is a probability (``Matcher.lost_line``) and where the best line is read (default
-    ``verdict.TARGET_PRECISION``)."""
+    ``verdict.TARGET_PRECISION``). ``search``: the rows an online matcher reads as ``Localizer`` reads them
+    (``Matcher.run``; None: the rows of ``sim``)."""
     t0 = time.perf_counter()
-    result = matcher.run(sim, k=max(RECALL_KS), still=still)
+    result = matcher.run(sim, k=max(RECALL_KS), still=still, search=search)
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)
     threshold = matcher.lost_line(min_confidence, target_precision)
     target = TARGET_PRECISION if target_precision is None else target_precision

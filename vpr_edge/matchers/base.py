@@ -70,6 +70,16 @@ class OnlineMatcher(Protocol):
         """Forget the stream."""
 
 
+class StreamRows(Protocol):
+    """A stream's rows as an online matcher reads them (``Matcher.run``'s ``search``): frame ``i``'s
+    similarities to the references ``refs`` (None: all), and what ``step`` asks an index for it (None: no
+    index); frames are asked in order."""
+
+    def rows(self, i: int, refs: np.ndarray | None) -> np.ndarray: ...
+
+    def candidates(self, i: int) -> Callable[[], np.ndarray] | None: ...
+
+
 class WholeRoute:
     """Base of online matchers that read every reference every frame (``wanted()`` is always None)."""
 
@@ -137,10 +147,12 @@ def run_online(matcher: OnlineMatcher, sim: np.ndarray, k: int = 10, still: np.n
 
 
 def run_rows(matcher: OnlineMatcher, rows: Callable[[int, np.ndarray | None], np.ndarray], q: int, r: int,
-             k: int = 10, still: np.ndarray | None = None) -> Result:
+             k: int = 10, still: np.ndarray | None = None,
+             candidates: Callable[[int], Callable[[], np.ndarray] | None] | None = None) -> Result:
     """``run_online`` with frame i's similarities to references ``idx`` (None: all R) given by
-    ``rows(i, idx)``, for rows computed on demand (a coarse whole-route search, ``python -m vpr_edge_bench
-    coarse-check``)."""
+    ``rows(i, idx)``, for rows computed on demand (a coarse whole-route search: ``map.search``, ``python -m
+    vpr_edge_bench coarse-check``); ``candidates(i)``: what ``step`` asks an index for frame i (None: no
+    index)."""
     if still is not None and len(still) != q:
         raise ValueError(f"need a motion cue per frame: {len(still)} for {q} frames")
     refs = np.empty(q, np.int64)
@@ -148,7 +160,8 @@ def run_rows(matcher: OnlineMatcher, rows: Callable[[int, np.ndarray | None], np
     ranked = np.empty((q, min(k, r)), np.int64)
     why = np.empty(q, object)
     for i in range(q):
-        refs[i], scores[i] = step(matcher, lambda idx: rows(i, idx), cue_at(still, i))
+        refs[i], scores[i] = step(matcher, lambda idx: rows(i, idx), cue_at(still, i),
+                                  None if candidates is None else candidates(i))
         ranked[i] = top_k(matcher.ranking(), k)
         why[i] = matcher.why()
     return Result(refs, scores, lead_with(refs, ranked), None if all(w is None for w in why) else why)
@@ -276,14 +289,20 @@ class Matcher:
             route = route_stands(rows, self.still_threshold, self.still_memory)
         return replace(self, route=route, graph=graph, reach=sample.reach(route))
 
-    def run(self, sim: np.ndarray, k: int = 10, still: np.ndarray | None = None) -> Result:
+    def run(self, sim: np.ndarray, k: int = 10, still: np.ndarray | None = None,
+            search: StreamRows | None = None) -> Result:
         """Match every row of ``sim`` (Q, R); online matchers see the rows in order, past frames only, each
-        with its motion cue from ``still`` (Q,) if given (``stillness``; offline matchers ignore it)."""
+        with its motion cue from ``still`` (Q,) if given (``stillness``; offline matchers ignore it), and with
+        ``search`` read them as it gives them (a map's index and coarse rows, ``map.search.StreamSearch``:
+        what ``Localizer`` reads; None: the rows of ``sim``)."""
         sim = np.asarray(sim)
         if sim.ndim != 2 or 0 in sim.shape:
             raise ValueError(f"similarity matrix must be 2-D and non-empty, got shape {sim.shape}")
         if self.align is not None:
             return self.align(sim, k, **self.params)
+        if search is not None:
+            return run_rows(self.stream(sim.shape[1]), search.rows, sim.shape[0], sim.shape[1], k, still,
+                            search.candidates)
         return run_online(self.stream(sim.shape[1]), sim, k, still)
 
 
