@@ -266,3 +266,28 @@ def test_road_matcher_off_map_stop_with_the_motion_cue_stays_lost() -> None:
         lost.append(np.mean(res.scores[stop] < matcher.min_confidence))
         parked.append(np.mean((res.refs[stop] == 300) & (res.scores[stop] >= matcher.min_confidence)))
     assert np.mean(lost) >= 0.9 and np.mean(parked) <= 0.1, (np.mean(lost), np.mean(parked))
+
+
+def test_a_front_end_that_sees_every_image_alike_is_followed() -> None:
+    """A front end whose encodings all lie within a cosine of 0.999 of each other (a network with random
+    weights: one common direction, a little place-specific detail): the map is not read as standing, the
+    camera's stops are, and the stream matcher follows the route from the encodings alone, as ``Localizer``
+    runs it (``on_route`` on the references, the motion cue from the query encodings). With the cue's first
+    step fixed in cosine units every frame read as standing and the matcher never moved."""
+    rng = np.random.default_rng(21)
+    n_refs, dim, eps = 120, 64, 0.02
+    common = unit_rows(rng.normal(size=dim))
+    detail = unit_rows(rng.normal(size=(n_refs, dim)))
+    refs = unit_rows(common + eps * detail)
+    places = places_at_speeds([(1.0, 30), (0.0, 8), (1.5, 30), (0.0, 6), (1.0, 20)], start=5.0)
+    frames = unit_rows(common + eps * (detail[places] + 0.4 * unit_rows(rng.normal(size=(len(places), dim)))))
+    assert (refs @ refs.T).min() > 0.998 and (frames @ refs.T).min() > 0.998
+    matcher = get_matcher("stream").on_route([refs])
+    assert not matcher.route.any()
+    cue = matcher.cue(frames)
+    stop = np.r_[False, places[1:] == places[:-1]]
+    settled = np.arange(len(places)) >= 1 + MIN_STEPS
+    assert (cue[stop & settled] >= 0.5).mean() > 0.9 and (cue[~stop & settled] < 0.5).mean() > 0.9
+    res = matcher.run(frames @ refs.T, k=1, still=cue)
+    right = np.abs(res.refs - places) <= 2
+    assert right[15:].mean() > 0.9 and (res.scores[15:] >= 1.0).mean() > 0.5
