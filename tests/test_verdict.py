@@ -1,5 +1,5 @@
-"""The probability line (``matchers.verdict``, the ``stream-prob`` matcher): each function against a plain
-loop, and planted front ends whose right line is known."""
+"""The probability line (``matchers.verdict``, the ``stream-prob`` and ``stream-decoy`` matchers): each function
+against a plain loop, and planted front ends whose right line is known."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,8 +7,11 @@ import pytest
 
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import get_matcher
-from vpr_edge.matchers.verdict import (RecentViews, TailScale, ViewFilter, block_peaks, local_best, rival_weight, spacings,
-                                       trajectory_probability, view_quantile)
+from vpr_edge.matchers.probability import reversed_stands
+from vpr_edge.matchers.verdict import (DecoyGate, RecentViews, TailScale, ViewFilter, block_peaks, local_best, rival_weight,
+                                       spacings, trajectory_probability, view_quantile)
+
+MODES = ["stream-prob", "stream-decoy"]
 
 
 def test_block_peaks_against_a_loop() -> None:
@@ -118,12 +121,39 @@ def planted(rng: np.random.Generator, n_refs: int, places: np.ndarray, signal: f
     return sim
 
 
-def run(sim: np.ndarray, places: np.ndarray, target: float = 0.98):
+def run(sim: np.ndarray, places: np.ndarray, target: float = 0.98, mode: str = "stream-prob"):
     truth = np.where(places[:, None] >= 0, places[:, None], -1)
-    return evaluate_mode(get_matcher("stream-prob"), sim, truth, tolerance=1, target_precision=target)
+    return evaluate_mode(get_matcher(mode), sim, truth, tolerance=1, target_precision=target)
 
 
-def test_the_same_probability_for_a_narrow_and_a_wide_band_of_cosines() -> None:
+def test_decoy_gate_against_a_loop() -> None:
+    """The gate opens where the exponential mean of (best - decoy) reaches ``line`` standard deviations of the
+    last ``spread`` decoys, after ``warm`` frames (a plain loop)."""
+    rng = np.random.default_rng(12)
+    best = np.r_[rng.normal(5, 2, 60), rng.normal(15, 2, 60), rng.normal(5, 2, 60)]
+    decoy = rng.normal(5, 2, len(best))
+    gate, opened = DecoyGate(memory=10, line=1.0, spread=20, warm=5), []
+    for b, d in zip(best, decoy):
+        opened.append(gate.update(float(b), float(d)))
+    want, total, weight = [], 0.0, 0.0
+    for t in range(len(best)):
+        total, weight = 0.9 * total + best[t] - decoy[t], 0.9 * weight + 1.0
+        recent = decoy[max(0, t - 19):t + 1]
+        want.append(t >= 4 and total / weight >= np.std(recent))
+    assert opened == want
+    assert np.mean(opened[:40]) < 0.15 and all(opened[80:120]) and np.mean(opened[150:]) < 0.15
+
+
+def test_reversed_stands_against_a_loop() -> None:
+    route = np.array([False, True, True, False, False, True, False])   # references 1, 2 and 5 show the one before
+    rev = reversed_stands(route)
+    refs = list(range(len(route)))[::-1]             # the references in reverse order
+    want = [False] + [bool(route[refs[i - 1]]) for i in range(1, len(refs))]   # shows the one before it there
+    assert rev.tolist() == want
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_the_same_probability_for_a_narrow_and_a_wide_band_of_cosines(mode: str) -> None:
     """A front end whose cosines all lie in 0.9-1.0 and one whose cosines spread over 0-1: the same answers,
     the same probabilities."""
     rng = np.random.default_rng(4)
@@ -131,40 +161,44 @@ def test_the_same_probability_for_a_narrow_and_a_wide_band_of_cosines() -> None:
     sim = planted(rng, 160, places, 3.0)
     wide = (sim - sim.min()) / (sim.max() - sim.min())
     narrow = 0.9 + 0.1 * wide
-    a, b = run(wide, places), run(narrow, places)
+    a, b = run(wide, places, mode=mode), run(narrow, places, mode=mode)
     assert np.array_equal(a.refs, b.refs)
     np.testing.assert_allclose(a.scores, b.scores, atol=1e-4)
 
 
-def test_a_strong_front_end_is_answered_at_the_target_and_leaves_the_map_at_once() -> None:
+@pytest.mark.parametrize("mode", MODES)
+def test_a_strong_front_end_is_answered_at_the_target_and_leaves_the_map_at_once(mode: str) -> None:
     rng = np.random.default_rng(5)
     places = np.r_[np.arange(0, 120), -np.ones(30, int), np.arange(150, 250)]
-    r = run(planted(rng, 260, places, 4.0), places)
+    r = run(planted(rng, 260, places, 4.0), places, mode=mode)
     assert r.answered_right >= 0.98 and r.mapped_right >= 0.9
     assert r.lost_unmapped >= 0.95 and r.exit_frames[0] <= 3
 
 
-def test_a_front_end_right_one_frame_in_four_is_not_silent() -> None:
+@pytest.mark.parametrize("mode", MODES)
+def test_a_front_end_right_one_frame_in_four_is_not_silent(mode: str) -> None:
     """Each frame alone finds its place about one time in four: the sequence does, and the line says so."""
     rng = np.random.default_rng(6)
     places = np.arange(0, 300)
     sim = planted(rng, 400, places, 2.2)
     single = evaluate_mode(get_matcher("single"), sim, places[:, None], tolerance=0).recall[1]
     assert 0.15 <= single <= 0.45
-    r = run(sim, places)
+    r = run(sim, places, mode=mode)
     assert r.recall[1] >= 0.9
     assert r.mapped_right >= 0.5 and r.answered_right >= 0.95
 
 
-def test_foreign_imagery_is_lost() -> None:
+@pytest.mark.parametrize("mode", MODES)
+def test_foreign_imagery_is_lost(mode: str) -> None:
     """Frames of a place the map does not hold at all: similarities with no structure, nearly all lost."""
     rng = np.random.default_rng(7)
     places = -np.ones(400, int)
-    r = run(planted(rng, 300, places, 0.0), places)
+    r = run(planted(rng, 300, places, 0.0), places, mode=mode)
     assert r.lost_unmapped >= 0.99
 
 
-def test_foreign_imagery_with_a_look_alike_is_lost() -> None:
+@pytest.mark.parametrize("mode", MODES)
+def test_foreign_imagery_with_a_look_alike_is_lost(mode: str) -> None:
     """Imagery of somewhere else in which one reference looks most like every frame (a hub of that stream):
     no trajectory of it is this place."""
     rng = np.random.default_rng(9)
@@ -172,4 +206,4 @@ def test_foreign_imagery_with_a_look_alike_is_lost() -> None:
     sim = planted(rng, 300, places, 0.0)
     sim[:, 120] += 2.5   # the look-alike
     sim[:, 121] += 1.5
-    assert run(sim, places).lost_unmapped >= 0.99
+    assert run(sim, places, mode=mode).lost_unmapped >= 0.99

@@ -133,7 +133,7 @@ def step(matcher: OnlineMatcher, similarity: Callable[[np.ndarray | None], np.nd
     by an index (``index.ivf``; None: no index): where the matcher asks for the whole route and can search
     around candidates (``around``), it gets those instead of every reference."""
     refs = matcher.wanted()
-    if refs is None and candidates is not None and hasattr(matcher, "around"):
+    if refs is None and candidates is not None and callable(getattr(matcher, "around", None)):
         refs = matcher.around(candidates())
     return matcher.update(similarity(refs), refs, still)
 

@@ -24,6 +24,11 @@ MATCHERS: dict[str, Matcher] = {m.name: m for m in (
             "model of 'not this place' read on the map and the stream (no labels); lost below the target "
             "precision (online)", start=ProbabilityMatcher, definitions=P.STREAM_PROB, min_confidence=TARGET_PRECISION,
             reads_route=True, probability=True),
+    Matcher("stream-decoy", "stream-prob that also runs its trajectories over the map reversed and answers only "
+            "while the stream stands above that decoy: imagery of a place the map does not hold is lost; twice "
+            "the matching, every reference every frame (online)", start=ProbabilityMatcher,
+            definitions=P.STREAM_PROB, params=P.defaults(P.STREAM_PROB, decoy=True),
+            min_confidence=TARGET_PRECISION, reads_route=True, probability=True),
     Matcher("single", "best single match per frame, no sequence information (online)", start=BestMatch),
     Matcher("stream-dtw", "decayed streaming DTW over 1 - cos (online; the first streaming matcher, kept "
             "as a baseline)", start=StreamingDTW, definitions=P.STREAM_DTW),

@@ -170,6 +170,7 @@ class RoadMatcher:
         self._mean = np.zeros(n_refs)     # running mean z per reference
         self._stopped = False
         self._position: float | None = None   # the last answer on the reference grid (``position``)
+        self._best = 0.0                       # the last frame's best trajectory score (``best``)
         # per reference, the decayed number of frames in its mean (starts as if `memory` frames of mean 0) and
         # the frame count when it was last seen (-1: never): a reference outside a local search's window is not
         # updated, and when seen again its old mean weighs as much as its age allows (an EMA over time, not over
@@ -179,6 +180,10 @@ class RoadMatcher:
         self._weight = np.full(n_refs, float(memory))
         self._seen = np.full(n_refs, -1, np.int64)
         self._t = 0                       # frames counted for the means (not those of a stopped vehicle)
+
+    def best(self) -> float:
+        """The last frame's best trajectory score H (0 before a frame)."""
+        return self._best
 
     def position(self) -> float | None:
         """The best state's position on the 1/``grid`` reference grid, in references (None before a frame)."""
@@ -450,6 +455,7 @@ class RoadMatcher:
             per_ref.append(h.max(axis=0).reshape(hi - lo, g).max(axis=1))
         self._stopped = stopped                    # the best trajectory has speed 0
         self._position = col / g
+        self._best = best                          # the best trajectory's score (``best``)
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
         self._last = (values, where)   # for ``around``'s hypotheses held
         score, held = self._verdict(ref, best, values, where, part, probe, mean, std, standing)
@@ -558,6 +564,7 @@ class RoadMatcher:
     def reset(self) -> None:
         """Forget the stream."""
         self._position = None
+        self._best = 0.0
         self._evidence = None
         self._why = NO_TRAJECTORY
         self._hold([], np.zeros(0, np.int64), np.zeros((self.n_speeds, 0), np.float32))

@@ -30,11 +30,19 @@ Two questions, two factors, ``probability = trajectory * view``:
   place stands out only as the vehicle passes it. Without it, a map answered imagery of a place it does not
   hold whenever one reference looked most like all of it (docs/results.md, "The line on any front end").
 
+* **Is the stream on the map at all?** (``stream-decoy`` only.) The same trajectories run over the map's
+  references in reverse order (a *decoy*: a vehicle drives its route forwards), so each frame's best decoy
+  trajectory is a draw of "the best trajectory where the answer is not the place" from the same front end,
+  frame and hubs. Imagery of somewhere else scores alike forwards and backwards; a mapped stream's true
+  trajectory scores far above its decoy. ``DecoyGate`` opens while the recent mean of (best - decoy best) is
+  at least ``DECOY_LINE`` spreads of the recent decoy bests; closed, the probability is 0.
+
 The constants below are the model's and are named once here; docs/results.md says what they were chosen on.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -58,6 +66,9 @@ LEAVE, ENTER = 0.01, 0.05
 HUB_MEMORY, HUB_PRIOR = 10.0, 1.0
 # a lock is firm (a local search may follow it) at this trajectory probability
 FIRM = 0.999
+# the decoy's gate (``DecoyGate``, ``stream-decoy``): frames in the mean of (best - decoy best), the line on it in
+# spreads of the recent decoy bests, the frames of that spread, and the frames before the gate can open
+DECOY_MEMORY, DECOY_LINE, DECOY_SPREAD, DECOY_WARM = 40.0, 0.5, 51, 5
 
 
 def block_peaks(values: np.ndarray, where: np.ndarray | None, width: int,
@@ -220,3 +231,24 @@ class ViewFilter:
             self.log_sum = self.keep * self.log_sum + -math.log(max(q, 1e-12))
             self.frames = self.keep * self.frames + 1.0
         return self.p
+
+
+class DecoyGate:
+    """Whether the stream shows the map at all, from each frame's best trajectory score and its decoy's (the
+    best over the map's references in reverse order; module docstring): open while the exponential mean over
+    ``memory`` frames of (best - decoy) is at least ``line`` times the standard deviation of the last
+    ``spread`` decoy bests, after ``warm`` frames. ``update(best, decoy)`` -> open."""
+
+    def __init__(self, memory: float = DECOY_MEMORY, line: float = DECOY_LINE, spread: int = DECOY_SPREAD,
+                 warm: int = DECOY_WARM) -> None:
+        self.keep, self.line, self.warm = 1.0 - 1.0 / memory, line, warm
+        self.total, self.weight = 0.0, 0.0
+        self.decoys: deque[float] = deque(maxlen=spread)
+        self.open = False
+
+    def update(self, best: float, decoy: float) -> bool:
+        self.total = self.keep * self.total + (best - decoy)
+        self.weight = self.keep * self.weight + 1.0
+        self.decoys.append(decoy)
+        self.open = len(self.decoys) >= self.warm and self.total / self.weight >= self.line * float(np.std(self.decoys))
+        return self.open

@@ -5,7 +5,7 @@ on every derived stream and on foreign imagery, from the similarity matrices the
 wrote, scored by the library's ``scoring.evaluate_mode`` (what ``evaluate`` runs).
 
     python -m vpr_edge_bench front-end-cache --streams out/corridor out/nordland-dev --out out/fronts
-    python -m vpr_edge_bench front-end-lines --cache out/fronts --modes stream,stream-prob,seqslam-online
+    python -m vpr_edge_bench front-end-lines --cache out/fronts --modes stream,stream-prob,stream-decoy,seqslam-online
 
 Per dataset and front end, one row per mode and stream: the front end alone (``single``'s R@1 at the cache's
 tolerance), the best answers' R@1 (lost ignored), the precision
@@ -50,7 +50,7 @@ def score(mode: str, case: dict[str, np.ndarray], tolerance: int, target: float)
 def main(argv: Sequence[str] | None = None) -> int:
     p = parser(__name__, __doc__)
     p.add_argument("--cache", type=Path, required=True)
-    p.add_argument("--modes", default="stream,stream-prob,seqslam-online")
+    p.add_argument("--modes", default="stream,stream-prob,stream-decoy,seqslam-online")
     p.add_argument("--fronts", default=None, help="comma-separated front ends (default: every one cached)")
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--target-precision", type=float, default=TARGET_PRECISION)

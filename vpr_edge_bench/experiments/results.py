@@ -119,7 +119,7 @@ SECTIONS = (
                                                  "--front", "head-gem={out}/models/lite0_head_gem_160x120.onnx"),
             setup=(_gem("stage5"), _gem("head"))),
     Section("front-end-lines", "front-end-lines", ("--cache", "{out}/fronts", "--modes",
-                                                   "stream,stream-prob,seqslam-online", "--ranges"),
+                                                   "stream,stream-prob,stream-decoy,seqslam-online", "--ranges"),
             setup=(("-m", "vpr_edge_bench", "front-end-cache", "--streams", "{corridor}", "{nordland-dev}",
                     "--out", "{out}/fronts"),)),
     Section("drives", "compare-drives", ("--streams", "{nordland-dev}", "{corridor}", "--drives", "4")),
