@@ -7,7 +7,7 @@ import pytest
 
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import get_matcher
-from vpr_edge.matchers.probability import reversed_stands
+from vpr_edge.matchers.motion import reversed_stands
 from vpr_edge.matchers.verdict import (DecoyGate, RecentViews, TailScale, ViewFilter, block_peaks, local_best, rival_weight,
                                        spacings, trajectory_probability, view_quantile)
 

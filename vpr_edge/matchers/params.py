@@ -67,14 +67,13 @@ STREAM: dict[str, Param] = {
                         "stop_decay for every frame"),
     "still_memory": Param(MEMORY, "motion cue: moving frames whose median step (1 - cosine of encodings) is the "
                                   "stream's typical moving step"),
+    "decoy": Param(False, "also run the trajectories over the map's references in reverse order, and answer only "
+                          "while the stream's best stands above that decoy's (imagery of somewhere else scores "
+                          "alike both ways); reads every reference every frame (no local or index search)"),
 }
 # the stream matcher's lock rules; ``stream-prob`` replaces them by a model of "not this place" (``verdict``)
 LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "unique", "hold")
-STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM.items() if k not in LOCK_RULES} | {
-    "decoy": Param(False, "also run the trajectories over the map's references in reverse order, and answer only "
-                          "while the stream's best stands above that decoy's (imagery of somewhere else scores "
-                          "alike both ways); reads every reference every frame: twice the matching"),
-}
+STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM.items() if k not in LOCK_RULES}
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),
 }

@@ -90,7 +90,8 @@ import numpy as np
 from collections.abc import Callable
 
 from vpr_edge.matchers.base import AMBIGUOUS, LOCKED, NO_TRAJECTORY, WEAK_VIEW
-from vpr_edge.matchers.motion import stands
+from vpr_edge.matchers.motion import reversed_stands, stands
+from vpr_edge.matchers.verdict import DecoyGate
 from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, merge, places
 
 
@@ -103,15 +104,17 @@ class RoadMatcher:
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
                  hold: float, seek: int, peaks: int, seek_frames: int, stop_gain: float, stop_decay: float, still: float,
                  still_memory: int,
-                 evidence: float, evidence_decay: float, unique: float, route: np.ndarray | None = None,
-                 graph: RouteGraph | None = None, reach: int = 0) -> None:
+                 evidence: float, evidence_decay: float, unique: float, decoy: bool = False,
+                 route: np.ndarray | None = None, graph: RouteGraph | None = None, reach: int = 0) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
         ``still_memory`` is the motion cue's, read where the cue is computed; ``seek_frames`` is what the index
         is asked, read where it is asked, ``index.ivf.SequenceQuery``). ``route``: (n_refs,) bool, the
         references where the map's drive stood (``motion.route_stands``; None: not known). ``graph``: the
         map's drives and where they meet (``route.RouteGraph``; None: one drive). ``reach``: how far along
         the map references stay alike (``likeness.reach``; 0: not known): a rival trajectory must lie beyond
-        it as well as beyond ``rival_window``."""
+        it as well as beyond ``rival_window``. ``decoy``: also run the recursion over the references in reverse
+        order, whole route every frame, and score 0 while the stream does not stand above it (``DecoyGate``;
+        module docstring)."""
         if n_refs < 1:
             raise ValueError("need at least one reference")
         if not 0.0 < decay < 1.0:
@@ -180,6 +183,19 @@ class RoadMatcher:
         self._weight = np.full(n_refs, float(memory))
         self._seen = np.full(n_refs, -1, np.int64)
         self._t = 0                       # frames counted for the means (not those of a stopped vehicle)
+        # the decoy: the same recursion over the references in reverse order, every reference every frame
+        # (so no local search and no search around an index's candidates), and the gate it feeds
+        self._decoy: RoadMatcher | None = None
+        self._gate: DecoyGate | None = None
+        if decoy:
+            self._decoy = RoadMatcher(
+                n_refs, vmax=vmax, grid=grid, decay=decay, bias=bias, turn=turn, memory=memory, lock=lock,
+                rival_window=rival_window, window=0, probe=probe, check=check, span=span, hold=hold, seek=seek,
+                peaks=peaks, seek_frames=seek_frames, stop_gain=stop_gain, stop_decay=stop_decay, still=still,
+                still_memory=still_memory, evidence=evidence, evidence_decay=evidence_decay, unique=unique,
+                route=None if route is None else reversed_stands(route), reach=reach)
+            self._gate = DecoyGate()
+            self.around = None   # type: ignore[assignment]   # whole rows: ``step`` asks no index
 
     def best(self) -> float:
         """The last frame's best trajectory score H (0 before a frame)."""
@@ -193,7 +209,7 @@ class RoadMatcher:
         """References (int array) whose similarities the next ``update`` needs, in that order; None:
         all of them. While locked on a large route (``window`` > 0): the ``window`` references either side of
         the answer, then the probe sample."""
-        if self._win is None:
+        if self._win is None or self._decoy is not None:
             return None
         return np.concatenate([places(self._win), self._probe])
 
@@ -404,6 +420,10 @@ class RoadMatcher:
         ``still``: the frame's motion cue (cosine similarity to the last moving frame's encoding,
         ``base.MotionCue``; None: none)."""
         s = np.asarray(sim_row, np.float64)
+        if self._decoy is not None:
+            if refs is not None or s.shape != (self.n_refs,):
+                raise ValueError(f"with a decoy every reference is read: a row of shape ({self.n_refs},)")
+            self._decoy.update(s[::-1], None, still)
         wins = self._win if self._win is not None else [(0, self.n_refs)]
         where = None if self._win is None else places(wins)   # the places searched (None: all, in order)
         n_win = self.n_refs if where is None else len(where)
@@ -459,6 +479,8 @@ class RoadMatcher:
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
         self._last = (values, where)   # for ``around``'s hypotheses held
         score, held = self._verdict(ref, best, values, where, part, probe, mean, std, standing)
+        if self._gate is not None and not self._gate.update(best, self._decoy.best()):
+            score, self._why = 0.0, NO_TRAJECTORY   # no trajectory stands above the reversed map's
         self._follow(ref, held)
         return ref, score
 
@@ -565,6 +587,9 @@ class RoadMatcher:
         """Forget the stream."""
         self._position = None
         self._best = 0.0
+        if self._decoy is not None:
+            self._decoy.reset()
+            self._gate = DecoyGate()
         self._evidence = None
         self._why = NO_TRAJECTORY
         self._hold([], np.zeros(0, np.int64), np.zeros((self.n_speeds, 0), np.float32))

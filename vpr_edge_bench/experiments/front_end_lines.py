@@ -38,8 +38,16 @@ def load(path: Path) -> dict[str, np.ndarray]:
         return {k: z[k] for k in z.files}
 
 
+def matcher_of(mode: str):
+    """A mode as ``--modes`` names it: a registered matcher, or ``NAME:KEY=VALUE[;KEY=VALUE]`` with some of its
+    parameters set (``Matcher.parse_params``, as ``--param`` reads them), e.g. ``stream:decoy=true``."""
+    name, _, spec = mode.partition(":")
+    m = get_matcher(name)
+    return m.with_params(**m.parse_params(spec.split(";"))) if spec else m
+
+
 def score(mode: str, case: dict[str, np.ndarray], tolerance: int, target: float):
-    m = get_matcher(mode)
+    m = matcher_of(mode)
     if m.reads_route and "route" in case:
         m = dataclasses.replace(m, route=case["route"].astype(bool), reach=int(case["reach"]))
     still = case.get("cue")
@@ -50,7 +58,9 @@ def score(mode: str, case: dict[str, np.ndarray], tolerance: int, target: float)
 def main(argv: Sequence[str] | None = None) -> int:
     p = parser(__name__, __doc__)
     p.add_argument("--cache", type=Path, required=True)
-    p.add_argument("--modes", default="stream,stream-prob,stream-decoy,seqslam-online")
+    p.add_argument("--modes", default="stream,stream-prob,stream-decoy,seqslam-online",
+                   help="comma-separated modes, each a registered matcher or NAME:KEY=VALUE[;KEY=VALUE] "
+                        "(some of its parameters set, e.g. stream:decoy=true)")
     p.add_argument("--fronts", default=None, help="comma-separated front ends (default: every one cached)")
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--target-precision", type=float, default=TARGET_PRECISION)
@@ -65,7 +75,7 @@ def _run(a: argparse.Namespace) -> int:
         raise VprError(f"{a.cache}: not a folder (front-end-cache writes it)")
     try:
         for mode in a.modes.split(","):
-            get_matcher(mode)
+            matcher_of(mode)
     except ValueError as e:
         raise VprError(f"--modes: {e}") from None
     use_threads(2)
