@@ -82,6 +82,12 @@ firmly locked frames, and every frame that is not firmly locked, search the whol
 hypothesis elsewhere (a jump, a re-entry after a detour) is found. A frame then costs O(window) instead of
 O(R), plus the global frames. Each reference's running mean counts time, not updates: seen again after k
 frames outside the window, its old mean is weighted by (1 - 1/memory)^k.
+
+With ``decoy`` the same recursion also runs over the references in reverse order (a vehicle drives its route
+forwards), every reference every frame, and a frame scores 0 (lost, "no-trajectory") while the recent mean of
+(best - decoy best) stays below a share of the decoy bests' spread (``verdict.DecoyGate``): imagery of a place
+the map does not hold scores alike both ways. It reads whole rows, so no local search and no index search, and
+costs a second pass.
 """
 from __future__ import annotations
 
