@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from vpr_edge.matchers import get_matcher
-from vpr_edge.matchers.likeness import MAX_LAG, reach
+from vpr_edge.matchers.constants import MAX_LAG
+from vpr_edge.matchers.likeness import reach
 
 
 def naive_reach(x: np.ndarray, stands: np.ndarray | None) -> int:

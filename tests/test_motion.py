@@ -9,7 +9,8 @@ import pytest
 
 from helpers import exposures, naive_road, places_at_speeds, planted, stop_cues, unit_rows
 from vpr_edge.matchers import MATCHERS, get_matcher
-from vpr_edge.matchers.motion import MEMORY, MIN_STEPS, route_stands, stillness
+from vpr_edge.matchers.constants import MEMORY, MIN_STEPS
+from vpr_edge.matchers.motion import route_stands, stillness
 
 
 def naive_cue(enc: np.ndarray, threshold: float | None, memory: int = MEMORY) -> list[float]:

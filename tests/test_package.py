@@ -178,3 +178,26 @@ def test_docstrings_name_only_what_exists() -> None:
     stale = sorted(ref for ref in cited if ref.split(".")[0] in modules and ref.rsplit(".", 1)[-1] not in files_named
                    and not resolves(ref))
     assert not stale, stale
+
+
+def test_matcher_constants_are_named_in_one_place() -> None:
+    """No module of ``vpr_edge/matchers`` but ``constants`` (the models' numbers) and ``params`` (what a user sets)
+    names a number at module level: a constant of a matcher's model is found in one file."""
+    def numeric(node: ast.AST) -> bool:
+        if isinstance(node, ast.Constant):
+            return isinstance(node.value, (int, float)) and not isinstance(node.value, bool)
+        if isinstance(node, ast.UnaryOp):
+            return numeric(node.operand)
+        if isinstance(node, ast.Tuple):
+            return any(numeric(e) for e in node.elts)
+        return False
+
+    found = []
+    for path in sorted((PACKAGE / "matchers").glob("*.py")):
+        if path.name in ("constants.py", "params.py"):
+            continue
+        for node in ast.parse(path.read_text()).body:
+            value = node.value if isinstance(node, (ast.Assign, ast.AnnAssign)) else None
+            if value is not None and numeric(value):
+                found.append(f"{path.name}:{node.lineno}")
+    assert not found, found

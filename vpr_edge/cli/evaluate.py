@@ -17,7 +17,7 @@ from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
 from vpr_edge.frames.images import Frame
 from vpr_edge.matchers import MATCHERS, get_matcher
-from vpr_edge.matchers.verdict import TARGET_PRECISION
+from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.threads import use_threads
 
 if TYPE_CHECKING:   # numpy is imported where the command runs

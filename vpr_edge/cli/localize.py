@@ -18,7 +18,7 @@ from vpr_edge.files import check_not_input, check_writable, output_path
 from vpr_edge.frames.images import Frame, open_stream
 from vpr_edge.frames.limits import Limited
 from vpr_edge.matchers import MATCHERS, get_matcher
-from vpr_edge.matchers.verdict import TARGET_PRECISION
+from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.outputs.sink import ResultSink
 from vpr_edge.outputs.log import SUFFIX_FORMATS, ResultLog, writing
 from vpr_edge.outputs.live import check_live, is_mcap, live_sinks

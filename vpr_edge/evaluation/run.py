@@ -16,7 +16,8 @@ from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
 from vpr_edge.evaluation.truth import Truth, one_view
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.matchers import MATCHERS, Matcher, check_lost_line, check_target_precision, get_matcher
-from vpr_edge.matchers.motion import MEMORY, route_stands
+from vpr_edge.matchers.constants import MEMORY
+from vpr_edge.matchers.motion import route_stands
 from vpr_edge.matchers.params import STREAM
 from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.map import MapQuery, PlaceMap, load_map

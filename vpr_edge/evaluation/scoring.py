@@ -10,7 +10,7 @@ import numpy as np
 from vpr_edge.calibration import Curve
 from vpr_edge.matchers import LOST_WHY, Matcher, Result, is_lost, lost_why
 from vpr_edge.matchers.base import StreamRows
-from vpr_edge.matchers.verdict import TARGET_PRECISION
+from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.evaluation import metrics
 from vpr_edge.positions import Positions
 
@@ -94,7 +94,7 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     ``one_view`` (Q,) bool: the frames whose truth lies where the map shows one view (``truth.one_view``): the
     answered / mapped right shares are also given over the other frames. ``target_precision``: the line of a
     matcher whose score is a probability (``Matcher.lost_line``) and where the best line is read (default
-    ``verdict.TARGET_PRECISION``). ``search``: the rows an online matcher reads as ``Localizer`` reads them
+    ``constants.TARGET_PRECISION``). ``search``: the rows an online matcher reads as ``Localizer`` reads them
     (``Matcher.run``; None: the rows of ``sim``)."""
     t0 = time.perf_counter()
     result = matcher.run(sim, k=max(RECALL_KS), still=still, search=search)

@@ -34,7 +34,8 @@ import numpy as np
 
 from vpr_edge.errors import InputError, Message, VprError
 from vpr_edge.matchers.likeness import LikenessSample
-from vpr_edge.matchers.motion import MEMORY, MotionCue, cue_at, route_stands, stillness
+from vpr_edge.matchers.constants import MEMORY
+from vpr_edge.matchers.motion import MotionCue, cue_at, route_stands, stillness
 from vpr_edge.matchers.params import Param, read_items
 from vpr_edge.matchers.route import RouteGraph
 

@@ -20,9 +20,7 @@ from collections.abc import Iterable, Iterator
 
 import numpy as np
 
-SAMPLE = 2048     # references the estimate reads, from the route's start
-MAX_LAG = 64      # the longest reach measured
-PAIRS = 2048      # pairs per lag (and of unrelated references) at most
+from vpr_edge.matchers.constants import MAX_LAG, PAIRS, SAMPLE
 
 
 class LikenessSample:

@@ -37,8 +37,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-MIN_STEPS = 3        # moving frames seen before their median step is trusted
-MEMORY = 30          # moving frames whose median step is the typical one (the ``still_memory`` parameter)
+from vpr_edge.matchers.constants import MEMORY, MIN_STEPS
 
 
 def stands(still: float | None, threshold: float | None) -> bool:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from vpr_edge.errors import Message
-from vpr_edge.matchers.motion import MEMORY
+from vpr_edge.matchers.constants import MEMORY
 
 
 @dataclass(frozen=True)

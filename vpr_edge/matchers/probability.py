@@ -20,7 +20,8 @@ import numpy as np
 from vpr_edge.matchers.base import AMBIGUOUS, NO_TRAJECTORY, WEAK_VIEW
 from vpr_edge.matchers.road import RoadMatcher
 from vpr_edge.matchers.route import Intervals, max_outside
-from vpr_edge.matchers.verdict import (FIRM, VIEW_LEARN, RecentViews, TailScale, ViewFilter, block_peaks,
+from vpr_edge.matchers.constants import DOUBT_SHARE, FIRM, FIRM_RIVAL, VIEW_LEARN
+from vpr_edge.matchers.verdict import (RecentViews, TailScale, ViewFilter, block_peaks,
                                        local_best, rival_weight, spacings, trajectory_probability, view_quantile)
 
 # the lock's rules of the ``stream`` matcher, which this one's verdict replaces (``params.LOCK_RULES``)
@@ -58,7 +59,7 @@ class ProbabilityMatcher(RoadMatcher):
         view = self._view.p
         self._why = WEAK_VIEW if view <= trajectory else AMBIGUOUS if doubt else NO_TRAJECTORY
         held = bool(self.window) and trajectory >= FIRM and \
-            max_outside(values, where, self.graph.near(ref, self.window)) < 0.5 * best
+            max_outside(values, where, self.graph.near(ref, self.window)) < FIRM_RIVAL * best
         return trajectory * view, held
 
     def _trajectory(self, ref: int, best: float, values: np.ndarray, where: np.ndarray | None, near: Intervals,
@@ -88,4 +89,4 @@ class ProbabilityMatcher(RoadMatcher):
         if not len(rivals) or beta is None:
             return trajectory_probability(weight), False
         top = float(np.exp(min((float(rivals.max()) - best) / beta, 50.0)))
-        return trajectory_probability(weight), top >= 0.5 * weight
+        return trajectory_probability(weight), top >= DOUBT_SHARE * weight

@@ -13,7 +13,7 @@ from vpr_edge.matchers.seqslam import SeqSLAMOnline, seqslam_match
 from vpr_edge.matchers.single import BestMatch
 from vpr_edge.matchers.probability import ProbabilityMatcher
 from vpr_edge.matchers.stream_dtw import StreamingDTW
-from vpr_edge.matchers.verdict import TARGET_PRECISION
+from vpr_edge.matchers.constants import TARGET_PRECISION
 
 
 MATCHERS: dict[str, Matcher] = {m.name: m for m in (

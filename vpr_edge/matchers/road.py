@@ -96,6 +96,7 @@ import numpy as np
 from collections.abc import Callable
 
 from vpr_edge.matchers.base import AMBIGUOUS, LOCKED, NO_TRAJECTORY, WEAK_VIEW
+from vpr_edge.matchers.constants import FIRM_RIVAL, LOCAL_ROUTE, MIN_SPREAD, PEAK_POOL, PEAK_SPACING
 from vpr_edge.matchers.motion import reversed_stands, stands
 from vpr_edge.matchers.verdict import DecoyGate
 from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, merge, places
@@ -148,7 +149,7 @@ class RoadMatcher:
         self.route = None if route is None else np.asarray(route, bool)
         self.n_speeds = int(round(vmax * grid)) + 1
         # local search pays only where the window is a small part of the route
-        self.window = int(window) if window and n_refs > 4 * window else 0
+        self.window = int(window) if window and n_refs > LOCAL_ROUTE * window else 0
         # references whose similarities estimate a frame's mean and spread while searching locally: a fixed
         # random sample, so that the estimate costs O(probe), not O(R)
         self._probe = np.sort(np.random.default_rng(0).choice(n_refs, min(n_refs, probe), replace=False))
@@ -222,7 +223,7 @@ class RoadMatcher:
     def _normalise(self, s: np.ndarray, lo: int, mean: float, std: float) -> np.ndarray:
         """Similarities of references [lo, lo + len(s)) -> z-scored with the frame's ``mean`` and ``std`` over
         all references, minus each reference's running mean."""
-        z = (s - mean) / max(std, 1e-12)
+        z = (s - mean) / max(std, MIN_SPREAD)
         run, weight = self._mean[lo:lo + len(s)], self._weight[lo:lo + len(s)]
         out = z - run
         if not self._stopped:   # frames of a stopped vehicle repeat one place: they say nothing of hubs
@@ -443,7 +444,7 @@ class RoadMatcher:
             part = s if where is None else s[where]
             probe = s[self._probe] if self._win is not None else s
         g = self.grid
-        mean, std = float(probe.mean()), max(float(probe.std()), 1e-12)
+        mean, std = float(probe.mean()), max(float(probe.std()), MIN_SPREAD)
         standing = self.stands(still)
         if not standing:   # a standing camera's view again says nothing new: the state stays
             fed = self._fed()
@@ -526,7 +527,7 @@ class RoadMatcher:
         locked = self._why == LOCKED
         # firm lock: strong evidence, and no hypothesis beyond the window half as strong (seen in global frames)
         held = bool(self.window) and best >= self.hold * self.lock and \
-            max_outside(values, where, self.graph.near(ref, self.window)) < 0.5 * best
+            max_outside(values, where, self.graph.near(ref, self.window)) < FIRM_RIVAL * best
         return float(locked) + uniqueness, held
 
     def why(self) -> str:
@@ -570,14 +571,14 @@ class RoadMatcher:
         if not len(values):
             return []
         reach = max(self.seek, self.window // 4)
-        k = min(len(values), 4 * self.peaks)
+        k = min(len(values), PEAK_POOL * self.peaks)
         top = np.argpartition(-values, k - 1)[:k]
         chosen: list[int] = []
         for i in top[np.argsort(-values[top], kind="stable")]:
             if values[i] <= 0.0 or len(chosen) == self.peaks:
                 break
             p = int(i) if where is None else int(where[i])
-            if all(abs(p - c) > 2 * reach for c in chosen):
+            if all(abs(p - c) > PEAK_SPACING * reach for c in chosen):
                 chosen.append(p)
         return [iv for p in chosen for iv in self.graph.near(p, reach)]
 

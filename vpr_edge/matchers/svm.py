@@ -16,7 +16,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError
 
-SVM_C = 1.0
+from vpr_edge.matchers.constants import SVM_C
 
 
 def fit_svm(encodings: np.ndarray, tolerance: int = 1, c: float = SVM_C,

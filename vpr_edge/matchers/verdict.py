@@ -37,7 +37,7 @@ Two questions, two factors, ``probability = trajectory * view``:
   trajectory scores far above its decoy. ``DecoyGate`` opens while the recent mean of (best - decoy best) is
   at least ``DECOY_LINE`` spreads of the recent decoy bests; closed, the probability is 0.
 
-The constants below are the model's and are named once here; docs/results.md says what they were chosen on.
+The model's constants are named once, in ``constants``; docs/decisions.md says what they were chosen on.
 """
 from __future__ import annotations
 
@@ -46,30 +46,10 @@ from collections import deque
 
 import numpy as np
 
+from vpr_edge.matchers.constants import (DECOY_LINE, DECOY_MEMORY, DECOY_SPREAD, DECOY_WARM, ENTER, HUB_MEMORY,
+                                         HUB_PRIOR, LEAVE, TAIL_MEMORY, TAIL_PEAKS, VIEW_MEMORY, VIEW_PRIOR,
+                                         VIEW_PRIOR_FRAMES, VIEW_RANGE)
 from vpr_edge.matchers.route import Intervals, inside
-
-# the line: answers whose probability of being right is below this are lost (``--target-precision``)
-TARGET_PRECISION = 0.98
-# rival peaks whose spacings estimate the null's tail scale in one frame (the highest ones)
-TAIL_PEAKS = 16
-# frames whose spacings are pooled into the tail scale (an exponential memory)
-TAIL_MEMORY = 100.0
-# the view's Beta(a, 1) model: a's prior value and its weight in frames, the trajectory probability above
-# which a frame teaches it, and the range it is kept in
-VIEW_PRIOR, VIEW_PRIOR_FRAMES, VIEW_LEARN, VIEW_RANGE = 0.5, 10.0, 0.9, (0.02, 1.0)
-# frames of the view's learning pooled (an exponential memory)
-VIEW_MEMORY = 200.0
-# the filter's prior rates per frame: leaving the answer's place (a detour, a lost track), coming onto it
-LEAVE, ENTER = 0.01, 0.05
-# the view's recent means (``RecentViews``): frames of memory (an exponential one, per sighting) and the
-# prior's weight in frames of mean 0
-HUB_MEMORY, HUB_PRIOR = 10.0, 1.0
-# a lock is firm (a local search may follow it) at this trajectory probability
-FIRM = 0.999
-# the decoy's gate (``DecoyGate``, ``stream-decoy``): frames in the mean of (best - decoy best), the line on it in
-# spreads of the recent decoy bests, the frames of that spread, and the frames before the gate can open
-DECOY_MEMORY, DECOY_LINE, DECOY_SPREAD, DECOY_WARM = 40.0, 0.5, 51, 5
-
 
 def block_peaks(values: np.ndarray, where: np.ndarray | None, width: int,
                 exclude: Intervals) -> tuple[np.ndarray, np.ndarray]:

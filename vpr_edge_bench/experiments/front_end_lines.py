@@ -28,7 +28,7 @@ import numpy as np
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import get_matcher
-from vpr_edge.matchers.verdict import TARGET_PRECISION
+from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.threads import use_threads
 from vpr_edge_bench.runner import parser, run_checked
 
