@@ -102,6 +102,8 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("front-end-cache", ["--streams", "{tmp}", "--out", "{tmp}/out"], "not a derived-streams folder (no ref"),
     ("front-end-cache", ["--streams", "{tmp}/a", "{tmp}/b/a", "--out", "{tmp}/out"], "names name the datasets"),
     ("front-end-lines", ["--cache", "{tmp}/none"], "none: not a folder"),
+    ("front-end-lines", ["--cache", "{tmp}", "--modes", "stream,stream:decoy=maybe"], "'maybe' is not a bool"),
+    ("front-end-lines", ["--cache", "{tmp}", "--modes", "stream:nope=1"], "stream takes KEY=VALUE with KEY one of"),
     ("one-view-check", ["--streams", "{tmp}"], NOT_STREAMS),
     ("eval-streams", ["--streams", "{tmp}"], NOT_STREAMS),
     ("eval-streams", ["--streams", "{tmp}", "--modes", "stream,nope"], "--modes 'stream,nope': unknown nope"),
