@@ -157,8 +157,11 @@ def _lines_in(path: Path) -> int:
 def test_a_stopped_stream_keeps_its_lines(ws: Path, tmp_path: Path, sig: int, code: int, said: str) -> None:
     out = tmp_path / "run.csv"
     out.write_text("the last run\n")
+    # Ctrl-C as a terminal delivers it, even where the tests run as a background job (whose children start
+    # with SIGINT ignored, and a Python started so never raises KeyboardInterrupt)
     proc = subprocess.Popen([*CLI, "localize", "-m", str(ws / "map.npz"), "-s", str(ws / "long"), "-o", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     end = time.time() + 120
     while _lines_in(part_path(out)) < 21 and proc.poll() is None and time.time() < end:
         time.sleep(0.01)
