@@ -86,6 +86,7 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("results", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--quick"], "not a dataset folder with ref/"),
     ("results", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--sections", "nope"], "no section 'nope'"),
     ("bench-matcher", ["--stop-noise", "-1"], "--stop-noise must be >= 0"),
+    ("bench-matcher", ["--param", "decoy=maybe"], "'maybe' is not a bool"),
     ("bench-scale", ["--work", "{tmp}", "--places", "5"], "need --places >= 10"),
     ("calibration-check", ["--streams", "{tmp}", "{tmp}", "--fits", "logistic,nope"],
      "--fits 'logistic,nope': choose from logistic, isotonic"),

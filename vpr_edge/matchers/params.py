@@ -69,7 +69,8 @@ STREAM: dict[str, Param] = {
                                   "stream's typical moving step"),
     "decoy": Param(False, "also run the trajectories over the map's references in reverse order, and answer only "
                           "while the stream's best stands above that decoy's (imagery of somewhere else scores "
-                          "alike both ways); reads every reference every frame (no local or index search)"),
+                          "alike both ways); whole-route frames read every reference (no index search), and "
+                          "while the gate is closed every frame does"),
 }
 # the stream matcher's lock rules; ``stream-prob`` replaces them by a model of "not this place" (``verdict``)
 LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "unique", "hold")

@@ -25,8 +25,8 @@ MATCHERS: dict[str, Matcher] = {m.name: m for m in (
             "precision (online)", start=ProbabilityMatcher, definitions=P.STREAM_PROB, min_confidence=TARGET_PRECISION,
             reads_route=True, probability=True),
     Matcher("stream-decoy", "stream-prob that also runs its trajectories over the map reversed and answers only "
-            "while the stream stands above that decoy: imagery of a place the map does not hold is lost; twice "
-            "the matching, every reference every frame (online)", start=ProbabilityMatcher,
+            "while the stream stands above that decoy: imagery of a place the map does not hold is lost; about "
+            "1.7x stream-prob's matching (online)", start=ProbabilityMatcher,
             definitions=P.STREAM_PROB, params=P.defaults(P.STREAM_PROB, decoy=True),
             min_confidence=TARGET_PRECISION, reads_route=True, probability=True),
     Matcher("single", "best single match per frame, no sequence information (online)", start=BestMatch),

@@ -84,10 +84,12 @@ O(R), plus the global frames. Each reference's running mean counts time, not upd
 frames outside the window, its old mean is weighted by (1 - 1/memory)^k.
 
 With ``decoy`` the same recursion also runs over the references in reverse order (a vehicle drives its route
-forwards), every reference every frame, and a frame scores 0 (lost, "no-trajectory") while the recent mean of
-(best - decoy best) stays below a share of the decoy bests' spread (``verdict.DecoyGate``): imagery of a place
-the map does not hold scores alike both ways. It reads whole rows, so no local search and no index search, and
-costs a second pass.
+forwards) on every frame that reads the whole route, and a frame scores 0 (lost, "no-trajectory") while the
+recent mean of (best - decoy best) stays below a share of the decoy bests' spread (``verdict.DecoyGate``):
+imagery of a place the map does not hold scores alike both ways. While the gate is closed every frame reads
+the whole route; while it is open and a firm lock searches locally, the decoy and the gate wait (the local
+frames cost what they cost without it). Whole-route frames read whole rows: no search around an index's
+candidates.
 """
 from __future__ import annotations
 
@@ -120,7 +122,7 @@ class RoadMatcher:
         map's drives and where they meet (``route.RouteGraph``; None: one drive). ``reach``: how far along
         the map references stay alike (``likeness.reach``; 0: not known): a rival trajectory must lie beyond
         it as well as beyond ``rival_window``. ``decoy``: also run the recursion over the references in reverse
-        order, whole route every frame, and score 0 while the stream does not stand above it (``DecoyGate``;
+        order on whole-route frames, and score 0 while the stream does not stand above it (``DecoyGate``;
         module docstring)."""
         if n_refs < 1:
             raise ValueError("need at least one reference")
@@ -190,8 +192,8 @@ class RoadMatcher:
         self._weight = np.full(n_refs, float(memory))
         self._seen = np.full(n_refs, -1, np.int64)
         self._t = 0                       # frames counted for the means (not those of a stopped vehicle)
-        # the decoy: the same recursion over the references in reverse order, every reference every frame
-        # (so no local search and no search around an index's candidates), and the gate it feeds
+        # the decoy: the same recursion over the references in reverse order on the whole-route frames (no
+        # search around an index's candidates), and the gate it feeds
         self._decoy: RoadMatcher | None = None
         self._gate: DecoyGate | None = None
         if decoy:
@@ -216,8 +218,8 @@ class RoadMatcher:
         """References (int array) whose similarities the next ``update`` needs, in that order; None:
         all of them. While locked on a large route (``window`` > 0): the ``window`` references either side of
         the answer, then the probe sample."""
-        if self._win is None or self._decoy is not None:
-            return None
+        if self._win is None or (self._gate is not None and not self._gate.open):
+            return None   # the whole route; with a decoy, also while its gate is closed (the decoy reads it)
         return np.concatenate([places(self._win), self._probe])
 
     def _normalise(self, s: np.ndarray, lo: int, mean: float, std: float) -> np.ndarray:
@@ -427,10 +429,12 @@ class RoadMatcher:
         ``still``: the frame's motion cue (cosine similarity to the last moving frame's encoding,
         ``base.MotionCue``; None: none)."""
         s = np.asarray(sim_row, np.float64)
-        if self._decoy is not None:
-            if refs is not None or s.shape != (self.n_refs,):
-                raise ValueError(f"with a decoy every reference is read: a row of shape ({self.n_refs},)")
+        decoy_read = self._decoy is not None and refs is None and s.shape == (self.n_refs,)
+        if decoy_read:   # a whole row: the decoy reads it (while a firm lock searches locally, it waits)
             self._decoy.update(s[::-1], None, still)
+        elif self._gate is not None and not self._gate.open:
+            raise ValueError(f"with a decoy whose gate is closed every reference is read: a row of shape "
+                             f"({self.n_refs},)")
         wins = self._win if self._win is not None else [(0, self.n_refs)]
         where = None if self._win is None else places(wins)   # the places searched (None: all, in order)
         n_win = self.n_refs if where is None else len(where)
@@ -486,7 +490,7 @@ class RoadMatcher:
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
         self._last = (values, where)   # for ``around``'s hypotheses held
         score, held = self._verdict(ref, best, values, where, part, probe, mean, std, standing)
-        if self._gate is not None and not self._gate.update(best, self._decoy.best()):
+        if decoy_read and not self._gate.update(best, self._decoy.best()):
             score, self._why = 0.0, NO_TRAJECTORY   # no trajectory stands above the reversed map's
         self._follow(ref, held)
         return ref, score

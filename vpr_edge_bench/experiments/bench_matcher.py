@@ -60,6 +60,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--storage", default="float32", choices=STORAGES, help="how the map keeps the references")
     p.add_argument("--matcher", default="stream", help="registered online matcher")
     p.add_argument("--window", type=int, default=None, help="stream: local search half-width (0 = global)")
+    p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="set one of the matcher's parameters (repeatable), as localize --param reads it")
     p.add_argument("--coarse", action="store_true", help="whole-route frames by coarse.CoarseSearch (signs, "
                    "then exact values for the best candidates), as Localizer does on maps of 20,000+ references")
     p.add_argument("--mmap", type=Path, default=None, metavar="FILE",
@@ -84,6 +86,13 @@ def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, its options checked before the synthetic map is built."""
     if not a.stop_noise >= 0:
         raise VprError(f"--stop-noise must be >= 0, got {a.stop_noise}")
+    try:
+        matcher = get_matcher(a.matcher)
+        if a.window is not None:
+            matcher = matcher.with_params(window=a.window)
+        matcher = matcher.with_params(**matcher.parse_params(a.param))
+    except ValueError as e:
+        raise VprError(str(e)) from None
     rng = np.random.default_rng(a.seed)
     route = np.random.default_rng([a.seed, 1])   # the route's speeds and detours: the same whatever --dim
     refs = rng.normal(size=(a.refs, a.dim)).astype(np.float32)
@@ -92,9 +101,6 @@ def _run(a: argparse.Namespace) -> int:
             refs[i] = a.walk * refs[i - 1] + np.sqrt(1.0 - a.walk ** 2) * refs[i]
     refs /= np.linalg.norm(refs, axis=1, keepdims=True)
     checkpoints = sorted(int(c) for c in a.checkpoints.split(",") if int(c) <= a.frames)
-    matcher = get_matcher(a.matcher)
-    if a.window is not None:
-        matcher = matcher.with_params(window=a.window)
     dtw = matcher.stream(a.refs)
     stored = Encodings.pack(refs, a.storage)
     del refs
