@@ -27,7 +27,7 @@ from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.frames.images import MIN_SIDE, Frame
 from vpr_edge.map import MapQuery, PlaceMap
-from vpr_edge.map.search import FrameSearch, uses_coarse
+from vpr_edge.map.search import FrameSearch, coarse_search, uses_coarse
 from vpr_edge.matchers import Matcher, get_matcher, is_lost, lost_why, step
 from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.threads import use_threads
@@ -118,9 +118,10 @@ class Localizer:
         self._online = self.matcher.stream(len(self.map.names)) if self.matcher.online else None
         # what each frame reads from the map: the rows asked for, coarse whole-route rows on a long map, the
         # index's candidates (``map.search``: evaluate runs the same)
+        wanted = uses_coarse(len(self.map.names), coarse, self.matcher.scores,
+                             self._online is not None and self._online.searches_locally)
         self._search = FrameSearch(self.query, self.matcher.scores, self.matcher.params.get("seek_frames", 1),
-                                   uses_coarse(len(self.map.names), coarse, self.matcher.scores,
-                                               self._online is not None and self._online.searches_locally))
+                                   coarse_search(self.query, wanted))
         self._lock = threading.Lock()
         self._count = 0
         self._cue = self.matcher.motion_cue()   # each frame's likeness to the last that moved

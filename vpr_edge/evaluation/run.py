@@ -21,7 +21,8 @@ from vpr_edge.matchers.motion import route_stands
 from vpr_edge.matchers.params import STREAM
 from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.map import MapQuery, PlaceMap, load_map
-from vpr_edge.map.search import FrameSearch, StreamSearch, uses_coarse
+from vpr_edge.index.coarse import CoarseSearch
+from vpr_edge.map.search import FrameSearch, StreamSearch, coarse_search, uses_coarse
 from vpr_edge.positions import Positions
 from vpr_edge.threads import use_threads
 
@@ -113,17 +114,21 @@ def map_same_view(blocks: Iterable[np.ndarray]) -> np.ndarray:
     return route_stands(blocks, STREAM["still"].default, MEMORY)
 
 
-def stream_search(query: MapQuery | None, matcher: Matcher, encodings: np.ndarray | None, sim: np.ndarray
-                  ) -> StreamSearch | None:
+def stream_search(query: MapQuery | None, matcher: Matcher, encodings: np.ndarray | None, sim: np.ndarray,
+                  coarse: list[CoarseSearch]) -> StreamSearch | None:
     """The rows ``matcher`` reads over the stream of ``encodings`` (Q, D) on ``query``'s map as ``Localizer``
     reads them (``map.search``: the index's candidates, coarse whole-route rows on a long map), exact rows from
     ``sim`` (Q, R); None where that is ``sim``'s rows alone (an offline matcher, no map, no index and no coarse
-    rows)."""
+    rows). ``coarse``: the map's coarse search once made (empty: none yet), shared by the modes."""
     if query is None or encodings is None or not matcher.online:
         return None
-    coarse = uses_coarse(len(query.map.names), None, matcher.scores,
-                         bool(getattr(matcher.start, "searches_locally", False)))
-    search = FrameSearch(query, matcher.scores, matcher.params.get("seek_frames", 1), coarse)
+    if uses_coarse(len(query.map.names), None, matcher.scores, bool(getattr(matcher.start, "searches_locally", False))):
+        if not coarse:
+            coarse.append(coarse_search(query, True))
+        rows = coarse[0]
+    else:
+        rows = None
+    search = FrameSearch(query, matcher.scores, matcher.params.get("seek_frames", 1), rows)
     if search.index is None and search.coarse is None:
         return None
     return StreamSearch(search, encodings, sim)
@@ -179,11 +184,12 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
         if same_view is None:
             same_view = map_same_view(sims.references.in_order())
     drive = None if query is None or len(query.map.drives) < 2 else query.map.drives.of_each()
+    coarse: list[CoarseSearch] = []   # the map's coarse search, made once for the modes that read it
     reports = {name: evaluate_mode(m, by_kind[m.scores], rows, tolerance, min_confidence, sims.positions,
                                    (calibration or {}).get(name),
                                    None if sims.encodings is None else m.cue(sims.encodings), drive,
                                    None if same_view is None else one_view(rows, same_view), target_precision,
-                                   stream_search(query, m, sims.encodings, by_kind[m.scores]))
+                                   stream_search(query, m, sims.encodings, by_kind[m.scores], coarse))
                for name, m in chosen.items()}
     return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms, rows,
                       sims.positions, sims.front)

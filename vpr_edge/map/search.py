@@ -29,16 +29,22 @@ def uses_coarse(n_refs: int, coarse: bool | None, kind: str, searches_locally: b
     return bool(wanted) and kind == "cosine" and searches_locally
 
 
+def coarse_search(query: MapQuery, wanted: bool) -> CoarseSearch | None:
+    """The coarse whole-route search of ``query``'s map where ``wanted`` (``uses_coarse``), else None; one
+    serves every stream and mode on the map (its signs are packed once, on first use)."""
+    return CoarseSearch(query.map.stored) if wanted else None
+
+
 class FrameSearch:
     """The search inputs of one stream's frames on ``query``'s map, for a matcher comparing ``kind`` scores
-    (``cosine`` or ``svm``) whose index query is the mean of ``seek_frames`` encodings; ``coarse``: whole-route
-    rows coarse (``uses_coarse``). ``push(encoding)`` for each frame in order, then ``rows`` and ``candidates``
-    are that frame's."""
+    (``cosine`` or ``svm``) whose index query is the mean of ``seek_frames`` encodings; ``coarse``: the coarse
+    search whole-route rows come from (``coarse_search``; None: exact rows). ``push(encoding)`` for each frame
+    in order, then ``rows`` and ``candidates`` are that frame's."""
 
-    def __init__(self, query: MapQuery, kind: str, seek_frames: int, coarse: bool) -> None:
+    def __init__(self, query: MapQuery, kind: str, seek_frames: int, coarse: CoarseSearch | None) -> None:
         self.query, self.kind = query, kind
         self.index = query.map.index if kind == "cosine" else None
-        self.coarse = CoarseSearch(query.map.stored) if coarse else None
+        self.coarse = coarse
         self._seq = SequenceQuery(seek_frames)
         self._enc: np.ndarray | None = None
         self._exact: Rows | None = None
