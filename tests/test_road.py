@@ -246,3 +246,25 @@ def test_road_matcher_takes_whole_numbers_for_real_parameters() -> None:
     assert "memory" in floats
     as_ints = get_matcher("stream").with_params(**{k: int(v) for k, v in floats.items()})
     np.testing.assert_array_equal(as_ints.run(sim).refs, get_matcher("stream").run(sim).refs)
+
+
+def test_lock_verdict_and_evidence_average_are_the_rules_in_order() -> None:
+    """The lock's rules as a table: the first that fails names the reason; the evidence average against a loop
+    (a standing frame may raise it, never lower it)."""
+    from vpr_edge.matchers.road import evidence_average, lock_verdict
+
+    cases = [((1.0, 10.0, 0.5), "weak-view"), ((2.0, 5.0, 0.5), "no-trajectory"), ((2.0, 10.0, 0.1), "ambiguous"),
+             ((2.0, 10.0, 0.5), "locked"), ((float("nan"), 10.0, 0.5), "weak-view"), ((1.0, 1.0, 0.0), "weak-view")]
+    for (evidence, best, own), want in cases:
+        assert lock_verdict(evidence, best, own, 1.5, 6.0, 0.25) == want, (evidence, best, own)
+    values, standing = [3.0, 1.0, 0.5, 4.0, 2.0], [False, False, True, True, False]
+    avg, want = None, []
+    for v, st in zip(values, standing):
+        avg = evidence_average(avg, v, 0.5, st)
+        want.append(avg)
+    loop, prev = [], None
+    for v, st in zip(values, standing):
+        cur = v if prev is None else (max(prev, 0.5 * prev + 0.5 * v) if st else 0.5 * prev + 0.5 * v)
+        loop.append(cur)
+        prev = cur
+    assert want == loop and want[2] == want[1] and want[3] > want[2]

@@ -104,6 +104,29 @@ from vpr_edge.matchers.verdict import DecoyGate
 from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, merge, places
 
 
+def evidence_average(previous: float | None, here: float, keep: float, standing: bool) -> float:
+    """The answer's standing out of its frames (``evidence``): this frame's ``here`` (its similarity in standard
+    deviations above the frame's row) joined to the ``previous`` average (None: none yet) with the past's
+    weight ``keep`` (``evidence_decay``); a standing frame may raise the average, not lower it."""
+    if previous is None:
+        return here
+    recent = keep * previous + (1.0 - keep) * here
+    return max(previous, recent) if standing else recent
+
+
+def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_line: float, lock: float,
+                 unique: float) -> str:
+    """The lock's rules (module docstring), in order: the first that fails names why the frame is lost
+    (``base.LOST_WHY``): "weak-view" (``evidence`` below ``evidence_line``), "no-trajectory" (``best`` below
+    ``lock``), "ambiguous" (``own_uniqueness``, against the best rival along the answer's own drive, below
+    ``unique``); else "locked"."""
+    if not evidence >= evidence_line:
+        return WEAK_VIEW
+    if best < lock:
+        return NO_TRAJECTORY
+    return AMBIGUOUS if own_uniqueness < unique else LOCKED
+
+
 class RoadMatcher:
     """Online matcher over (position, speed) trajectories; see the module docstring."""
 
@@ -515,19 +538,14 @@ class RoadMatcher:
         # how far the answer stands out of its frame's row, averaged; a standing frame may raise it, not lower it
         first, last = self.graph.bounds(ref)
         here = (float(self._answer_view(ref, where, part).max()) - mean) / std
-        if self._evidence is None:
-            self._evidence = here
-        else:
-            recent = self.evidence_decay * self._evidence + (1.0 - self.evidence_decay) * here
-            self._evidence = max(self._evidence, recent) if standing else recent
+        self._evidence = evidence_average(self._evidence, here, self.evidence_decay, standing)
         uniqueness = 1.0 - (rival + 1.0) / (best + 1.0)
         # the floor asks for an answer unambiguous along its own drive: another drive may be the same road
         # driven again, whose places are no rival to it
         own = rival if (first, last) == (0, self.n_refs - 1) else max_outside(
             values, where, merge([*near, (0, first), (last + 1, self.n_refs)]))
-        # the first of the lock's conditions that fails names why the frame is lost (``base.LOST_WHY``)
-        self._why = WEAK_VIEW if not self._evidence >= self.evidence else NO_TRAJECTORY if best < self.lock else \
-            AMBIGUOUS if 1.0 - (own + 1.0) / (best + 1.0) < self.unique else LOCKED
+        self._why = lock_verdict(self._evidence, best, 1.0 - (own + 1.0) / (best + 1.0), self.evidence, self.lock,
+                                 self.unique)
         locked = self._why == LOCKED
         # firm lock: strong evidence, and no hypothesis beyond the window half as strong (seen in global frames)
         held = bool(self.window) and best >= self.hold * self.lock and \
