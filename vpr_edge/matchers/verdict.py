@@ -30,12 +30,13 @@ Two questions, two factors, ``probability = trajectory * view``:
   place stands out only as the vehicle passes it. Without it, a map answered imagery of a place it does not
   hold whenever one reference looked most like all of it (docs/results.md, "The line on any front end").
 
-* **Is the stream on the map at all?** (``stream-decoy`` only.) The same trajectories run over the map's
+* **Is the stream on the map at all?** (With the ``decoy`` parameter, ``stream-decoy``'s; ``road.RoadMatcher``
+  runs it, for ``stream`` too.) The same trajectories run over the map's
   references in reverse order (a *decoy*: a vehicle drives its route forwards), so each frame's best decoy
   trajectory is a draw of "the best trajectory where the answer is not the place" from the same front end,
   frame and hubs. Imagery of somewhere else scores alike forwards and backwards; a mapped stream's true
   trajectory scores far above its decoy. ``DecoyGate`` opens while the recent mean of (best - decoy best) is
-  at least ``DECOY_LINE`` spreads of the recent decoy bests; closed, the probability is 0.
+  at least ``DECOY_LINE`` spreads of the recent decoy bests; closed, the score is 0 (the frame is lost).
 
 The model's constants are named once, in ``constants``; docs/decisions.md says what they were chosen on.
 """
