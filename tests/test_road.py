@@ -251,7 +251,7 @@ def test_road_matcher_takes_whole_numbers_for_real_parameters() -> None:
 def test_lock_verdict_and_evidence_average_are_the_rules_in_order() -> None:
     """The lock's rules as a table: the first that fails names the reason; the evidence average against a loop
     (a standing frame may raise it, never lower it)."""
-    from vpr_edge.matchers.road import evidence_average, lock_verdict
+    from vpr_edge.matchers.lock import evidence_average, lock_verdict
 
     cases = [((1.0, 10.0, 0.5), "weak-view"), ((2.0, 5.0, 0.5), "no-trajectory"), ((2.0, 10.0, 0.1), "ambiguous"),
              ((2.0, 10.0, 0.5), "locked"), ((float("nan"), 10.0, 0.5), "weak-view"), ((1.0, 1.0, 0.0), "weak-view")]

@@ -1,7 +1,8 @@
 """The stream matcher with a line from a model of "not this place": its score is the probability that its
 answer is right (``verdict``), estimated from the map and the stream alone, so that one line, the target
 precision, is meant to mean the same on every front end. The trajectories, the motion cue, the drives and the
-searches are the ``stream`` matcher's (``road.RoadMatcher``); only the verdict differs.
+searches are the ``stream`` matcher's (``road.RoadMatcher``); only the verdict differs (``ProbabilityVerdict``
+in place of ``lock.LockVerdict``).
 
     probability = trajectory * view
 
@@ -18,9 +19,10 @@ from __future__ import annotations
 import numpy as np
 
 from vpr_edge.matchers.base import AMBIGUOUS, NO_TRAJECTORY, WEAK_VIEW
+from vpr_edge.matchers.constants import DOUBT_SHARE, FIRM, VIEW_LEARN
+from vpr_edge.matchers.reading import FrameReading, Judgement, answer_view
 from vpr_edge.matchers.road import RoadMatcher
-from vpr_edge.matchers.route import Intervals, max_outside
-from vpr_edge.matchers.constants import DOUBT_SHARE, FIRM, FIRM_RIVAL, VIEW_LEARN
+from vpr_edge.matchers.route import Intervals, RouteGraph
 from vpr_edge.matchers.verdict import (RecentViews, TailScale, ViewFilter, block_peaks,
                                        local_best, rival_weight, spacings, trajectory_probability, view_quantile)
 
@@ -28,39 +30,41 @@ from vpr_edge.matchers.verdict import (RecentViews, TailScale, ViewFilter, block
 _UNUSED = {"lock": 0.0, "evidence": 0.0, "evidence_decay": 0.0, "unique": 0.0, "hold": 1.0}
 
 
-class ProbabilityMatcher(RoadMatcher):
-    """``road.RoadMatcher`` whose score is the probability that its answer is right (see the module
-    docstring). Parameters: ``matchers.params.STREAM`` less the lock's rules (``params.LOCK_RULES``)."""
+def probability_matcher(n_refs: int, **params) -> RoadMatcher:
+    """``road.RoadMatcher`` whose score is the probability that its answer is right (``ProbabilityVerdict``).
+    Parameters: ``matchers.params.STREAM`` less the lock's rules (``params.LOCK_RULES``)."""
+    return RoadMatcher(n_refs, **_UNUSED, **params, verdict=ProbabilityVerdict)
 
-    def __init__(self, n_refs: int, **params) -> None:
-        super().__init__(n_refs, **_UNUSED, **params)
-        self._tail = TailScale()      # the null's tail scale
-        self._view = ViewFilter()     # whether the frames still show the answer's place
-        self._recent = RecentViews(n_refs)   # each place's recent views: this stream's hubs
-        self._far = (np.zeros(0), np.zeros(0, np.int64))   # rival peaks and their blocks, last whole-route frame
+
+class ProbabilityVerdict:
+    """The probability that the answer is right, ``trajectory * view`` (the module docstring), over one stream
+    on the map whose route graph is ``graph``; rivals lie beyond ``rival_window`` places of the answer. Strong
+    enough for a local search at a trajectory probability of ``FIRM``; ``why`` names the weaker factor."""
+
+    def __init__(self, graph: RouteGraph, rival_window: int) -> None:
+        self.graph, self.rival_window = graph, rival_window
+        self.reset()
 
     def reset(self) -> None:
-        super().reset()
-        self._tail, self._view, self._recent = TailScale(), ViewFilter(), RecentViews(self.n_refs)
-        self._far = (np.zeros(0), np.zeros(0, np.int64))
+        self._tail = TailScale()      # the null's tail scale
+        self._view = ViewFilter()     # whether the frames still show the answer's place
+        self._recent = RecentViews(self.graph.n_refs)   # each place's recent views: this stream's hubs
+        self._far = (np.zeros(0), np.zeros(0, np.int64))   # rival peaks and their blocks, last whole-route frame
 
-    def _verdict(self, ref: int, best: float, values: np.ndarray, where: np.ndarray | None, part: np.ndarray,
-                 probe: np.ndarray, mean: float, std: float, standing: bool) -> tuple[float, bool]:
-        near = self.graph.near(ref, self.rival_window)
-        trajectory, doubt = self._trajectory(ref, best, values, where, near, standing)
-        if not standing:   # a standing frame's view again says nothing new
-            at = slice(None) if where is None else where
-            z = (part - mean) / std
+    def judge(self, f: FrameReading) -> Judgement:
+        near = self.graph.near(f.ref, self.rival_window)
+        trajectory, doubt = self._trajectory(f.ref, f.best, f.values, f.where, near, f.standing)
+        if not f.standing:   # a standing frame's view again says nothing new
+            at = slice(None) if f.where is None else f.where
+            z = (f.part - f.mean) / f.std
             views = self._recent.corrected(z, at)   # the frame's views less this stream's hubs
             self._recent.add(z, at)
-            here = self._answer_view(ref, where, views)
-            null = local_best(views, where, near)
+            here = answer_view(self.graph, f.ref, f.where, views)
+            null = local_best(views, f.where, near)
             self._view.update(view_quantile(null, float(here.max())), trajectory >= VIEW_LEARN)
         view = self._view.p
-        self._why = WEAK_VIEW if view <= trajectory else AMBIGUOUS if doubt else NO_TRAJECTORY
-        held = bool(self.window) and trajectory >= FIRM and \
-            max_outside(values, where, self.graph.near(ref, self.window)) < FIRM_RIVAL * best
-        return trajectory * view, held
+        why = WEAK_VIEW if view <= trajectory else AMBIGUOUS if doubt else NO_TRAJECTORY
+        return Judgement(trajectory * view, trajectory >= FIRM, why)
 
     def _trajectory(self, ref: int, best: float, values: np.ndarray, where: np.ndarray | None, near: Intervals,
                     standing: bool) -> tuple[float, bool]:

@@ -11,7 +11,7 @@ from vpr_edge.matchers.dtw import dtw_match
 from vpr_edge.matchers.road import RoadMatcher
 from vpr_edge.matchers.seqslam import SeqSLAMOnline, seqslam_match
 from vpr_edge.matchers.single import BestMatch
-from vpr_edge.matchers.probability import ProbabilityMatcher
+from vpr_edge.matchers.probability import probability_matcher
 from vpr_edge.matchers.stream_dtw import StreamingDTW
 from vpr_edge.matchers.constants import TARGET_PRECISION
 
@@ -22,11 +22,11 @@ MATCHERS: dict[str, Matcher] = {m.name: m for m in (
             definitions=P.STREAM, min_confidence=1.0, reads_route=True),
     Matcher("stream-prob", "the stream matcher with its score the probability that the answer is right, from a "
             "model of 'not this place' read on the map and the stream (no labels); lost below the target "
-            "precision (online)", start=ProbabilityMatcher, definitions=P.STREAM_PROB, min_confidence=TARGET_PRECISION,
+            "precision (online)", start=probability_matcher, definitions=P.STREAM_PROB, min_confidence=TARGET_PRECISION,
             reads_route=True, probability=True),
     Matcher("stream-decoy", "stream-prob that also runs its trajectories over the map reversed and answers only "
             "while the stream stands above that decoy: imagery of a place the map does not hold is lost; about "
-            "1.7x stream-prob's matching (online)", start=ProbabilityMatcher,
+            "1.7x stream-prob's matching (online)", start=probability_matcher,
             definitions=P.STREAM_PROB, params=P.defaults(P.STREAM_PROB, decoy=True),
             min_confidence=TARGET_PRECISION, reads_route=True, probability=True),
     Matcher("single", "best single match per frame, no sequence information (online)", start=BestMatch),

@@ -46,7 +46,10 @@ answered just before such a reference is read as motion, so the answer moves on 
 references as the frames of the mapping drive did (where it stands still, the answer would stay at the first
 of them while the rest of that stop, the same place, went by).
 
-The answer is the position of the best state. Its score does two jobs, so it has two parts:
+The answer is the position of the best state. How sure it is, and why a frame is lost, is a *verdict*'s
+(``reading.Verdict``; each frame handed over as a ``reading.FrameReading``): ``stream-prob``'s is a model of
+"not this place" (``probability.ProbabilityVerdict``); the ``stream`` matcher's is the lock's rules
+(``lock.LockVerdict``), described here. Their score does two jobs, so it has two parts:
 
     score = [H_best >= lock and E >= evidence and uniqueness >= unique] + uniqueness,
     uniqueness = 1 - (H_rival + 1) / (H_best + 1)
@@ -97,34 +100,14 @@ import numpy as np
 
 from collections.abc import Callable
 
-from vpr_edge.matchers.base import AMBIGUOUS, LOCKED, NO_TRAJECTORY, WEAK_VIEW
+from vpr_edge.matchers import params as P
+from vpr_edge.matchers.base import NO_TRAJECTORY
 from vpr_edge.matchers.constants import FIRM_RIVAL, LOCAL_ROUTE, MIN_SPREAD, PEAK_POOL, PEAK_SPACING
+from vpr_edge.matchers.lock import LockVerdict
 from vpr_edge.matchers.motion import reversed_stands, stands
+from vpr_edge.matchers.reading import FrameReading, TrajectoryOnly, VerdictFactory
 from vpr_edge.matchers.verdict import DecoyGate
 from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, merge, places
-
-
-def evidence_average(previous: float | None, here: float, keep: float, standing: bool) -> float:
-    """The answer's standing out of its frames (``evidence``): this frame's ``here`` (its similarity in standard
-    deviations above the frame's row) joined to the ``previous`` average (None: none yet) with the past's
-    weight ``keep`` (``evidence_decay``); a standing frame may raise the average, not lower it."""
-    if previous is None:
-        return here
-    recent = keep * previous + (1.0 - keep) * here
-    return max(previous, recent) if standing else recent
-
-
-def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_line: float, lock: float,
-                 unique: float) -> str:
-    """The lock's rules (module docstring), in order: the first that fails names why the frame is lost
-    (``base.LOST_WHY``): "weak-view" (``evidence`` below ``evidence_line``), "no-trajectory" (``best`` below
-    ``lock``), "ambiguous" (``own_uniqueness``, against the best rival along the answer's own drive, below
-    ``unique``); else "locked"."""
-    if not evidence >= evidence_line:
-        return WEAK_VIEW
-    if best < lock:
-        return NO_TRAJECTORY
-    return AMBIGUOUS if own_uniqueness < unique else LOCKED
 
 
 class RoadMatcher:
@@ -137,7 +120,8 @@ class RoadMatcher:
                  hold: float, seek: int, peaks: int, seek_frames: int, stop_gain: float, stop_decay: float, still: float,
                  still_memory: int,
                  evidence: float, evidence_decay: float, unique: float, decoy: bool = False,
-                 route: np.ndarray | None = None, graph: RouteGraph | None = None, reach: int = 0) -> None:
+                 route: np.ndarray | None = None, graph: RouteGraph | None = None, reach: int = 0,
+                 verdict: VerdictFactory | None = None) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
         ``still_memory`` is the motion cue's, read where the cue is computed; ``seek_frames`` is what the index
         is asked, read where it is asked, ``index.ivf.SequenceQuery``). ``route``: (n_refs,) bool, the
@@ -146,29 +130,25 @@ class RoadMatcher:
         the map references stay alike (``likeness.reach``; 0: not known): a rival trajectory must lie beyond
         it as well as beyond ``rival_window``. ``decoy``: also run the recursion over the references in reverse
         order on whole-route frames, and score 0 while the stream does not stand above it (``DecoyGate``;
-        module docstring)."""
+        module docstring). ``verdict``: what judges each frame, made from the route graph and the rival window
+        (``reading.Verdict``; None: the lock's rules with the parameters above, ``lock.LockVerdict``)."""
+        given = {k: v for k, v in locals().items() if k in P.STREAM}   # the parameters, for the decoy
         if n_refs < 1:
             raise ValueError("need at least one reference")
         if not 0.0 < decay < 1.0:
             raise ValueError(f"decay must be in (0, 1), got {decay}")
         if not (0.0 <= stop_gain <= 1.0 and 0.0 < stop_decay < 1.0):
             raise ValueError(f"need stop_gain in [0, 1] and stop_decay in (0, 1), got {stop_gain}, {stop_decay}")
-        if not 0.0 <= evidence_decay < 1.0:
-            raise ValueError(f"evidence_decay must be in [0, 1), got {evidence_decay}")
-        if not 0.0 <= unique < 1.0:
-            raise ValueError(f"unique must be in [0, 1), got {unique}")
         if not 0.0 <= still <= 1.0:
             raise ValueError(f"still must be in [0, 1] (0: no motion cue), got {still}")
         if grid < 1 or vmax < 0 or memory < 1 or window < 0 or probe < 2:
             raise ValueError(f"need grid >= 1, vmax >= 0, memory >= 1, window >= 0, probe >= 2 (got {grid}, "
                              f"{vmax}, {memory}, {window}, {probe})")
         self.n_refs, self.grid, self.decay, self.bias = n_refs, grid, decay, bias
-        self.turn, self.memory, self.lock = turn, memory, lock
+        self.turn, self.memory = turn, memory
         self.rival_window = max(0, int(rival_window), int(reach))
         self.stop_gain, self.stop_decay, self.still = stop_gain, stop_decay, still
-        self.evidence, self.evidence_decay, self.unique = evidence, evidence_decay, unique
-        self._evidence: float | None = None   # the answer's recent standing out of its rows (``evidence``)
-        self._why = NO_TRAJECTORY   # which of the lock's conditions the last frame failed first (``why``)
+        self._why = NO_TRAJECTORY   # why the last frame is not answered, as its verdict said (``why``)
         if route is not None and np.shape(route) != (n_refs,):
             raise ValueError(f"route must flag each of the {n_refs} references, got shape {np.shape(route)}")
         self.route = None if route is None else np.asarray(route, bool)
@@ -181,6 +161,9 @@ class RoadMatcher:
         self.graph = RouteGraph.line(n_refs) if graph is None else graph
         if self.graph.n_refs != n_refs:
             raise ValueError(f"route graph of {self.graph.n_refs} references for {n_refs}")
+        self.verdict = verdict(self.graph, self.rival_window) if verdict is not None else LockVerdict(
+            self.graph, self.rival_window, lock=lock, evidence=evidence, evidence_decay=evidence_decay, unique=unique,
+            hold=hold)
         # trajectories across drives: state entries whose predecessor in map order is another drive's (cut),
         # and what the junctions carry from their sources' ends into their targets (fed)
         self._cut = self.graph.cuts(grid, self.n_speeds)
@@ -190,7 +173,7 @@ class RoadMatcher:
         self._win: Intervals | None = None   # references the next frame searches ([lo, hi) intervals); None = all
         self.seek, self.peaks = max(0, int(seek)), max(1, int(peaks))
         self._last: tuple[np.ndarray, np.ndarray | None] = (np.zeros(0, np.float32), None)   # (``_peaks``)
-        self.check, self.span, self.hold = max(1, int(check)), max(0, int(span)), hold
+        self.check, self.span = max(1, int(check)), max(0, int(span))
         self._held = 0                               # frames since the local search began
         # the state H, held where it may be non-zero: over the whole route (``_full``, (speeds, positions); a
         # frame that searches everything) or compact over the intervals a local or index search keeps
@@ -220,12 +203,8 @@ class RoadMatcher:
         self._decoy: RoadMatcher | None = None
         self._gate: DecoyGate | None = None
         if decoy:
-            self._decoy = RoadMatcher(
-                n_refs, vmax=vmax, grid=grid, decay=decay, bias=bias, turn=turn, memory=memory, lock=lock,
-                rival_window=rival_window, window=0, probe=probe, check=check, span=span, hold=hold, seek=seek,
-                peaks=peaks, seek_frames=seek_frames, stop_gain=stop_gain, stop_decay=stop_decay, still=still,
-                still_memory=still_memory, evidence=evidence, evidence_decay=evidence_decay, unique=unique,
-                route=None if route is None else reversed_stands(route), reach=reach)
+            self._decoy = RoadMatcher(n_refs, **(given | {"window": 0, "decoy": False}), reach=reach,
+                                      route=None if route is None else reversed_stands(route), verdict=TrajectoryOnly)
             self._gate = DecoyGate()
             self.around = None   # type: ignore[assignment]   # whole rows: ``step`` asks no index
 
@@ -512,51 +491,21 @@ class RoadMatcher:
         self._best = best                          # the best trajectory's score (``best``)
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
         self._last = (values, where)   # for ``around``'s hypotheses held
-        score, held = self._verdict(ref, best, values, where, part, probe, mean, std, standing)
+        judged = self.verdict.judge(FrameReading(ref, best, values, where, part, probe, mean, std, standing))
+        score, self._why = judged.score, judged.why
+        # a firm lock: a strong answer, and no trajectory beyond the window half as strong (seen in global frames)
+        held = bool(self.window) and judged.strong and \
+            max_outside(values, where, self.graph.near(ref, self.window)) < FIRM_RIVAL * best
         if decoy_read and not self._gate.update(best, self._decoy.best()):
             score, self._why = 0.0, NO_TRAJECTORY   # no trajectory stands above the reversed map's
         self._follow(ref, held)
         return ref, score
 
-    def _answer_view(self, ref: int, where: np.ndarray | None, part: np.ndarray) -> np.ndarray:
-        """The frame's similarities (of ``part``, over the places ``where``; None: all) to the answer ``ref``
-        and its neighbours along its drive (one either side where there is one)."""
-        first, last = self.graph.bounds(ref)
-        at = int(np.searchsorted(where, ref)) if where is not None else ref
-        lo_ = max(0, at - (1 if ref > first else 0))
-        return part[lo_:at + (2 if ref < last else 1)]
-
-    def _verdict(self, ref: int, best: float, values: np.ndarray, where: np.ndarray | None, part: np.ndarray,
-                 probe: np.ndarray, mean: float, std: float, standing: bool) -> tuple[float, bool]:
-        """The frame's score and whether the lock is firm (a local search may follow it), from the answer
-        ``ref`` and its trajectory score ``best``, the best trajectory ending at each place (``values`` over the
-        places ``where``; None: all), the frame's similarities (``part`` over ``where``; ``probe``: over the
-        probe sample, or every reference; ``mean``, ``std``: the frame's, as z uses them) and whether it stands. Here: the lock's rules (module docstring);
-        ``probability.ProbabilityMatcher``: a model of "not this place"."""
-        near = self.graph.near(ref, self.rival_window)
-        rival = max_outside(values, where, near)
-        # how far the answer stands out of its frame's row, averaged; a standing frame may raise it, not lower it
-        first, last = self.graph.bounds(ref)
-        here = (float(self._answer_view(ref, where, part).max()) - mean) / std
-        self._evidence = evidence_average(self._evidence, here, self.evidence_decay, standing)
-        uniqueness = 1.0 - (rival + 1.0) / (best + 1.0)
-        # the floor asks for an answer unambiguous along its own drive: another drive may be the same road
-        # driven again, whose places are no rival to it
-        own = rival if (first, last) == (0, self.n_refs - 1) else max_outside(
-            values, where, merge([*near, (0, first), (last + 1, self.n_refs)]))
-        self._why = lock_verdict(self._evidence, best, 1.0 - (own + 1.0) / (best + 1.0), self.evidence, self.lock,
-                                 self.unique)
-        locked = self._why == LOCKED
-        # firm lock: strong evidence, and no hypothesis beyond the window half as strong (seen in global frames)
-        held = bool(self.window) and best >= self.hold * self.lock and \
-            max_outside(values, where, self.graph.near(ref, self.window)) < FIRM_RIVAL * best
-        return float(locked) + uniqueness, held
-
     def why(self) -> str:
-        """Why the last frame is not locked, the first of the lock's conditions it fails (``base.LOST_WHY``):
-        "weak-view" (its answer does not stand out of what the frame sees: E < ``evidence``), "no-trajectory"
-        (none has built up: H < ``lock``), "ambiguous" (a rival along the drive nearly as strong:
-        uniqueness < ``unique``); "locked" when it fails none."""
+        """Why the last frame is not answered, as its verdict says (``base.LOST_WHY``; "locked" when it is);
+        the lock's rules: "weak-view" (its answer does not stand out of what the frame sees: E < ``evidence``),
+        "no-trajectory" (none has built up: H < ``lock``), "ambiguous" (a rival along the drive nearly as
+        strong: uniqueness < ``unique``); with a decoy, "no-trajectory" while its gate is closed."""
         return self._why
 
     def _follow(self, ref: int, held: bool) -> None:
@@ -619,7 +568,7 @@ class RoadMatcher:
         if self._decoy is not None:
             self._decoy.reset()
             self._gate = DecoyGate()
-        self._evidence = None
+        self.verdict.reset()
         self._why = NO_TRAJECTORY
         self._hold([], np.zeros(0, np.int64), np.zeros((self.n_speeds, 0), np.float32))
         self._mean[:] = 0.0

@@ -1,0 +1,144 @@
+"""The stream matcher in parts: each verdict judged alone over hand-made frames (``reading.FrameReading``),
+and the trajectory recursion (``road.RoadMatcher``) handing each frame to whatever verdict it is given."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vpr_edge.matchers import MATCHERS
+from vpr_edge.matchers.lock import LockVerdict
+from vpr_edge.matchers.probability import ProbabilityVerdict
+from vpr_edge.matchers.reading import FrameReading, Judgement, TrajectoryOnly, answer_view
+from vpr_edge.matchers.road import RoadMatcher
+from vpr_edge.matchers.route import RouteGraph
+
+from helpers import places_at_speeds, planted
+
+RULES = {"lock": 6.0, "evidence": 1.5, "evidence_decay": 0.0, "unique": 0.25, "hold": 2.0}
+
+
+def reading(values: np.ndarray, part: np.ndarray, standing: bool = False) -> FrameReading:
+    ref = int(np.argmax(values))
+    return FrameReading(ref, float(values[ref]), values, None, part, part, float(part.mean()), float(part.std()),
+                        standing)
+
+
+def naive_lock(values: np.ndarray, part: np.ndarray, rival_window: int) -> tuple[float, bool, str]:
+    """The lock's rules on one frame of a one-drive map, as plain loops (evidence_decay 0: this frame alone)."""
+    ref = int(np.argmax(values))
+    best = values[ref]
+    rival = max([v for i, v in enumerate(values) if abs(i - ref) > rival_window], default=0.0)
+    here = max((part[i] - part.mean()) / part.std() for i in range(max(0, ref - 1), min(len(part), ref + 2)))
+    uniqueness = 1 - (rival + 1) / (best + 1)
+    why = "weak-view" if here < RULES["evidence"] else "no-trajectory" if best < RULES["lock"] else \
+        "ambiguous" if uniqueness < RULES["unique"] else "locked"
+    return float(why == "locked") + uniqueness, best >= RULES["hold"] * RULES["lock"], why
+
+
+@pytest.mark.parametrize("case", ["locked", "weak-view", "no-trajectory", "ambiguous", "weak-but-locked"])
+def test_the_lock_verdict_alone_against_its_rules(case: str) -> None:
+    n = 60
+    rng = np.random.default_rng(3)
+    values = rng.uniform(0, 2, n)
+    part = rng.normal(0, 1, n)
+    values[30], part[30] = {"no-trajectory": 5.0, "weak-but-locked": 7.0}.get(case, 20.0), 4.0
+    if case == "weak-view":
+        part[29:32] = part.mean()
+    if case == "ambiguous":
+        values[50] = 19.0
+    verdict = LockVerdict(RouteGraph.line(n), 10, **RULES)
+    got = verdict.judge(reading(values, part))
+    score, strong, why = naive_lock(values, part, 10)
+    assert (got.why, got.strong) == (why, strong) and got.score == pytest.approx(score)
+    assert why == case.replace("weak-but-", "")
+
+
+def test_the_lock_verdicts_evidence_is_averaged_over_frames_and_reset() -> None:
+    n = 40
+    rules = RULES | {"evidence_decay": 0.5}
+    values = np.zeros(n)
+    values[10] = 20.0
+    strong_view = np.zeros(n)
+    strong_view[10] = 10.0
+    flat = np.r_[np.ones(n // 2), -np.ones(n // 2)]
+    verdict = LockVerdict(RouteGraph.line(n), 5, **rules)
+    assert verdict.judge(reading(values, strong_view)).why == "locked"
+    here = verdict.judge(reading(values, flat))   # this frame alone is weak; the average is not
+    assert here.why == "locked"
+    verdict.reset()
+    assert verdict.judge(reading(values, flat)).why == "weak-view"
+
+
+def test_the_probability_verdict_alone() -> None:
+    """No tail scale before the first frame with rivals: probability 0; then a lone peak far above its rivals
+    is judged right, and the same frame with a rival as strong is not."""
+    n = 200
+    rng = np.random.default_rng(5)
+    verdict = ProbabilityVerdict(RouteGraph.line(n), 10)
+    part = rng.normal(0, 1, n)
+    part[100] = 6.0
+    values = rng.exponential(1.0, n)
+    values[100] = 40.0
+    first = verdict.judge(reading(values, part))
+    assert isinstance(first, Judgement) and first.score < 1.0
+    for _ in range(30):
+        got = verdict.judge(reading(values, part))
+    assert got.score > 0.9 and got.why in ("weak-view", "no-trajectory", "ambiguous")
+    values[20] = 40.0
+    rival = verdict.judge(reading(values, part))
+    assert rival.score < 0.6 and rival.why == "ambiguous" and not rival.strong
+
+
+def test_answer_view_stays_on_the_answers_drive() -> None:
+    graph = RouteGraph(6, [0, 3])
+    part = np.arange(6.0)
+    assert answer_view(graph, 2, None, part).tolist() == [1.0, 2.0]   # the drive ends at place 2
+    assert answer_view(graph, 3, None, part).tolist() == [3.0, 4.0]   # the next one starts at 3
+    assert answer_view(graph, 4, None, part).tolist() == [3.0, 4.0, 5.0]
+    assert answer_view(graph, 4, np.array([1, 3, 4, 5]), np.array([1.0, 3.0, 4.0, 5.0])).tolist() == [3.0, 4.0, 5.0]
+
+
+class Recorder:
+    """A verdict that records what the recursion hands it and says "strong" as told."""
+
+    def __init__(self, graph: RouteGraph, rival_window: int, strong: bool) -> None:
+        self.frames: list[FrameReading] = []
+        self.strong = strong
+
+    def judge(self, frame: FrameReading) -> Judgement:
+        self.frames.append(frame)
+        return Judgement(float(len(self.frames)), self.strong, "locked")
+
+    def reset(self) -> None:
+        self.frames.clear()
+
+
+@pytest.mark.parametrize("strong", [True, False])
+def test_the_recursion_hands_each_frame_to_its_verdict(strong: bool) -> None:
+    """Every frame reaches the verdict with the places it searched, the answer at the best of their trajectory
+    scores; the score and the reason are the verdict's; only a strong verdict lets a local search follow."""
+    n = 1000
+    rng = np.random.default_rng(2)
+    sim = planted(rng, n, places_at_speeds([(1.0, 60)], start=100.0), noise=0.2)
+    params = MATCHERS["stream"].params | {"window": 50}
+    m = RoadMatcher(n, **params, verdict=lambda g, w: Recorder(g, w, strong))
+    local = 0
+    for i, row in enumerate(sim):
+        wanted = m.wanted()
+        local += wanted is not None
+        ref, score = m.update(row if wanted is None else row[wanted], wanted)
+        frame = m.verdict.frames[-1]
+        assert score == i + 1 and m.why() == "locked" and frame.ref == ref and frame.best == pytest.approx(m.best())
+        searched = np.arange(n) if wanted is None else wanted[:len(frame.values)]
+        assert (frame.where is None) == (wanted is None) and np.array_equal(searched, frame.where if
+                                                                           frame.where is not None else searched)
+        assert frame.values.max() == pytest.approx(frame.best) and searched[np.argmax(frame.values)] == ref
+    assert (local > 30) == strong and (local == 0) == (not strong)
+    m.reset()
+    assert m.verdict.frames == []
+
+
+def test_the_decoy_reads_trajectories_only() -> None:
+    m = RoadMatcher(50, **MATCHERS["stream-prob"].params | {"decoy": True, "lock": 6.0, "evidence": 1.5,
+                                                           "evidence_decay": 0.5, "unique": 0.25, "hold": 2.0})
+    assert isinstance(m._decoy.verdict, TrajectoryOnly) and m._decoy._decoy is None and m._decoy.window == 0

@@ -1,0 +1,74 @@
+"""The ``stream`` matcher's verdict: the lock's rules (``road``'s module docstring says what each one guards).
+
+    score = [locked] + uniqueness,   uniqueness = 1 - (H_rival + 1) / (H_best + 1)
+
+A frame is locked when its answer stands out of what the frame sees (the evidence average E >= ``evidence``),
+its trajectory has built up (H_best >= ``lock``) and no rival along the answer's own drive is nearly as strong
+(uniqueness against it >= ``unique``); the first rule that fails names why it is lost (``lock_verdict``).
+So locked frames rank above lost ones, each by uniqueness. The answer is strong enough for a local search at
+H_best >= ``hold`` * ``lock``.
+"""
+from __future__ import annotations
+
+from vpr_edge.matchers.base import AMBIGUOUS, LOCKED, NO_TRAJECTORY, WEAK_VIEW
+from vpr_edge.matchers.reading import FrameReading, Judgement, answer_view
+from vpr_edge.matchers.route import RouteGraph, max_outside, merge
+
+
+def evidence_average(previous: float | None, here: float, keep: float, standing: bool) -> float:
+    """The answer's standing out of its frames (``evidence``): this frame's ``here`` (its similarity in standard
+    deviations above the frame's row) joined to the ``previous`` average (None: none yet) with the past's
+    weight ``keep`` (``evidence_decay``); a standing frame may raise the average, not lower it."""
+    if previous is None:
+        return here
+    recent = keep * previous + (1.0 - keep) * here
+    return max(previous, recent) if standing else recent
+
+
+def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_line: float, lock: float,
+                 unique: float) -> str:
+    """The lock's rules, in order: the first that fails names why the frame is lost (``base.LOST_WHY``):
+    "weak-view" (``evidence`` below ``evidence_line``), "no-trajectory" (``best`` below ``lock``), "ambiguous"
+    (``own_uniqueness``, against the best rival along the answer's own drive, below ``unique``); else
+    "locked"."""
+    if not evidence >= evidence_line:
+        return WEAK_VIEW
+    if best < lock:
+        return NO_TRAJECTORY
+    return AMBIGUOUS if own_uniqueness < unique else LOCKED
+
+
+class LockVerdict:
+    """The lock's rules over a stream (module docstring); parameters as ``matchers.params.STREAM`` names them
+    (``lock``, ``evidence``, ``evidence_decay``, ``unique``, ``hold``). ``rival_window``: places either side of
+    the answer that a rival trajectory must lie beyond."""
+
+    def __init__(self, graph: RouteGraph, rival_window: int, *, lock: float, evidence: float, evidence_decay: float,
+                 unique: float, hold: float) -> None:
+        if not 0.0 <= evidence_decay < 1.0:
+            raise ValueError(f"evidence_decay must be in [0, 1), got {evidence_decay}")
+        if not 0.0 <= unique < 1.0:
+            raise ValueError(f"unique must be in [0, 1), got {unique}")
+        self.graph, self.rival_window = graph, rival_window
+        self.lock, self.evidence, self.evidence_decay, self.unique, self.hold = lock, evidence, evidence_decay, \
+            unique, hold
+        self._evidence: float | None = None   # the answer's recent standing out of its rows
+
+    def reset(self) -> None:
+        self._evidence = None
+
+    def judge(self, f: FrameReading) -> Judgement:
+        graph, n_refs = self.graph, self.graph.n_refs
+        near = graph.near(f.ref, self.rival_window)
+        rival = max_outside(f.values, f.where, near)
+        here = (float(answer_view(graph, f.ref, f.where, f.part).max()) - f.mean) / f.std
+        self._evidence = evidence_average(self._evidence, here, self.evidence_decay, f.standing)
+        uniqueness = 1.0 - (rival + 1.0) / (f.best + 1.0)
+        # the rule asks for an answer unambiguous along its own drive: another drive may be the same road
+        # driven again, whose places are no rival to it
+        first, last = graph.bounds(f.ref)
+        own = rival if (first, last) == (0, n_refs - 1) else max_outside(
+            f.values, f.where, merge([*near, (0, first), (last + 1, n_refs)]))
+        why = lock_verdict(self._evidence, f.best, 1.0 - (own + 1.0) / (f.best + 1.0), self.evidence, self.lock,
+                           self.unique)
+        return Judgement(float(why == LOCKED) + uniqueness, f.best >= self.hold * self.lock, why)
