@@ -102,12 +102,13 @@ from collections.abc import Callable
 
 from vpr_edge.matchers import params as P
 from vpr_edge.matchers.base import NO_TRAJECTORY
-from vpr_edge.matchers.constants import FIRM_RIVAL, LOCAL_ROUTE, MIN_SPREAD, PEAK_POOL, PEAK_SPACING
+from vpr_edge.matchers.constants import FIRM_RIVAL, LOCAL_ROUTE, MIN_SPREAD
 from vpr_edge.matchers.lock import LockVerdict
 from vpr_edge.matchers.motion import reversed_stands, stands
 from vpr_edge.matchers.reading import FrameReading, TrajectoryOnly, VerdictFactory
+from vpr_edge.matchers.search_policy import around_candidates, best_hypotheses, local_next
 from vpr_edge.matchers.verdict import DecoyGate
-from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, merge, places
+from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, places
 
 
 class RoadMatcher:
@@ -172,7 +173,7 @@ class RoadMatcher:
         self._gap = -(-self.n_speeds // grid) + 1   # windows closer than this are searched as one
         self._win: Intervals | None = None   # references the next frame searches ([lo, hi) intervals); None = all
         self.seek, self.peaks = max(0, int(seek)), max(1, int(peaks))
-        self._last: tuple[np.ndarray, np.ndarray | None] = (np.zeros(0, np.float32), None)   # (``_peaks``)
+        self._last: tuple[np.ndarray, np.ndarray | None] = (np.zeros(0, np.float32), None)   # (``best_hypotheses``)
         self.check, self.span = max(1, int(check)), max(0, int(span))
         self._held = 0                               # frames since the local search began
         # the state H, held where it may be non-zero: over the whole route (``_full``, (speeds, positions); a
@@ -514,7 +515,7 @@ class RoadMatcher:
         global frames every ``check`` frames, else everything. State outside the window is kept at 0
         (trajectories there are dropped when the window is entered and when it moves on)."""
         self._held = self._held + 1 if (self.window and held) else 0
-        if not self._held or self._held % self.check >= self.check - self.span:
+        if not local_next(self._held, self.check, self.span):
             self._win = None
             return
         self._search(self.graph.near(ref, self.window, self._gap))
@@ -531,27 +532,10 @@ class RoadMatcher:
         within ``seek`` of each candidate along the route and the neighbourhoods of the best hypotheses held
         (``peaks`` of them, ``window``/4 places either side), then the probe. Hypotheses elsewhere are
         dropped: the state lives around candidates, not over every place."""
-        near = [iv for c in np.unique(np.asarray(candidates, np.int64)) for iv in self.graph.near(int(c), self.seek)]
-        self._search(merge(near + self._peaks(*self._last), self._gap))
-        return np.concatenate([places(self._win), self._probe])
-
-    def _peaks(self, values: np.ndarray, where: np.ndarray | None) -> Intervals:
-        """The neighbourhoods (``window``/4 places along the route) of the ``peaks`` best hypotheses: the
-        places whose best trajectory is highest (over ``values``, one per place of ``where``; None: every
-        place), positive, each more than two neighbourhoods from a better one."""
-        if not len(values):
-            return []
         reach = max(self.seek, self.window // 4)
-        k = min(len(values), PEAK_POOL * self.peaks)
-        top = np.argpartition(-values, k - 1)[:k]
-        chosen: list[int] = []
-        for i in top[np.argsort(-values[top], kind="stable")]:
-            if values[i] <= 0.0 or len(chosen) == self.peaks:
-                break
-            p = int(i) if where is None else int(where[i])
-            if all(abs(p - c) > PEAK_SPACING * reach for c in chosen):
-                chosen.append(p)
-        return [iv for p in chosen for iv in self.graph.near(p, reach)]
+        hypotheses = best_hypotheses(*self._last, self.peaks, reach)
+        self._search(around_candidates(self.graph, candidates, self.seek, hypotheses, reach, self._gap))
+        return np.concatenate([places(self._win), self._probe])
 
     def ranking(self) -> np.ndarray:
         """Best trajectory score ending at each reference (R,) (0 where nothing is held)."""
