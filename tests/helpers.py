@@ -354,3 +354,113 @@ def naive_road_over_drives(sim: np.ndarray, graph, grid: int, vmax: float, decay
                 new[v, c] = max(0.0, decay * before) + z[c]
         h = np.maximum(new, 0.0)
     return h
+
+
+def naive_road_all(sim, graph, cues, route, candidates, *, vmax, grid, decay, bias, turn, memory, lock, window,
+                   probe, check, span, hold, seek, peaks, stop_gain, stop_decay, still, **_):
+    """RoadMatcher's trajectories with everything at once, as plain loops over states, from its docstrings:
+    a map of several drives (the ``RouteGraph`` ``graph``: each state's predecessors listed, in its drive and
+    across the junctions), the motion cue (``cues`` (F,), NaN = none; ``route``: the references where the
+    map's drive stood), the local search around a firm lock (the lock's rules' firm test), and an index
+    (``candidates[i]``: frame i's candidates, None: none), whose frames that would read the whole route read
+    the places within ``seek`` of each candidate and the neighbourhoods of the best hypotheses held instead.
+    The state is one (speeds, places * grid) array, zero outside what is held. -> per frame (ref, best H,
+    the state after it, as the next frame's local search holds it, the references the frame read (None:
+    all))."""
+    from vpr_edge.matchers.route import merge
+
+    n_refs = sim.shape[1]
+    n_speeds, n_pos = int(round(vmax * grid)) + 1, n_refs * grid
+    w = window if window and n_refs > 4 * window else 0
+    gap = -(-n_speeds // grid) + 1
+    probe_refs = np.sort(np.random.default_rng(0).choice(n_refs, min(n_refs, probe), replace=False))
+    # predecessors of each (speed, column): v columns back within the drive, or a junction's source columns
+    first_col = [graph.bounds(c // grid)[0] * grid for c in range(n_pos)]
+    preds = {(v, c): ([c - v] if c - v >= first_col[c] else []) for v in range(1, n_speeds) for c in range(n_pos)}
+    for sources, targets in graph.junctions:
+        for t in targets:
+            for v in range(1, n_speeds):
+                for i in range(v):
+                    c = t * grid + i
+                    if c < (graph.bounds(t)[1] + 1) * grid:
+                        preds[(v, c)] += [s * grid + grid - (v - i) for s in sources
+                                          if s * grid + grid - (v - i) >= graph.bounds(s)[0] * grid]
+    h = np.zeros((n_speeds, n_pos))
+    mean, weight, seen = np.zeros(n_refs), np.full(n_refs, float(memory)), np.full(n_refs, -1)
+    t, stopped, position, win, held_for = 0, False, None, None, 0
+    last_values: dict[int, float] = {}
+    out = []
+    for i, s in enumerate(sim):
+        if win is None and candidates[i] is not None:   # an index: around its candidates and the hypotheses held
+            reach = max(seek, w // 4)
+            ranked = sorted(last_values.items(), key=lambda pv: -pv[1])[:4 * peaks]
+            chosen: list[int] = []
+            for p, v in ranked:
+                if v <= 0 or len(chosen) == peaks:
+                    break
+                if all(abs(p - c) > 2 * reach for c in chosen):
+                    chosen.append(p)
+            near = [iv for c in set(int(c) for c in candidates[i]) for iv in graph.near(c, seek)]
+            win = merge(near + [iv for p in chosen for iv in graph.near(p, reach)], gap)
+            keep = np.zeros(n_pos, bool)
+            for lo, hi in win:
+                keep[lo * grid:hi * grid] = True
+            h = np.where(keep, h, 0.0)
+        searched = list(range(n_refs)) if win is None else [r for lo, hi in win for r in range(lo, hi)]
+        read = None if win is None else searched + [int(r) for r in probe_refs]
+        sample = s if win is None else s[probe_refs]
+        mu, sd = sample.mean(), max(sample.std(), 1e-12)
+        cue = cues[i]
+        gain, s_decay, stands = stop_gain, stop_decay, False
+        if still > 0 and cue == cue:
+            gain, s_decay, stands = 0.0, decay, cue >= still
+            if stands and route is not None and position is not None:
+                nxt = int(round(position)) + 1
+                stands = not (nxt < n_refs and route[nxt])
+        if not stands:
+            if not stopped:
+                t += 1
+            zr = {}
+            for r in searched:
+                z = (s[r] - mu) / sd
+                zr[r] = z - mean[r]
+                if not stopped:
+                    weight[r] = weight[r] * (1 - 1 / memory) ** (1 if seen[r] < 0 else t - seen[r]) + 1
+                    seen[r] = t
+                    mean[r] += (z - mean[r]) / weight[r]
+            m = np.array([[max(h[u, c] - turn * abs(v - u) for u in range(n_speeds)) for c in range(n_pos)]
+                          for v in range(n_speeds)])
+            new = np.zeros_like(h)
+            for r in searched:
+                for c in range(r * grid, (r + 1) * grid):
+                    e = zr[r] - bias
+                    new[0, c] = max(0.0, max(0.0, s_decay * m[0, c]) + (gain * e if e > 0 else e))
+                    for v in range(1, n_speeds):
+                        before = max([m[v, p] for p in preds[(v, c)]], default=0.0)
+                        new[v, c] = max(0.0, max(0.0, decay * before) + e)
+            h = new
+        best, ref, col = -1.0, -1, 0
+        values = {}
+        for lo, hi in ([(0, n_refs)] if win is None else win):
+            part = h[:, lo * grid:hi * grid]
+            v_best, p_best = np.unravel_index(np.argmax(part), part.shape)
+            if part[v_best, p_best] > best:
+                best, ref, col = part[v_best, p_best], lo + p_best // grid, lo * grid + p_best
+                stopped = v_best == 0
+            values.update({r: h[:, r * grid:(r + 1) * grid].max() for r in range(lo, hi)})
+        position, last_values = col / grid, values
+        out.append((ref, best, h, read))   # the state as the next frame's search leaves it (below)
+        near_ref = {r for lo, hi in graph.near(ref, w) for r in range(lo, hi)}
+        far = max([v for r, v in values.items() if r not in near_ref], default=0.0)
+        held = bool(w) and best >= hold * lock and far < 0.5 * best
+        held_for = held_for + 1 if held else 0
+        if not held_for or held_for % check >= check - span:
+            win = None
+            continue
+        win = graph.near(ref, w, gap)
+        keep = np.zeros(n_pos, bool)
+        for lo, hi in win:
+            keep[lo * grid:hi * grid] = True
+        h = np.where(keep, h, 0.0)
+        out[-1] = (ref, best, h, read)
+    return out
