@@ -8,7 +8,8 @@ import pytest
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.motion import reversed_stands
-from vpr_edge.matchers.verdict import (DecoyGate, RecentViews, TailScale, ViewFilter, block_peaks, local_best, rival_weight,
+from vpr_edge.matchers.verdict import (DecoyGate, RecentViews, TailScale, ViewFilter, block_peaks, expected_precision,
+                                       line_score, local_best, near_values, place_probability, rival_weight,
                                        spacings, trajectory_probability, view_quantile)
 
 MODES = ["stream-prob", "stream-decoy"]
@@ -207,3 +208,56 @@ def test_foreign_imagery_with_a_look_alike_is_lost(mode: str) -> None:
     sim[:, 120] += 2.5   # the look-alike
     sim[:, 121] += 1.5
     assert run(sim, places, mode=mode).lost_unmapped >= 0.99
+
+
+def test_near_values_against_a_loop() -> None:
+    rng = np.random.default_rng(7)
+    values = rng.normal(size=80)
+    near = [(3, 9), (40, 41), (70, 80)]
+    places, got = near_values(values, None, near)
+    want = [p for p in range(80) if any(lo <= p < hi for lo, hi in near)]
+    assert places.tolist() == want and got.tolist() == values[want].tolist()
+    where = np.sort(rng.choice(200, 80, replace=False))
+    places, got = near_values(values, where, near)
+    keep = [i for i, p in enumerate(where) if any(lo <= p < hi for lo, hi in near)]
+    assert places.tolist() == where[keep].tolist() and got.tolist() == values[keep].tolist()
+
+
+def test_place_probability_is_a_softmax_over_near_places_and_rivals() -> None:
+    rng = np.random.default_rng(8)
+    places = np.arange(20, 41)
+    values = rng.uniform(0, 10, len(places))
+    best = float(values.max())
+    answer = int(places[np.argmax(values)])
+    right = [(answer - 2, answer + 3)]
+    rivals, scale = 0.7, 1.5
+    weights = {int(p): np.exp((v - best) / scale) for p, v in zip(places, values)}
+    want = sum(w for p, w in weights.items() if answer - 2 <= p <= answer + 2) / (sum(weights.values()) + rivals)
+    assert place_probability(best, places, values, right, rivals, scale) == pytest.approx(want)
+    # only the answer near: the trajectory's probability against the rivals
+    alone = place_probability(best, np.array([answer]), np.array([best]), right, rivals, scale)
+    assert alone == pytest.approx(trajectory_probability(rivals))
+    assert place_probability(best, places, values, right, rivals, None) == 0.0
+
+
+def test_expected_precision_and_the_line_score_against_loops() -> None:
+    rng = np.random.default_rng(9)
+    recent = rng.uniform(size=50)
+    for p in (0.05, 0.5, 0.95, float(recent.max())):
+        sure = [x for x in recent if x >= p]
+        want = sum(sure) / len(sure)
+        assert expected_precision(p, recent) == pytest.approx(want)
+        assert line_score(p, recent, 0.9) == pytest.approx(want if p >= 0.9 else p)
+    assert expected_precision(0.3, np.zeros(0)) == 0.3
+
+
+def test_a_sure_stretch_does_not_carry_the_answers_of_a_place_off_the_map() -> None:
+    """After a long stretch of sure answers the frames of an unmapped place are lost at once: the line's
+    mean over answers "at least as sure" would still stand high, the floor does not let them through."""
+    rng = np.random.default_rng(5)
+    places = np.r_[np.arange(0, 120), -np.ones(30, int), np.arange(150, 250)]
+    r = run(planted(rng, 260, places, 4.0), places)
+    assert r.lost_unmapped >= 0.95 and r.exit_frames[0] <= 2
+    p = r.probabilities
+    carried = [i for i in np.flatnonzero(places < 0) if expected_precision(p[i], p[max(0, i - 499):i + 1]) >= 0.98]
+    assert len(carried) > 2   # what the mean alone would have answered

@@ -95,9 +95,9 @@ ANSWER_FIELDS = ("frame", "mode", "ref", "score", "probability", "lost", "why", 
 
 
 def write_answers(path: str | os.PathLike[str], reports: dict[str, ModeReport]) -> None:
-    """Each frame's answer per mode as CSV (``ANSWER_FIELDS``; probability: the score where the mode's score
-    is the probability that the answer is right, else empty; why: a lost frame's reason, where the mode gives
-    one), written atomically."""
+    """Each frame's answer per mode as CSV (``ANSWER_FIELDS``; probability: that the answer is right, where
+    the mode models one, else empty; why: a lost frame's reason, where the mode gives one), written
+    atomically."""
     import csv
 
     with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
@@ -107,7 +107,8 @@ def write_answers(path: str | os.PathLike[str], reports: dict[str, ModeReport]) 
             for i in range(len(r.refs)):
                 score = float(r.scores[i])
                 why = "" if r.why is None or r.why[i] is None else r.why[i]
-                w.writerow([i, mode, int(r.refs[i]), f"{score:.6g}", f"{score:.6g}" if r.probability else "",
+                p = None if r.probabilities is None else float(r.probabilities[i])
+                w.writerow([i, mode, int(r.refs[i]), f"{score:.6g}", "" if p is None or p != p else f"{p:.6g}",
                             int(r.lost[i]), why, int(r.correct[i])])
 
 

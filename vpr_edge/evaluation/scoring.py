@@ -57,7 +57,9 @@ class ModeReport:
     target_precision: float = TARGET_PRECISION   # the precision the best line is read at
     best_line_recall: float = float("nan")  # the best line's recall (mapped right) at the target precision
     line_gap: float = float("nan")          # the best line's recall at the delivered precision - mapped_right
-    probability: bool = False               # the scores are probabilities that the answer is right
+    probability: bool = False               # the scores lie on the precision scale (a target precision line)
+    probabilities: np.ndarray | None = field(default=None, repr=False, compare=False)   # (Q,) each answer's
+    # probability of being right, where the matcher models one
 
     def as_json(self) -> dict:
         """The keys of ``evaluate --json`` (NaN as null)."""
@@ -144,6 +146,7 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
                       metres=None if positions is None else metrics.metre_summary(
                           metrics.metre_errors(result.refs, truth, positions.coords, positions.geo), lost),
                       refs=result.refs, lost=lost, correct=correct[:, 0], scores=result.scores,
+                      probabilities=result.probability,
                       answered_right=answered_right, mapped_right=mapped_right,
                       one_view=view, one_view_frames=distinct[0],
                       distinct_answered_right=distinct[1], distinct_mapped_right=distinct[2], why=why,

@@ -105,6 +105,7 @@ class Result:
     scores: np.ndarray
     ranked: np.ndarray
     why: np.ndarray | None = None   # (Q,) object: each frame's ``OnlineMatcher.why()`` (None: not given)
+    probability: np.ndarray | None = None   # (Q,) the probability each answer is right (None: not modelled)
 
 
 def top_k(pref: np.ndarray, k: int) -> np.ndarray:
@@ -160,12 +161,18 @@ def run_rows(matcher: OnlineMatcher, rows: Callable[[int, np.ndarray | None], np
     scores = np.empty(q, np.float64)
     ranked = np.empty((q, min(k, r)), np.int64)
     why = np.empty(q, object)
+    modelled = getattr(matcher, "probability", None)   # a matcher that models it says how likely each answer is right
+    probability = np.full(q, np.nan)
     for i in range(q):
         refs[i], scores[i] = step(matcher, lambda idx: rows(i, idx), cue_at(still, i),
                                   None if candidates is None else candidates(i))
         ranked[i] = top_k(matcher.ranking(), k)
         why[i] = matcher.why()
-    return Result(refs, scores, lead_with(refs, ranked), None if all(w is None for w in why) else why)
+        if callable(modelled):
+            p = modelled()
+            probability[i] = np.nan if p is None else p
+    return Result(refs, scores, lead_with(refs, ranked), None if all(w is None for w in why) else why,
+                  None if np.isnan(probability).all() else probability)
 
 
 @dataclass(frozen=True)

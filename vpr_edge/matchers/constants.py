@@ -37,6 +37,18 @@ LEAVE, ENTER = 0.01, 0.05
 # the view's recent means (``RecentViews``): frames of memory (an exponential one, per sighting) and the
 # prior's weight in frames of mean 0
 HUB_MEMORY, HUB_PRIOR = 10.0, 1.0
+# an answer within this many places of the place (along the route) is right: the place's probability sums the
+# hypotheses that near the answer (the shared datasets' ground truth lists each frame's place +-2)
+ANSWER_SLACK = 2
+# the places near the answer are hypotheses of their own, weighed with this share of the null's tail scale
+# (chosen on nordland-dev: the most answers whose median precision over its streams and five front ends
+# reaches the target; Corridor's choice would be 0.7; docs/decisions.md)
+PLACE_SCALE = 0.6
+# frames whose probabilities the line reads (``expected_precision``): the last this many
+LINE_MEMORY = 500
+# no answer less sure than this is given, whatever the precision of the answers as sure as it: a vehicle acts
+# on each answer, and after a long sure stretch the mean over "at least as sure" stays high for a while
+ANSWER_FLOOR = 0.9
 # a lock is firm (a local search may follow it) at this trajectory probability
 FIRM = 0.999
 # one rival holds most of the doubt ("ambiguous" rather than "no-trajectory") at this share of the rivals' weight

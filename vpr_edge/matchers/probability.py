@@ -16,15 +16,18 @@ not hold).
 """
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 
 from vpr_edge.matchers.base import AMBIGUOUS, NO_TRAJECTORY, WEAK_VIEW
-from vpr_edge.matchers.constants import DOUBT_SHARE, FIRM, VIEW_LEARN
+from vpr_edge.matchers.constants import ANSWER_SLACK, DOUBT_SHARE, FIRM, LINE_MEMORY, PLACE_SCALE, VIEW_LEARN
 from vpr_edge.matchers.reading import FrameReading, Judgement, answer_view
 from vpr_edge.matchers.road import RoadMatcher
 from vpr_edge.matchers.route import Intervals, RouteGraph
-from vpr_edge.matchers.verdict import (RecentViews, TailScale, ViewFilter, block_peaks,
-                                       local_best, rival_weight, spacings, trajectory_probability, view_quantile)
+from vpr_edge.matchers.verdict import (RecentViews, TailScale, ViewFilter, block_peaks, line_score,
+                                       local_best, near_values, place_probability, rival_weight, spacings,
+                                       trajectory_probability, view_quantile)
 
 # the lock's rules of the ``stream`` matcher, which this one's verdict replaces (``params.LOCK_RULES``)
 _UNUSED = {"lock": 0.0, "evidence": 0.0, "evidence_decay": 0.0, "unique": 0.0, "hold": 1.0}
@@ -50,10 +53,15 @@ class ProbabilityVerdict:
         self._view = ViewFilter()     # whether the frames still show the answer's place
         self._recent = RecentViews(self.graph.n_refs)   # each place's recent views: this stream's hubs
         self._far = (np.zeros(0), np.zeros(0, np.int64))   # rival peaks and their blocks, last whole-route frame
+        self._sure: deque[float] = deque(maxlen=LINE_MEMORY)   # the last frames' probabilities (the line's)
 
     def judge(self, f: FrameReading) -> Judgement:
         near = self.graph.near(f.ref, self.rival_window)
-        trajectory, doubt = self._trajectory(f.ref, f.best, f.values, f.where, near, f.standing)
+        rivals, beta, doubt = self._rivals(f.ref, f.best, f.values, f.where, near, f.standing)
+        trajectory = trajectory_probability(rivals)   # the answer's trajectory rather than a rival's
+        places, values = near_values(f.values, f.where, near)
+        place = place_probability(f.best, places, values, self.graph.near(f.ref, ANSWER_SLACK), rivals,
+                                  None if beta is None else PLACE_SCALE * beta)
         if not f.standing:   # a standing frame's view again says nothing new
             at = slice(None) if f.where is None else f.where
             z = (f.part - f.mean) / f.std
@@ -63,13 +71,16 @@ class ProbabilityVerdict:
             null = local_best(views, f.where, near)
             self._view.update(view_quantile(null, float(here.max())), trajectory >= VIEW_LEARN)
         view = self._view.p
-        why = WEAK_VIEW if view <= trajectory else AMBIGUOUS if doubt else NO_TRAJECTORY
-        return Judgement(trajectory * view, trajectory >= FIRM, why)
+        why = WEAK_VIEW if view <= place else AMBIGUOUS if doubt else NO_TRAJECTORY
+        probability = place * view
+        self._sure.append(probability)
+        return Judgement(line_score(probability, np.fromiter(self._sure, float, len(self._sure))),
+                         trajectory >= FIRM, why, probability)
 
-    def _trajectory(self, ref: int, best: float, values: np.ndarray, where: np.ndarray | None, near: Intervals,
-                    standing: bool) -> tuple[float, bool]:
-        """-> (the probability that the best trajectory, ``best`` at ``ref``, is the place rather than a rival,
-        whether one rival holds most of the doubt). ``values``: the best trajectory ending at each place of
+    def _rivals(self, ref: int, best: float, values: np.ndarray, where: np.ndarray | None, near: Intervals,
+                standing: bool) -> tuple[float, float | None, bool]:
+        """-> (how much the rival trajectories explain the best one, ``best`` at ``ref`` (``rival_weight``),
+        the null's tail scale (None: not known yet), whether one rival holds most of the doubt). ``values``: the best trajectory ending at each place of
         ``where`` (None: every place); the rivals are the block peaks beyond ``near`` on the answer's own drive
         (another drive may be the same road driven again), with the peaks of blocks this frame did not search
         as the last whole-route frame left them; every drive's teach the null's scale."""
@@ -91,6 +102,6 @@ class ProbabilityVerdict:
         beta = self._tail.value
         weight = rival_weight(best, rivals, beta)
         if not len(rivals) or beta is None:
-            return trajectory_probability(weight), False
+            return weight, beta, False
         top = float(np.exp(min((float(rivals.max()) - best) / beta, 50.0)))
-        return trajectory_probability(weight), top >= DOUBT_SHARE * weight
+        return weight, beta, top >= DOUBT_SHARE * weight

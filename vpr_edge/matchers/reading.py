@@ -38,11 +38,13 @@ class FrameReading:
 class Judgement:
     """A verdict on one frame: its ``score`` (the matcher's; a lost line is drawn on it), whether the answer is
     ``strong`` enough for a local search to follow it (the matcher adds that no trajectory beyond its window is
-    near as strong), and ``why`` (``base.LOST_WHY`` or "locked": the first reason the frame is not answered)."""
+    near as strong), ``why`` (``base.LOST_WHY`` or "locked": the first reason the frame is not answered) and,
+    for a verdict that models it, the ``probability`` that the answer is right."""
 
     score: float
     strong: bool
     why: str
+    probability: float | None = None   # the probability that the answer is right, where the verdict has one
 
 
 class Verdict(Protocol):

@@ -150,6 +150,7 @@ class RoadMatcher:
         self.rival_window = max(0, int(rival_window), int(reach))
         self.stop_gain, self.stop_decay, self.still = stop_gain, stop_decay, still
         self._why = NO_TRAJECTORY   # why the last frame is not answered, as its verdict said (``why``)
+        self._probability: float | None = None   # the probability its answer is right, as the verdict said
         if route is not None and np.shape(route) != (n_refs,):
             raise ValueError(f"route must flag each of the {n_refs} references, got shape {np.shape(route)}")
         self.route = None if route is None else np.asarray(route, bool)
@@ -493,12 +494,13 @@ class RoadMatcher:
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
         self._last = (values, where)   # for ``around``'s hypotheses held
         judged = self.verdict.judge(FrameReading(ref, best, values, where, part, probe, mean, std, standing))
-        score, self._why = judged.score, judged.why
+        score, self._why, self._probability = judged.score, judged.why, judged.probability
         # a firm lock: a strong answer, and no trajectory beyond the window half as strong (seen in global frames)
         held = bool(self.window) and judged.strong and \
             max_outside(values, where, self.graph.near(ref, self.window)) < FIRM_RIVAL * best
         if decoy_read and not self._gate.update(best, self._decoy.best()):
             score, self._why = 0.0, NO_TRAJECTORY   # no trajectory stands above the reversed map's
+            self._probability = None if self._probability is None else 0.0
         self._follow(ref, held)
         return ref, score
 
@@ -508,6 +510,11 @@ class RoadMatcher:
         "no-trajectory" (none has built up: H < ``lock``), "ambiguous" (a rival along the drive nearly as
         strong: uniqueness < ``unique``); with a decoy, "no-trajectory" while its gate is closed."""
         return self._why
+
+    def probability(self) -> float | None:
+        """The probability that the last frame's answer is right, where its verdict models one (None: the
+        lock's rules do not)."""
+        return self._probability
 
     def _follow(self, ref: int, held: bool) -> None:
         """Choose the next frame's search: the references within ``window`` of ``ref`` along the route
@@ -554,6 +561,7 @@ class RoadMatcher:
             self._gate = DecoyGate()
         self.verdict.reset()
         self._why = NO_TRAJECTORY
+        self._probability = None
         self._hold([], np.zeros(0, np.int64), np.zeros((self.n_speeds, 0), np.float32))
         self._mean[:] = 0.0
         self._stopped = False

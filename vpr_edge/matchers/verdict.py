@@ -47,7 +47,7 @@ from collections import deque
 
 import numpy as np
 
-from vpr_edge.matchers.constants import (DECOY_LINE, DECOY_MEMORY, DECOY_SPREAD, DECOY_WARM, ENTER, HUB_MEMORY,
+from vpr_edge.matchers.constants import (ANSWER_FLOOR, DECOY_LINE, DECOY_MEMORY, DECOY_SPREAD, DECOY_WARM, ENTER, HUB_MEMORY,
                                          HUB_PRIOR, LEAVE, TAIL_MEMORY, TAIL_PEAKS, VIEW_MEMORY, VIEW_PRIOR,
                                          VIEW_PRIOR_FRAMES, VIEW_RANGE)
 from vpr_edge.matchers.route import Intervals, inside
@@ -137,6 +137,46 @@ def trajectory_probability(weight: float) -> float:
     """The probability that the best trajectory is the place rather than one of the rivals whose
     ``rival_weight`` is ``weight``: 1 / (1 + weight) (0 for an infinite weight)."""
     return 0.0 if math.isinf(weight) else 1.0 / (1.0 + weight)
+
+
+def near_values(values: np.ndarray, where: np.ndarray | None, near: Intervals) -> tuple[np.ndarray, np.ndarray]:
+    """The per-place scores ``values`` (n,) of the places ``where`` (sorted; None: 0..n-1) that lie in the
+    intervals ``near`` ([lo, hi) places) -> (their places, their values), both (m,) in place order."""
+    if where is None:
+        places = np.concatenate([np.arange(lo, hi) for lo, hi in near]) if near else np.zeros(0, np.int64)
+        return places, np.asarray(values)[places]
+    keep = inside(where, near)
+    return np.asarray(where, np.int64)[keep], np.asarray(values)[keep]
+
+
+def place_probability(best: float, places: np.ndarray, values: np.ndarray, right: Intervals, rivals: float,
+                      scale: float | None) -> float:
+    """The probability that the place lies within ``right`` (the places an answer there counts as right
+    for): a softmax over the hypotheses, each place near the answer (``places``, with their best trajectory
+    scores ``values``; the answer's own among them, at ``best``) of weight exp((value - best) / ``scale``),
+    and the rivals far away of summed weight ``rivals`` (``rival_weight``). ``scale`` None: nothing known
+    yet, 0. With no place near but the answer, 1 / (1 + rivals): ``trajectory_probability``."""
+    if scale is None or math.isinf(rivals):
+        return 0.0
+    w = np.exp(np.minimum((np.asarray(values, np.float64) - best) / scale, 50.0))
+    return float(w[inside(places, right)].sum() / (w.sum() + rivals))
+
+
+def expected_precision(probability: float, recent: np.ndarray) -> float:
+    """The precision expected of the answers at least as sure as this one (``probability``) among the
+    ``recent`` probabilities (this one's included): their mean. A line at P on it gives answers whose mean
+    probability of being right, so whose expected precision, is at least P (a Bayesian false discovery rate
+    line), where a line on each answer's own probability asks every answer to be P sure."""
+    r = np.asarray(recent, np.float64)
+    sure = r[r >= probability]
+    return float(sure.mean()) if len(sure) else probability
+
+
+def line_score(probability: float, recent: np.ndarray, floor: float = ANSWER_FLOOR) -> float:
+    """The score a target-precision line is drawn on: for an answer at least ``floor`` sure, the precision
+    expected of the ``recent`` answers at least as sure (``expected_precision``); for a less sure one, its own
+    ``probability`` (below any line above ``floor``: never given)."""
+    return expected_precision(probability, recent) if probability >= floor else probability
 
 
 def local_best(part: np.ndarray, where: np.ndarray | None, exclude: Intervals) -> np.ndarray:
