@@ -280,6 +280,9 @@ def test_evaluate_target_precision_line_gap_and_answers(tmp_path: Path) -> None:
     assert all(0.0 <= float(r["probability"]) <= 1.0 for r in rows if r["mode"] == "stream-prob")
     lost = [r for r in rows if r["mode"] == "stream-prob" and r["lost"] == "1"]
     assert all(float(r["probability"]) < 0.9 and r["why"] for r in lost)
+    given = [r for r in rows if r["mode"] == "stream-prob" and r["lost"] == "0"]
+    # an answer given is at least the floor sure, scored by the precision expected of the answers as sure
+    assert given and all(float(r["score"]) >= float(r["probability"]) >= 0.9 for r in given)
     for bad in ("1", "0", "-0.5", "nan"):
         proc = run("evaluate", "--similarity", s, "--gt", gt, "--target-precision", bad, "--json", tmp_path / "x.json")
         assert proc.returncode == 2

@@ -4,11 +4,14 @@ precision, is meant to mean the same on every front end. The trajectories, the m
 searches are the ``stream`` matcher's (``road.RoadMatcher``); only the verdict differs (``ProbabilityVerdict``
 in place of ``lock.LockVerdict``).
 
-    probability = trajectory * view
+    probability = place * view
 
-``trajectory``: how far the best trajectory stands out of the rival trajectories' null, in that null's own
-tail scale (``verdict.trajectory_probability``); ``view``: whether the frames still show the answer's place
-(``verdict.ViewFilter``). A frame is lost below the line; ``why()`` names the weaker factor.
+``place``: how far the best trajectory stands out of the rival trajectories' null, in that null's own tail
+scale, and out of the trajectories ending at the places next to the answer: the probability that the place
+lies within ``ANSWER_SLACK`` of the answer (``verdict.place_probability``); ``view``: whether the frames still
+show the answer's place (``verdict.ViewFilter``). The score, on which the line is drawn, is the precision
+expected of the stream's recent answers at least as sure (``verdict.line_score``; ``probability()`` gives the
+probability itself). A frame is lost below the line; ``why()`` names the weaker factor.
 
 With ``decoy`` (the registry's ``stream-decoy``; ``road.RoadMatcher``'s decoy) the probability is 0 while the
 stream's best trajectories do not stand above those over the map reversed (imagery of a place the map does

@@ -20,7 +20,7 @@ MATCHERS: dict[str, Matcher] = {m.name: m for m in (
     Matcher("stream", "trajectories over (position, speed) with contrast-normalised similarities: any speed "
             "0-4 places/frame, lock-on anywhere, lost state (online, default)", start=RoadMatcher,
             definitions=P.STREAM, min_confidence=1.0, reads_route=True),
-    Matcher("stream-prob", "the stream matcher with its score the probability that the answer is right, from a "
+    Matcher("stream-prob", "the stream matcher with the probability that each answer is right, from a "
             "model of 'not this place' read on the map and the stream (no labels); lost below the target "
             "precision (online)", start=probability_matcher, definitions=P.STREAM_PROB, min_confidence=TARGET_PRECISION,
             reads_route=True, probability=True),

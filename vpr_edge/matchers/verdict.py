@@ -2,7 +2,7 @@
 estimated on the map and the stream alone (no labels, no front-end constant), so that one line (the target
 precision) means the same on every front end, route and camera.
 
-Two questions, two factors, ``probability = trajectory * view``:
+Two questions, two factors, ``probability = place * view``, and a line on the answers' precision:
 
 * **Does the answer's trajectory stand out of the trajectories that are not this place?** The trajectory
   scores H of places far from the answer are the null: H of a wrong place is a decayed sum of a frame's
@@ -15,6 +15,10 @@ Two questions, two factors, ``probability = trajectory * view``:
   with the null's own temperature. Off the map, the best is the top of the null and the gap to the next is an
   exponential draw of mean beta, so a line at P is passed by at most about 1 - P of such frames (a constant
   false-alarm rate), whatever the similarities' scale.
+  The places next to the answer (within the rival window) are hypotheses too: a trajectory a few places off
+  (a lag, a speed change) is the commonest confident wrong answer. Each weighs exp(-(best - H) / scale) with
+  ``PLACE_SCALE`` of beta, and ``place_probability`` is the share of all the weight (near places and rivals)
+  on the places within ``ANSWER_SLACK`` of the answer: the probability that an answer there is right.
 * **Does this frame still show the answer's place?** A trajectory remembers ~1/(1 - decay) frames, so it
   says late that the vehicle left the map; the frame says so at once. ``view_quantile`` is the share of the
   frame's references that look at least as much like it as the answer does (uniform over [0, 1] where the
@@ -37,6 +41,12 @@ Two questions, two factors, ``probability = trajectory * view``:
   frame and hubs. Imagery of somewhere else scores alike forwards and backwards; a mapped stream's true
   trajectory scores far above its decoy. ``DecoyGate`` opens while the recent mean of (best - decoy best) is
   at least ``DECOY_LINE`` spreads of the recent decoy bests; closed, the score is 0 (the frame is lost).
+
+* **Where is the line?** A line on each answer's own probability asks every answer to be P sure, so the
+  answers given are right far more often than P. ``line_score`` scores an answer by the precision expected of
+  the stream's recent answers at least as sure (their mean probability: a Bayesian false discovery rate
+  line), so that a line at P delivers about P, for answers at least ``ANSWER_FLOOR`` sure: a vehicle acts on
+  each answer, and after a long sure stretch that mean stays high while the first frames off the map come in.
 
 The model's constants are named once, in ``constants``; docs/decisions.md says what they were chosen on.
 """
