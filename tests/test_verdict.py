@@ -261,3 +261,27 @@ def test_a_sure_stretch_does_not_carry_the_answers_of_a_place_off_the_map() -> N
     p = r.probabilities
     carried = [i for i in np.flatnonzero(places < 0) if expected_precision(p[i], p[max(0, i - 499):i + 1]) >= 0.98]
     assert len(carried) > 2   # what the mean alone would have answered
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_foreign_imagery_after_a_firm_lock_is_lost(mode: str) -> None:
+    """A long map followed under a firm lock (a local search: the decoy waits while its gate is open), then,
+    the camera moving on, imagery of somewhere else in which the place just past the lock looks most like
+    every frame: at least 95% of its frames are lost, the first within 3 frames of leaving."""
+    from vpr_edge.matchers.base import step
+
+    rng = np.random.default_rng(11)
+    n = 1000
+    places = np.r_[np.arange(100, 160), -np.ones(80, int)]
+    sim = planted(rng, n, places, 4.0)
+    sim[60:, 162] += 2.5   # the look-alike, just past where the mapped stretch ended
+    sim[60:, 163] += 1.5
+    m = get_matcher(mode).stream(n)
+    local, scores = [], []
+    for row in sim:
+        local.append(m.wanted() is not None)
+        scores.append(step(m, lambda idx, row=row: row if idx is None else row[idx], 0.1)[1])   # moving
+    lost = np.asarray(scores) < 0.98
+    assert all(local[30:61])   # a firm lock: the frames searched locally, the first foreign one too
+    assert np.mean(~lost[20:60]) > 0.9
+    assert np.mean(lost[60:]) >= 0.95 and lost[60:64].any()
