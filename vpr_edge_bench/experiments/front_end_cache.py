@@ -4,7 +4,7 @@ Beside each matrix it keeps what the streaming matcher reads, so that experiment
 
     python -m vpr_edge_bench derive-streams --dataset ../shared/datasets/corridor --out out/corridor   # (and nordland-dev)
     python -m vpr_edge_bench front-end-cache --streams out/corridor out/nordland-dev --out out/fronts \\
-        [--fronts ifv,ifv128,hog,pixels,gem,random,noisy] [--threads 2]
+        [--fronts ifv,ifv128,hog,sift,ldb,pixels,gem,random,noisy] [--threads 2]
 
 For each dataset folder D (``derive-streams`` output) and front end F it builds OUT/D.name/F/map.npz
 (kept if it exists) and writes, per stream kind K of ``streams.KINDS`` and for ``foreign`` (the
@@ -25,7 +25,8 @@ OUT/D.name/F/K.npz (``np.savez``, no pickles; kept if it exists) with:
 ``pixels`` files have no ``cue``, ``route``, ``reach`` or ``one_view`` (no map, no motion cue).
 
 Front ends: ``ifv`` (the default build: D/map.npz copied), ``ifv128`` (``--components 128 --pca-dim 0``),
-``hog`` (HOG features, IFV encoding), ``pixels`` (SeqSLAM's front end on D/ref, no map), ``gem``
+``hog`` and ``sift`` (HOG, dense SIFT: IFV encoding, the thesis's handcrafted front ends), ``ldb`` (LDB, a
+binary descriptor of the whole image, no encoding), ``pixels`` (SeqSLAM's front end on D/ref, no map), ``gem``
 (EfficientNet-Lite0 cut at stage5 + GeM, pretrained, exported by ``vpr_edge_export.onnx_export`` to
 OUT/models/gem_160x120.onnx), ``random`` (the same network with seeded random weights, Kaiming-normal
 fan-in convolutions: a state dict written to OUT/models/ and exported by the same exporter with
@@ -64,7 +65,7 @@ from vpr_edge.threads import use_threads
 from vpr_edge_bench.folder import StreamsFolder, streams_folders
 from vpr_edge_bench.runner import parser, run_checked
 
-FRONTS: tuple[str, ...] = ("ifv", "ifv128", "hog", "pixels", "gem", "random", "noisy")
+FRONTS: tuple[str, ...] = ("ifv", "ifv128", "hog", "sift", "ldb", "pixels", "gem", "random", "noisy")
 FOREIGN = "foreign"
 MODEL_SIZE = (160, 120)          # the global models' input, width x height
 BACKBONE, TAP = "efficientnet_lite0", "stage5"
@@ -192,8 +193,10 @@ def ensure_map(front: str, folder: StreamsFolder, out: Path, models: Path, threa
         os.replace(tmp, path)
     elif front == "ifv128":
         build_with(refs, path, BuildOptions(components=128, pca_dim=0, threads=threads))
-    elif front == "hog":
-        build_with(refs, path, BuildOptions(features="hog", encoding="ifv", threads=threads))
+    elif front in ("hog", "sift"):
+        build_with(refs, path, BuildOptions(features=front, encoding="ifv", threads=threads))
+    elif front == "ldb":
+        build_with(refs, path, BuildOptions(features="ldb", encoding="none", threads=threads))
     elif front == "gem":
         build_with(refs, path, BuildOptions(model=export_gem(models), threads=threads))
     elif front == "random":
