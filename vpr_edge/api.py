@@ -33,8 +33,8 @@ from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.threads import use_threads
 
 
-RESULTS_SCHEMA = 4   # the output line (docs/formats.md, docs/results-line.schema.json); 4: lost_why; 3: drive;
-#                     2: stamp, position
+RESULTS_SCHEMA = 5   # the output line (docs/formats.md, docs/results-line.schema.json); 5: confidence from the
+#                     mode's own probability without a calibration; 4: lost_why; 3: drive; 2: stamp, position
 
 
 @dataclass(frozen=True)
@@ -46,7 +46,8 @@ class Match:
     positions),
     interpolated between references where the matcher resolves finer than one reference, a score (higher =
     more confident; its meaning per mode: docs/matchers.md), the ``confidence`` (the probability that the
-    answer is right, from a calibration of the mode; None without one), the lost flag and, for a lost frame of
+    answer is right: from a calibration of the mode where one is given, else the mode's own where it models
+    one, ``stream-prob`` and ``stream-decoy``; None without either), the lost flag and, for a lost frame of
     a mode that says so, why it is lost (``matchers.LOST_WHY``: weak-view, no-trajectory, ambiguous; else None)."""
 
     frame_index: int
@@ -157,7 +158,7 @@ class Localizer:
         given."""
         return self.query.scores(encodings, self.matcher.scores, refs)
 
-    def _step(self, enc: np.ndarray) -> tuple[int, float, float | None, str | None]:
+    def _step(self, enc: np.ndarray) -> tuple[int, float, float | None, str | None, float | None]:
         """Match one encoding (D,), with its motion cue (its likeness to the encoding of the last frame that
         moved, ``matchers.MotionCue``): only the similarities the matcher asks for are computed (a local search
         around a locked position reads a window of the map, not all of it; with ``coarse``, a whole-route
@@ -166,16 +167,18 @@ class Localizer:
         self.query.check_unchanged()   # a memory-mapped map rewritten under us: stop before reading it
         self._search.push(enc)
         ref, score = step(self._online, self._search.rows, self._cue(enc), self._search.candidates())
-        return ref, score, self._online.position(), self._online.why()
+        modelled = getattr(self._online, "probability", None)   # the matcher's own probability, where it has one
+        return ref, score, self._online.position(), self._online.why(), modelled() if callable(modelled) else None
 
     def _line(self, index: int, name: str, ref: int, score: float, stamp: float | None = None,
-              where: float | None = None, why: str | None = None) -> Match:
+              where: float | None = None, why: str | None = None, probability: float | None = None) -> Match:
         """The output line of a frame answered ``ref`` (at fractional reference ``where`` if the matcher
-        resolves finer) with ``score``; ``why``: the matcher's ``why()`` for the frame (None: it gives none)."""
+        resolves finer) with ``score``; ``why``: the matcher's ``why()`` for the frame (None: it gives none);
+        ``probability``: the matcher's own probability that the answer is right (None: it models none)."""
         lost = bool(is_lost(score, self.threshold))
         if lost:
             return Match(index, name, None, None, score, True, stamp, lost_why=lost_why(why, True))
-        confidence = None if self._calibration is None else self._calibration(score)
+        confidence = probability if self._calibration is None else self._calibration(score)
         place: dict = {}
         if self.map.positions is not None:
             coords, heading, along = self.map.place_at(ref if where is None else where)
@@ -205,9 +208,9 @@ class Localizer:
         matcher asks for, the matcher's update and the output line; online modes only."""
         self._check_online()
         with self._lock:
-            ref, score, where, why = self._step(np.asarray(encoding, np.float32))
+            ref, score, where, why, probability = self._step(np.asarray(encoding, np.float32))
             self._count += 1
-            return self._line(self._count - 1, name, ref, score, stamp, where, why)
+            return self._line(self._count - 1, name, ref, score, stamp, where, why, probability)
 
     def run(self, frames: Iterable[Frame], batch_size: int = 1,
             on_skip: Callable[[Frame], None] = lambda f: None) -> Iterator[Match]:
@@ -224,8 +227,8 @@ class Localizer:
         if self._online is not None:
             for frame, enc in encoded:
                 with self._lock:
-                    ref, score, where, why = self._step(enc)
-                yield frame, self._line(frame.index, frame.name, ref, score, frame.stamp, where, why)
+                    ref, score, where, why, probability = self._step(enc)
+                yield frame, self._line(frame.index, frame.name, ref, score, frame.stamp, where, why, probability)
             return
         pairs = list(encoded)
         if pairs:
