@@ -464,3 +464,34 @@ def naive_road_all(sim, graph, cues, route, candidates, *, vmax, grid, decay, bi
         h = np.where(keep, h, 0.0)
         out[-1] = (ref, best, h, read)
     return out
+
+
+# --- encodings along a route (index and API tests) ----------------------------------------------------------
+
+
+def alike_refs(n: int, dim: int, rho: float = 0.9, seed: int = 0) -> np.ndarray:
+    """Unit references along a route: each place like the one before."""
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(n, dim)).astype(np.float32)
+    for i in range(1, n):
+        x[i] = rho * x[i - 1] + np.sqrt(1 - rho ** 2) * x[i]
+    return x / np.linalg.norm(x, axis=1, keepdims=True)
+
+
+def driven_encodings(n_refs: int, frames: int, noise: float, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """References along a route, a vehicle driving part of it at changing speeds with a detour: (refs,
+    query encodings, true places (-1 off the map))."""
+    refs = alike_refs(n_refs, 64, seed=seed)
+    rng = np.random.default_rng(seed + 1)
+    pos, truth, queries = 100.0, [], []
+    for t in range(frames):
+        speed = [1.0, 2.0, 0.5, 1.5][(t // 60) % 4]
+        if 200 <= t < 240:   # off the map
+            truth.append(-1)
+            queries.append(rng.normal(size=64))
+            continue
+        pos += speed
+        truth.append(int(pos))
+        queries.append(refs[int(pos)] + noise * rng.normal(size=64) / 8)
+    q = np.asarray(queries, np.float32)
+    return refs, q / np.linalg.norm(q, axis=1, keepdims=True), np.asarray(truth)

@@ -201,7 +201,7 @@ def test_confidence_is_the_modes_own_probability(tmp_path: Path) -> None:
     """Without a calibration, a mode that models the probability that its answer is right gives it as the
     line's ``confidence``: stream-prob's answers given are at least 0.9 sure and score at least that (the
     precision expected of the answers as sure); a lost frame and a mode without a model give none."""
-    from test_ivf import driven_encodings
+    from helpers import driven_encodings
 
     refs, queries, truth = driven_encodings(400, 160, noise=1.0, seed=6)
     np.save(tmp_path / "refs.npy", refs)

@@ -8,22 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import invoke
+from helpers import alike_refs, driven_encodings, invoke
 from vpr_edge.files import read_npz, write_npz
 from vpr_edge.index.encodings import Encodings
 from vpr_edge.index.ivf import IvfIndex, fit_ivf
 from vpr_edge.map import MAP_SCHEMA, load_map
 from vpr_edge.matchers import MATCHERS, step
 from vpr_edge.matchers.road import RoadMatcher
-
-
-def alike_refs(n: int, dim: int, rho: float = 0.9, seed: int = 0) -> np.ndarray:
-    """Unit references along a route: each place like the one before."""
-    rng = np.random.default_rng(seed)
-    x = rng.normal(size=(n, dim)).astype(np.float32)
-    for i in range(1, n):
-        x[i] = rho * x[i - 1] + np.sqrt(1 - rho ** 2) * x[i]
-    return x / np.linalg.norm(x, axis=1, keepdims=True)
 
 
 def test_index_lists_every_place_once_and_finds_what_an_exhaustive_search_finds() -> None:
@@ -77,25 +68,6 @@ def test_compact_pass_equals_one_pass_per_window() -> None:
             refs = m.around(cands)
             m.update(row[refs], refs)
         np.testing.assert_allclose(a.h, b.h, atol=1e-5)
-
-
-def driven_encodings(n_refs: int, frames: int, noise: float, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """References along a route, a vehicle driving part of it at changing speeds with a detour: (refs,
-    query encodings, true places (-1 off the map))."""
-    refs = alike_refs(n_refs, 64, seed=seed)
-    rng = np.random.default_rng(seed + 1)
-    pos, truth, queries = 100.0, [], []
-    for t in range(frames):
-        speed = [1.0, 2.0, 0.5, 1.5][(t // 60) % 4]
-        if 200 <= t < 240:   # off the map
-            truth.append(-1)
-            queries.append(rng.normal(size=64))
-            continue
-        pos += speed
-        truth.append(int(pos))
-        queries.append(refs[int(pos)] + noise * rng.normal(size=64) / 8)
-    q = np.asarray(queries, np.float32)
-    return refs, q / np.linalg.norm(q, axis=1, keepdims=True), np.asarray(truth)
 
 
 def test_searching_around_candidates_answers_as_the_dense_matcher() -> None:
