@@ -83,8 +83,8 @@ class ProbabilityVerdict:
     def _rivals(self, ref: int, best: float, values: np.ndarray, where: np.ndarray | None, near: Intervals,
                 standing: bool) -> tuple[float, float | None, bool]:
         """-> (how much the rival trajectories explain the best one, ``best`` at ``ref`` (``rival_weight``),
-        the null's tail scale (None: not known yet), whether one rival holds most of the doubt). ``values``: the best trajectory ending at each place of
-        ``where`` (None: every place); the rivals are the block peaks beyond ``near`` on the answer's own drive
+        the null's tail scale (None: not known yet), whether one rival holds most of the doubt). ``values``: the
+        best trajectory ending at each place of ``where`` (None: every place); the rivals are the block peaks beyond ``near`` on the answer's own drive
         (another drive may be the same road driven again), with the peaks of blocks this frame did not search
         as the last whole-route frame left them; every drive's teach the null's scale."""
         width = self.rival_window or 1

@@ -57,9 +57,9 @@ from collections import deque
 
 import numpy as np
 
-from vpr_edge.matchers.constants import (ANSWER_FLOOR, DECOY_LINE, DECOY_MEMORY, DECOY_SPREAD, DECOY_WARM, ENTER, HUB_MEMORY,
-                                         HUB_PRIOR, LEAVE, TAIL_MEMORY, TAIL_PEAKS, VIEW_MEMORY, VIEW_PRIOR,
-                                         VIEW_PRIOR_FRAMES, VIEW_RANGE)
+from vpr_edge.matchers.constants import (ANSWER_FLOOR, DECOY_LINE, DECOY_MEMORY, DECOY_SPREAD, DECOY_WARM, ENTER,
+                                         HUB_MEMORY, HUB_PRIOR, LEAVE, TAIL_MEMORY, TAIL_PEAKS, VIEW_MEMORY,
+                                         VIEW_PRIOR, VIEW_PRIOR_FRAMES, VIEW_RANGE)
 from vpr_edge.matchers.route import Intervals, inside
 
 def block_peaks(values: np.ndarray, where: np.ndarray | None, width: int,
