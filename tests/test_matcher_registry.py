@@ -46,3 +46,10 @@ def test_parse_params_reads_each_default_type_and_refuses_bad_items() -> None:
             matcher.parse_params(bad)
     with pytest.raises(ValueError, match="unknown DTW variant"):
         dtw.parse_params(["variant=fastest"])
+
+
+def test_a_matcher_declares_the_search_its_instances_make() -> None:
+    """What ``evaluate`` reads off the registry (whether whole-route rows may be coarse) is what ``Localizer``
+    reads off an instance, for every registered matcher."""
+    for m in MATCHERS.values():
+        assert m.searches_locally == (m.online and m.stream(60).searches_locally), m.name

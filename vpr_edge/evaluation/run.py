@@ -122,7 +122,7 @@ def stream_search(query: MapQuery | None, matcher: Matcher, encodings: np.ndarra
     rows). ``coarse``: the map's coarse search once made (empty: none yet), shared by the modes."""
     if query is None or encodings is None or not matcher.online:
         return None
-    if uses_coarse(len(query.map.names), None, matcher.scores, bool(getattr(matcher.start, "searches_locally", False))):
+    if uses_coarse(len(query.map.names), None, matcher.scores, matcher.searches_locally):
         if not coarse:
             coarse.append(coarse_search(query, True))
         rows = coarse[0]

@@ -225,6 +225,12 @@ class Matcher:
         """True if it can run on a live stream (past frames only)."""
         return self.start is not None
 
+    @property
+    def searches_locally(self) -> bool:
+        """Whether the online matchers it starts search locally (``OnlineMatcher.searches_locally``, as the
+        class or factory ``start`` declares it); False for an offline one."""
+        return bool(getattr(self.start, "searches_locally", False))
+
     def with_params(self, **overrides: Any) -> "Matcher":
         """The same matcher with some parameters changed; unknown names raise ValueError."""
         unknown = set(overrides) - set(self.params)

@@ -42,6 +42,9 @@ def probability_matcher(n_refs: int, **params) -> RoadMatcher:
     return RoadMatcher(n_refs, **_UNUSED, **params, verdict=ProbabilityVerdict)
 
 
+probability_matcher.searches_locally = RoadMatcher.searches_locally   # type: ignore[attr-defined]   # it makes those
+
+
 class ProbabilityVerdict:
     """The probability that the answer is right, ``trajectory * view`` (the module docstring), over one stream
     on the map whose route graph is ``graph``; rivals lie beyond ``rival_window`` places of the answer. Strong
