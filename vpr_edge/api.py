@@ -167,8 +167,7 @@ class Localizer:
         self.query.check_unchanged()   # a memory-mapped map rewritten under us: stop before reading it
         self._search.push(enc)
         ref, score = step(self._online, self._search.rows, self._cue(enc), self._search.candidates())
-        modelled = getattr(self._online, "probability", None)   # the matcher's own probability, where it has one
-        return ref, score, self._online.position(), self._online.why(), modelled() if callable(modelled) else None
+        return ref, score, self._online.position(), self._online.why(), self._online.probability()
 
     def _line(self, index: int, name: str, ref: int, score: float, stamp: float | None = None,
               where: float | None = None, why: str | None = None, probability: float | None = None) -> Match:

@@ -67,6 +67,9 @@ class OnlineMatcher(Protocol):
         """Why the last frame is not confidently answered, one of ``LOST_WHY``, or "locked" when it is; None:
         the matcher gives no reason (``lost_why`` turns this into a lost frame's reason)."""
 
+    def probability(self) -> float | None:
+        """The probability that the last frame's answer is right; None: the matcher models none."""
+
     def reset(self) -> None:
         """Forget the stream."""
 
@@ -93,6 +96,9 @@ class WholeRoute:
         return None
 
     def why(self) -> None:
+        return None
+
+    def probability(self) -> None:
         return None
 
 
@@ -161,16 +167,14 @@ def run_rows(matcher: OnlineMatcher, rows: Callable[[int, np.ndarray | None], np
     scores = np.empty(q, np.float64)
     ranked = np.empty((q, min(k, r)), np.int64)
     why = np.empty(q, object)
-    modelled = getattr(matcher, "probability", None)   # a matcher that models it says how likely each answer is right
     probability = np.full(q, np.nan)
     for i in range(q):
         refs[i], scores[i] = step(matcher, lambda idx: rows(i, idx), cue_at(still, i),
                                   None if candidates is None else candidates(i))
         ranked[i] = top_k(matcher.ranking(), k)
         why[i] = matcher.why()
-        if callable(modelled):
-            p = modelled()
-            probability[i] = np.nan if p is None else p
+        p = matcher.probability()
+        probability[i] = np.nan if p is None else p
     return Result(refs, scores, lead_with(refs, ranked), None if all(w is None for w in why) else why,
                   None if np.isnan(probability).all() else probability)
 

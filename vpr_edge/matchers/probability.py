@@ -46,7 +46,7 @@ probability_matcher.searches_locally = RoadMatcher.searches_locally   # type: ig
 
 
 class ProbabilityVerdict:
-    """The probability that the answer is right, ``trajectory * view`` (the module docstring), over one stream
+    """The probability that the answer is right, ``place * view`` (the module docstring), over one stream
     on the map whose route graph is ``graph``; rivals lie beyond ``rival_window`` places of the answer. Strong
     enough for a local search at a trajectory probability of ``FIRM``; ``why`` names the weaker factor."""
 
@@ -87,9 +87,10 @@ class ProbabilityVerdict:
                 standing: bool) -> tuple[float, float | None, bool]:
         """-> (how much the rival trajectories explain the best one, ``best`` at ``ref`` (``rival_weight``),
         the null's tail scale (None: not known yet), whether one rival holds most of the doubt). ``values``: the
-        best trajectory ending at each place of ``where`` (None: every place); the rivals are the block peaks beyond ``near`` on the answer's own drive
-        (another drive may be the same road driven again), with the peaks of blocks this frame did not search
-        as the last whole-route frame left them; every drive's teach the null's scale."""
+        best trajectory ending at each place of ``where`` (None: every place); the rivals are the block peaks
+        beyond ``near`` on the answer's own drive (another drive may be the same road driven again), with the
+        peaks of blocks this frame did not search as the last whole-route frame left them; every drive's teach
+        the null's scale."""
         width = self.rival_window or 1
         peaks, blocks = block_peaks(values, where, width, near)
         if where is None:
