@@ -315,14 +315,11 @@ def naive_road_local(sim, vmax, grid, decay, bias, turn, memory, lock, rival_win
     return out
 
 
-def naive_road_over_drives(sim: np.ndarray, graph, grid: int, vmax: float, decay: float, bias: float,
-                           turn: float, stop_gain: float, stop_decay: float) -> np.ndarray:
-    """The road matcher's state (speeds x positions) after the last row over a map of several drives (the
-    ``RouteGraph`` ``graph``), by loops over a predecessor list: in-drive ``c - v`` plus each junction's
-    virtual predecessors; the whole route read, no running means, no motion cue."""
-    r = sim.shape[1]
-    n_speeds = int(round(vmax * grid)) + 1
-    cols = r * grid
+def naive_predecessors(graph, grid: int, n_speeds: int) -> dict[tuple[int, int], list[int]]:
+    """The road matcher's state columns' predecessors on the map of several drives ``graph``, by loops: for
+    each (speed v >= 1, column c), the column v back within c's drive, or none before the drive's start, and
+    across each junction into c's drive the source columns a trajectory at speed v comes from."""
+    cols = graph.n_refs * grid
     first_col = np.array([graph.bounds(c // grid)[0] * grid for c in range(cols)])
     preds: dict[tuple[int, int], list[int]] = {}
     for c in range(cols):
@@ -340,6 +337,18 @@ def naive_road_over_drives(sim: np.ndarray, graph, grid: int, vmax: float, decay
                         p = s * grid + grid - (v - i)
                         if p >= graph.bounds(s)[0] * grid:
                             preds[(v, c)].append(p)
+    return preds
+
+
+def naive_road_over_drives(sim: np.ndarray, graph, grid: int, vmax: float, decay: float, bias: float,
+                           turn: float, stop_gain: float, stop_decay: float) -> np.ndarray:
+    """The road matcher's state (speeds x positions) after the last row over a map of several drives (the
+    ``RouteGraph`` ``graph``), by loops over a predecessor list: in-drive ``c - v`` plus each junction's
+    virtual predecessors; the whole route read, no running means, no motion cue."""
+    r = sim.shape[1]
+    n_speeds = int(round(vmax * grid)) + 1
+    cols = r * grid
+    preds = naive_predecessors(graph, grid, n_speeds)
     h = np.zeros((n_speeds, cols))
     for row in sim:
         z = np.repeat((row - row.mean()) / row.std(), grid) - bias
@@ -374,17 +383,7 @@ def naive_road_all(sim, graph, cues, route, candidates, *, vmax, grid, decay, bi
     w = window if window and n_refs > 4 * window else 0
     gap = -(-n_speeds // grid) + 1
     probe_refs = np.sort(np.random.default_rng(0).choice(n_refs, min(n_refs, probe), replace=False))
-    # predecessors of each (speed, column): v columns back within the drive, or a junction's source columns
-    first_col = [graph.bounds(c // grid)[0] * grid for c in range(n_pos)]
-    preds = {(v, c): ([c - v] if c - v >= first_col[c] else []) for v in range(1, n_speeds) for c in range(n_pos)}
-    for sources, targets in graph.junctions:
-        for t in targets:
-            for v in range(1, n_speeds):
-                for i in range(v):
-                    c = t * grid + i
-                    if c < (graph.bounds(t)[1] + 1) * grid:
-                        preds[(v, c)] += [s * grid + grid - (v - i) for s in sources
-                                          if s * grid + grid - (v - i) >= graph.bounds(s)[0] * grid]
+    preds = naive_predecessors(graph, grid, n_speeds)
     h = np.zeros((n_speeds, n_pos))
     mean, weight, seen = np.zeros(n_refs), np.full(n_refs, float(memory)), np.full(n_refs, -1)
     t, stopped, position, win, held_for = 0, False, None, None, 0
