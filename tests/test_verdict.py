@@ -145,6 +145,27 @@ def test_decoy_gate_against_a_loop() -> None:
     assert np.mean(opened[:40]) < 0.15 and all(opened[80:120]) and np.mean(opened[150:]) < 0.15
 
 
+def test_decoy_gate_leaves_frames_that_do_not_tell_out() -> None:
+    """Frames that do not tell forwards from backwards (a standing camera, a best where the map shows one
+    view) leave the gate as it was: it opens and closes as a gate fed only the telling frames does, and it
+    waits for ``warm`` telling frames."""
+    rng = np.random.default_rng(3)
+    best = np.r_[rng.normal(5, 2, 40), rng.normal(15, 2, 40)]
+    decoy = rng.normal(5, 2, len(best))
+    telling = rng.random(len(best)) > 0.3
+    telling[:4] = [False, False, True, False]
+    wild = np.where(telling, decoy, 100.0)   # what a frame that does not tell shows: it must not count
+    mixed, alone = DecoyGate(memory=10, line=1.0, spread=20, warm=2), DecoyGate(memory=10, line=1.0, spread=20, warm=2)
+    got, want, last = [], [], False
+    for b, d, w, t in zip(best, wild, decoy, telling):
+        got.append(mixed.update(float(b), float(d), bool(t)))
+        if t:
+            last = alone.update(float(b), float(w))
+        want.append(last)
+    assert got == want
+    assert not any(got[:4]) and any(got)   # shut until two frames have told
+
+
 def test_reversed_stands_against_a_loop() -> None:
     route = np.array([False, True, True, False, False, True, False])   # references 1, 2 and 5 show the one before
     rev = reversed_stands(route)

@@ -54,8 +54,9 @@ FIRM = 0.999
 # one rival holds most of the doubt ("ambiguous" rather than "no-trajectory") at this share of the rivals' weight
 DOUBT_SHARE = 0.5
 # the decoy's gate (``DecoyGate``, the ``decoy`` parameter): frames in the mean of (best - decoy best), the line
-# on it in spreads of the recent decoy bests, the frames of that spread, and the frames before the gate can open
-DECOY_MEMORY, DECOY_LINE, DECOY_SPREAD, DECOY_WARM = 40.0, 0.5, 51, 5
+# on it in spreads of the recent decoy bests, the frames of that spread, and the frames that tell forwards from
+# backwards before the gate can open (2: the fewest a spread is read from)
+DECOY_MEMORY, DECOY_LINE, DECOY_SPREAD, DECOY_WARM = 40.0, 0.5, 51, 2
 
 # --- the SVM baseline (``svm``) -----------------------------------------------------------------------------
 SVM_C = 1.0          # the linear SVMs' regularisation (scikit-learn's default)

@@ -409,6 +409,15 @@ class RoadMatcher:
             v = tv[ok]
             np.maximum.at(new, (v, where), fed[v, row[ok]])
 
+    def at_one_view(self) -> bool:
+        """Whether the best state lies in a run of references that show one view (the map's drive stood there:
+        ``route``), where a trajectory fits as well backwards as forwards (False before a frame, or with no
+        route)."""
+        if self.route is None or self._position is None:
+            return False
+        ref = int(self._position)
+        return bool(self.route[ref] or (ref + 1 < self.n_refs and self.route[ref + 1]))
+
     def stands(self, still: float | None) -> bool:
         """Whether a frame with motion cue ``still`` shows a standing camera (its view again) where the map's
         drive moved on: such a frame leaves the state as it was (see the module docstring)."""
@@ -498,7 +507,10 @@ class RoadMatcher:
         # a firm lock: a strong answer, and no trajectory beyond the window half as strong (seen in global frames)
         held = bool(self.window) and judged.strong and \
             max_outside(values, where, self.graph.near(ref, self.window)) < FIRM_RIVAL * best
-        if decoy_read and not self._gate.update(best, self._decoy.best()):
+        # the gate learns from frames that tell forwards from backwards: a moving camera, neither best where
+        # the map shows one view
+        if decoy_read and not self._gate.update(best, self._decoy.best(), not standing and not self.at_one_view()
+                                                and not self._decoy.at_one_view()):
             score, self._why = 0.0, NO_TRAJECTORY   # no trajectory stands above the reversed map's
             self._probability = None if self._probability is None else 0.0
         self._follow(ref, held)

@@ -40,7 +40,10 @@ Two questions, two factors, ``probability = place * view``, and a line on the an
   trajectory is a draw of "the best trajectory where the answer is not the place" from the same front end,
   frame and hubs. Imagery of somewhere else scores alike forwards and backwards; a mapped stream's true
   trajectory scores far above its decoy. ``DecoyGate`` opens while the recent mean of (best - decoy best) is
-  at least ``DECOY_LINE`` spreads of the recent decoy bests; closed, the score is 0 (the frame is lost).
+  at least ``DECOY_LINE`` spreads of the recent decoy bests; closed, the score is 0 (the frame is lost). It
+  learns only from frames that tell forwards from backwards: not a standing camera (the state stands still
+  too) nor a best, forwards or reversed, where the map shows one view (a trajectory fits a station's run alike
+  both ways, and a reversed best there climbed as high as the true one).
 
 * **Where is the line?** A line on each answer's own probability asks every answer to be P sure, so the
   answers given are right far more often than P. ``line_score`` scores an answer by the precision expected of
@@ -268,7 +271,8 @@ class DecoyGate:
     """Whether the stream shows the map at all, from each frame's best trajectory score and its decoy's (the
     best over the map's references in reverse order; module docstring): open while the exponential mean over
     ``memory`` frames of (best - decoy) is at least ``line`` times the standard deviation of the last
-    ``spread`` decoy bests, after ``warm`` frames. ``update(best, decoy)`` -> open."""
+    ``spread`` decoy bests, once ``warm`` frames have told (``update``'s ``telling``). ``update(best, decoy,
+    telling)`` -> open."""
 
     def __init__(self, memory: float = DECOY_MEMORY, line: float = DECOY_LINE, spread: int = DECOY_SPREAD,
                  warm: int = DECOY_WARM) -> None:
@@ -277,9 +281,14 @@ class DecoyGate:
         self.decoys: deque[float] = deque(maxlen=spread)
         self.open = False
 
-    def update(self, best: float, decoy: float) -> bool:
-        self.total = self.keep * self.total + (best - decoy)
-        self.weight = self.keep * self.weight + 1.0
-        self.decoys.append(decoy)
-        self.open = len(self.decoys) >= self.warm and self.total / self.weight >= self.line * float(np.std(self.decoys))
+    def update(self, best: float, decoy: float, telling: bool = True) -> bool:
+        """One frame's best trajectory score and its decoy's -> open. A frame that does not tell forwards from
+        backwards (``telling`` False: a standing camera, or a best where the map shows one view, where a
+        trajectory fits alike both ways) leaves the gate as it was."""
+        if telling:
+            self.total = self.keep * self.total + (best - decoy)
+            self.weight = self.keep * self.weight + 1.0
+            self.decoys.append(decoy)
+            self.open = len(self.decoys) >= self.warm and \
+                self.total / self.weight >= self.line * float(np.std(self.decoys))
         return self.open
