@@ -418,6 +418,11 @@ class RoadMatcher:
         ref = int(self._position)
         return bool(self.route[ref] or (ref + 1 < self.n_refs and self.route[ref + 1]))
 
+    def _tells(self, standing: bool) -> bool:
+        """Whether this frame tells forwards from backwards, for the decoy's gate: the camera moves, and neither
+        the best trajectory nor the decoy's best lies where the map shows one view."""
+        return not standing and not self.at_one_view() and not (self._decoy is not None and self._decoy.at_one_view())
+
     def stands(self, still: float | None) -> bool:
         """Whether a frame with motion cue ``still`` shows a standing camera (its view again) where the map's
         drive moved on: such a frame leaves the state as it was (see the module docstring)."""
@@ -507,10 +512,7 @@ class RoadMatcher:
         # a firm lock: a strong answer, and no trajectory beyond the window half as strong (seen in global frames)
         held = bool(self.window) and judged.strong and \
             max_outside(values, where, self.graph.near(ref, self.window)) < FIRM_RIVAL * best
-        # the gate learns from frames that tell forwards from backwards: a moving camera, neither best where
-        # the map shows one view
-        if decoy_read and not self._gate.update(best, self._decoy.best(), not standing and not self.at_one_view()
-                                                and not self._decoy.at_one_view()):
+        if decoy_read and not self._gate.update(best, self._decoy.best(), self._tells(standing)):
             score, self._why = 0.0, NO_TRAJECTORY   # no trajectory stands above the reversed map's
             self._probability = None if self._probability is None else 0.0
         self._follow(ref, held)
