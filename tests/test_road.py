@@ -130,11 +130,11 @@ def test_evaluate_reports_lock_on_and_exit_delays() -> None:
 def test_road_matcher_reports_leaving_the_map_within_four_frames() -> None:
     """A vehicle leaves the map for 20 frames of unmapped views: the first frame reported lost comes within 4
     frames of leaving in every one of 8 draws (2 on average), and >= 80% of the unmapped frames are lost on
-    average; without the evidence line and the uniqueness floor (the trajectory score alone) the lock's memory
+    average; without the view lines and the uniqueness floor (the trajectory score alone) the lock's memory
     holds the answer for 5
     frames or more (8 on average) and loses about 60%."""
     m = get_matcher("stream")
-    off = m.with_params(evidence=-99.0, unique=0.0)   # the trajectory score alone
+    off = m.with_params(evidence=-99.0, hub=-99.0, unique=0.0)   # the trajectory score alone
     exits, shares, exits_off = [], [], []
     for seed in range(8):
         rng = np.random.default_rng(seed)
@@ -257,6 +257,9 @@ def test_lock_verdict_and_evidence_average_are_the_rules_in_order() -> None:
              ((2.0, 10.0, 0.5), "locked"), ((float("nan"), 10.0, 0.5), "weak-view"), ((1.0, 1.0, 0.0), "weak-view")]
     for (evidence, best, own), want in cases:
         assert lock_verdict(evidence, best, own, 1.5, 6.0, 0.25) == want, (evidence, best, own)
+        # the hub line: an answer that stands out of its frame but not of this stream's recent views is weak
+        assert lock_verdict(evidence, best, own, 1.5, 6.0, 0.25, 2.0, 1.0) == want
+        assert lock_verdict(evidence, best, own, 1.5, 6.0, 0.25, 0.5, 1.0) == "weak-view"
     values, standing = [3.0, 1.0, 0.5, 4.0, 2.0], [False, False, True, True, False]
     avg, want = None, []
     for v, st in zip(values, standing):

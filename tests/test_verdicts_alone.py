@@ -14,7 +14,7 @@ from vpr_edge.matchers.route import RouteGraph
 
 from helpers import places_at_speeds, planted
 
-RULES = {"lock": 6.0, "evidence": 1.5, "evidence_decay": 0.0, "unique": 0.25, "hold": 2.0}
+RULES = {"lock": 6.0, "evidence": 1.5, "evidence_decay": 0.0, "hub": -99.0, "unique": 0.25, "hold": 2.0}
 
 
 def reading(values: np.ndarray, part: np.ndarray, standing: bool = False) -> FrameReading:
@@ -51,6 +51,41 @@ def test_the_lock_verdict_alone_against_its_rules(case: str) -> None:
     score, strong, why = naive_lock(values, part, 10)
     assert (got.why, got.strong) == (why, strong) and got.score == pytest.approx(score)
     assert why == case.replace("weak-but-", "")
+
+
+def test_the_lock_verdicts_hub_line_against_a_loop() -> None:
+    """The hub line alone: each frame's answer view less its place's mean over the stream's recent moving
+    frames (an exponential memory per place, ``HUB_MEMORY``, shrunk by ``HUB_PRIOR``; plain loops), averaged as
+    the evidence is, below ``hub`` -> "weak-view". A place that looks most like every frame is soon weak; the
+    same views moving along the route stay locked; a stopped trajectory's frames neither teach the means nor
+    lower the average."""
+    from vpr_edge.matchers.constants import HUB_MEMORY, HUB_PRIOR
+
+    n, rules = 40, RULES | {"evidence_decay": 0.5, "hub": 1.0}
+    rng = np.random.default_rng(2)
+    for case in ("hub", "moving", "stopped"):
+        verdict = LockVerdict(RouteGraph.line(n), 5, **rules)
+        mean, weight, avg, whys, want = np.zeros(n), np.zeros(n), None, [], []
+        for t in range(25):
+            ref = 20 if case != "moving" else 5 + t
+            values = np.zeros(n)
+            values[ref] = 20.0
+            part = rng.normal(0, 1, n)
+            part[ref] += 6.0
+            stopped = case == "stopped" and t >= 3
+            whys.append(verdict.judge(FrameReading(ref, 20.0, values, None, part, part, float(part.mean()),
+                                                   float(part.std()), False, stopped)).why)
+            z = (part - part.mean()) / part.std()
+            views = [z[i] - mean[i] * weight[i] / (weight[i] + HUB_PRIOR) for i in range(n)]
+            if not stopped:
+                for i in range(n):
+                    weight[i] = weight[i] * (1 - 1 / HUB_MEMORY) + 1
+                    mean[i] += (z[i] - mean[i]) / weight[i]
+            here = max(views[max(0, ref - 1):ref + 2])
+            avg = here if avg is None else (max(avg, 0.5 * avg + 0.5 * here) if stopped else 0.5 * avg + 0.5 * here)
+            want.append("weak-view" if avg < 1.0 else "locked")
+        assert whys == want, case
+        assert {"hub": "weak-view", "moving": "locked", "stopped": "locked"}[case] == whys[-1], (case, whys)
 
 
 def test_the_lock_verdicts_evidence_is_averaged_over_frames_and_reset() -> None:
@@ -140,5 +175,5 @@ def test_the_recursion_hands_each_frame_to_its_verdict(strong: bool) -> None:
 
 def test_the_decoy_reads_trajectories_only() -> None:
     m = RoadMatcher(50, **MATCHERS["stream-prob"].params | {"decoy": True, "lock": 6.0, "evidence": 1.5,
-                                                           "evidence_decay": 0.5, "unique": 0.25, "hold": 2.0})
+                                                           "evidence_decay": 0.5, "hub": 1.0, "unique": 0.25, "hold": 2.0})
     assert isinstance(m._decoy.verdict, TrajectoryOnly) and m._decoy._decoy is None and m._decoy.window == 0

@@ -2,17 +2,23 @@
 
     score = [locked] + uniqueness,   uniqueness = 1 - (H_rival + 1) / (H_best + 1)
 
-A frame is locked when its answer stands out of what the frame sees (the evidence average E >= ``evidence``),
-its trajectory has built up (H_best >= ``lock``) and no rival along the answer's own drive is nearly as strong
+A frame is locked when its answer stands out of what the frame sees (the evidence average E >= ``evidence``)
+and of what this stream's recent frames saw there (the same average of the answer's view less its place's
+mean over the stream's recent moving frames, ``verdict.RecentViews``: >= ``hub``; a place that looks like
+every frame, imagery of somewhere else the map's place happens to resemble most, does not), its trajectory
+has built up (H_best >= ``lock``) and no rival along the answer's own drive is nearly as strong
 (uniqueness against it >= ``unique``); the first rule that fails names why it is lost (``lock_verdict``).
 So locked frames rank above lost ones, each by uniqueness. The answer is strong enough for a local search at
 H_best >= ``hold`` * ``lock``.
 """
 from __future__ import annotations
 
+import numpy as np
+
 from vpr_edge.matchers.base import AMBIGUOUS, LOCKED, NO_TRAJECTORY, WEAK_VIEW
 from vpr_edge.matchers.reading import FrameReading, Judgement, answer_view
 from vpr_edge.matchers.route import RouteGraph, max_outside, merge
+from vpr_edge.matchers.verdict import RecentViews
 
 
 def evidence_average(previous: float | None, here: float, keep: float, standing: bool) -> float:
@@ -26,12 +32,13 @@ def evidence_average(previous: float | None, here: float, keep: float, standing:
 
 
 def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_line: float, lock: float,
-                 unique: float) -> str:
+                 unique: float, hub_evidence: float = np.inf, hub_line: float = -np.inf) -> str:
     """The lock's rules, in order: the first that fails names why the frame is lost (``base.LOST_WHY``):
-    "weak-view" (``evidence`` below ``evidence_line``), "no-trajectory" (``best`` below ``lock``), "ambiguous"
+    "weak-view" (``evidence`` below ``evidence_line``, or ``hub_evidence``, the same less the answer's place's
+    recent mean, below ``hub_line``), "no-trajectory" (``best`` below ``lock``), "ambiguous"
     (``own_uniqueness``, against the best rival along the answer's own drive, below ``unique``); else
     "locked"."""
-    if not evidence >= evidence_line:
+    if not (evidence >= evidence_line and hub_evidence >= hub_line):
         return WEAK_VIEW
     if best < lock:
         return NO_TRAJECTORY
@@ -40,11 +47,11 @@ def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_l
 
 class LockVerdict:
     """The lock's rules over a stream (module docstring); parameters as ``matchers.params.STREAM`` names them
-    (``lock``, ``evidence``, ``evidence_decay``, ``unique``, ``hold``). ``rival_window``: places either side of
-    the answer that a rival trajectory must lie beyond."""
+    (``lock``, ``evidence``, ``evidence_decay``, ``hub``, ``unique``, ``hold``). ``rival_window``: places either
+    side of the answer that a rival trajectory must lie beyond."""
 
     def __init__(self, graph: RouteGraph, rival_window: int, *, lock: float, evidence: float, evidence_decay: float,
-                 unique: float, hold: float) -> None:
+                 hub: float, unique: float, hold: float) -> None:
         if not 0.0 <= evidence_decay < 1.0:
             raise ValueError(f"evidence_decay must be in [0, 1), got {evidence_decay}")
         if not 0.0 <= unique < 1.0:
@@ -52,10 +59,13 @@ class LockVerdict:
         self.graph, self.rival_window = graph, rival_window
         self.lock, self.evidence, self.evidence_decay, self.unique, self.hold = lock, evidence, evidence_decay, \
             unique, hold
-        self._evidence: float | None = None   # the answer's recent standing out of its rows
+        self.hub = hub
+        self.reset()
 
     def reset(self) -> None:
-        self._evidence = None
+        self._evidence: float | None = None   # the answer's recent standing out of its rows
+        self._hub: float | None = None        # the same, less its place's recent mean (``hub_view``)
+        self._recent = RecentViews(self.graph.n_refs) if self.hub > -99 else None   # this stream's views per place
 
     def judge(self, f: FrameReading) -> Judgement:
         graph, n_refs = self.graph, self.graph.n_refs
@@ -63,6 +73,8 @@ class LockVerdict:
         rival = max_outside(f.values, f.where, near)
         here = (float(answer_view(graph, f.ref, f.where, f.part).max()) - f.mean) / f.std
         self._evidence = evidence_average(self._evidence, here, self.evidence_decay, f.standing)
+        if self._recent is not None:
+            self._hub = evidence_average(self._hub, self._hub_view(f), self.evidence_decay, f.standing or f.stopped)
         uniqueness = 1.0 - (rival + 1.0) / (f.best + 1.0)
         # the rule asks for an answer unambiguous along its own drive: another drive may be the same road
         # driven again, whose places are no rival to it
@@ -70,5 +82,17 @@ class LockVerdict:
         own = rival if (first, last) == (0, n_refs - 1) else max_outside(
             f.values, f.where, merge([*near, (0, first), (last + 1, n_refs)]))
         why = lock_verdict(self._evidence, f.best, 1.0 - (own + 1.0) / (f.best + 1.0), self.evidence, self.lock,
-                           self.unique)
+                           self.unique, *(() if self._hub is None else (self._hub, self.hub)))
         return Judgement(float(why == LOCKED) + uniqueness, f.best >= self.hold * self.lock, why)
+
+    def _hub_view(self, f: FrameReading) -> float:
+        """The answer's view in this frame less each place's mean over the stream's recent moving frames (in
+        standard deviations of the frame's row; best within 1 place, as ``evidence`` reads it); a frame that
+        moves (neither a standing camera nor a stopped best trajectory: those repeat one place) then joins the
+        means."""
+        at = slice(None) if f.where is None else f.where
+        z = (np.asarray(f.part, np.float64) - f.mean) / f.std
+        views = self._recent.corrected(z, at)
+        if not (f.standing or f.stopped):
+            self._recent.add(z, at)
+        return float(answer_view(self.graph, f.ref, f.where, views).max())

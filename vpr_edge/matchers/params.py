@@ -37,6 +37,10 @@ STREAM: dict[str, Param] = {
                            "reference, averaged over frames with evidence_decay; a standing frame may raise the "
                            "average, not lower it); -99 = off"),
     "evidence_decay": Param(0.5, "weight of the past in that average (0: this frame alone)"),
+    "hub": Param(1.0, "the answer is reported lost unless that similarity, less its place's mean over this "
+                      "stream's recent moving frames (a place that looks like every frame: imagery of somewhere "
+                      "else), stands at least this many standard deviations above them too (averaged the same "
+                      "way); -99 = off"),
     "unique": Param(0.25, "the answer is reported lost unless its uniqueness (1 - (H_rival + 1) / (H_best + 1): "
                          "how far the best trajectory leads the best one beyond rival_window) is at least this; "
                          "0 = off"),
@@ -73,7 +77,7 @@ STREAM: dict[str, Param] = {
                           "while the gate is closed every frame does"),
 }
 # the stream matcher's lock rules; ``stream-prob`` replaces them by a model of "not this place" (``verdict``)
-LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "unique", "hold")
+LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "hub", "unique", "hold")
 STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM.items() if k not in LOCK_RULES}
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),

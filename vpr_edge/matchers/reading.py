@@ -21,7 +21,9 @@ class FrameReading:
     trajectory's score H; ``values`` (n,): the best trajectory ending at each place of ``where`` (sorted place
     numbers, (n,); None: every place, in order); ``part`` (n,): the frame's similarities to those places;
     ``probe``: its similarities that estimate its ``mean`` and spread ``std`` (the probe sample while searching
-    locally, else every reference); ``standing``: the frame shows a standing camera (its view again)."""
+    locally, else every reference); ``standing``: the frame shows a standing camera (its view again);
+    ``stopped``: no motion cue is given and the best trajectory has speed 0 (the vehicle stands as the
+    trajectories read it)."""
 
     ref: int
     best: float
@@ -32,6 +34,7 @@ class FrameReading:
     mean: float
     std: float
     standing: bool
+    stopped: bool = False
 
 
 @dataclass(frozen=True)

@@ -120,7 +120,7 @@ class RoadMatcher:
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
                  hold: float, seek: int, peaks: int, seek_frames: int, stop_gain: float, stop_decay: float, still: float,
                  still_memory: int,
-                 evidence: float, evidence_decay: float, unique: float, decoy: bool = False,
+                 evidence: float, evidence_decay: float, hub: float, unique: float, decoy: bool = False,
                  route: np.ndarray | None = None, graph: RouteGraph | None = None, reach: int = 0,
                  verdict: VerdictFactory | None = None) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
@@ -164,8 +164,8 @@ class RoadMatcher:
         if self.graph.n_refs != n_refs:
             raise ValueError(f"route graph of {self.graph.n_refs} references for {n_refs}")
         self.verdict = verdict(self.graph, self.rival_window) if verdict is not None else LockVerdict(
-            self.graph, self.rival_window, lock=lock, evidence=evidence, evidence_decay=evidence_decay, unique=unique,
-            hold=hold)
+            self.graph, self.rival_window, lock=lock, evidence=evidence, evidence_decay=evidence_decay, hub=hub,
+            unique=unique, hold=hold)
         # trajectories across drives: state entries whose predecessor in map order is another drive's (cut),
         # and what the junctions carry from their sources' ends into their targets (fed)
         self._cut = self.graph.cuts(grid, self.n_speeds)
@@ -507,7 +507,9 @@ class RoadMatcher:
         self._best = best                          # the best trajectory's score (``best``)
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
         self._last = (values, where)   # for ``around``'s hypotheses held
-        judged = self.verdict.judge(FrameReading(ref, best, values, where, part, probe, mean, std, standing))
+        # without a motion cue, a best trajectory at speed 0 is what says the vehicle stands; with one, the cue
+        judged = self.verdict.judge(FrameReading(ref, best, values, where, part, probe, mean, std, standing,
+                                                 stopped and still is None))
         score, self._why, self._probability = judged.score, judged.why, judged.probability
         # a firm lock: a strong answer, and no trajectory beyond the window half as strong (seen in global frames)
         held = bool(self.window) and judged.strong and \
