@@ -64,7 +64,7 @@ class LockVerdict:
 
     def reset(self) -> None:
         self._evidence: float | None = None   # the answer's recent standing out of its rows
-        self._hub: float | None = None        # the same, less its place's recent mean (``hub_view``)
+        self._hub: float | None = None        # the same, less its place's mean over the stream's recent frames
         self._recent = RecentViews(self.graph.n_refs) if self.hub > -99 else None   # this stream's views per place
 
     def judge(self, f: FrameReading) -> Judgement:
@@ -73,8 +73,11 @@ class LockVerdict:
         rival = max_outside(f.values, f.where, near)
         here = (float(answer_view(graph, f.ref, f.where, f.part).max()) - f.mean) / f.std
         self._evidence = evidence_average(self._evidence, here, self.evidence_decay, f.standing)
-        if self._recent is not None:
-            self._hub = evidence_average(self._hub, self._hub_view(f), self.evidence_decay, f.standing or f.stopped)
+        if self._recent is not None:   # a standing camera or a stopped trajectory repeats one place: no hub
+            repeats = f.standing or f.stopped
+            views = self._recent.read(f.z, f.places, learn=not repeats)
+            hub_view = float(answer_view(graph, f.ref, f.where, views).max())
+            self._hub = evidence_average(self._hub, hub_view, self.evidence_decay, repeats)
         uniqueness = 1.0 - (rival + 1.0) / (f.best + 1.0)
         # the rule asks for an answer unambiguous along its own drive: another drive may be the same road
         # driven again, whose places are no rival to it
@@ -85,14 +88,3 @@ class LockVerdict:
                            self.unique, *(() if self._hub is None else (self._hub, self.hub)))
         return Judgement(float(why == LOCKED) + uniqueness, f.best >= self.hold * self.lock, why)
 
-    def _hub_view(self, f: FrameReading) -> float:
-        """The answer's view in this frame less each place's mean over the stream's recent moving frames (in
-        standard deviations of the frame's row; best within 1 place, as ``evidence`` reads it); a frame that
-        moves (neither a standing camera nor a stopped best trajectory: those repeat one place) then joins the
-        means."""
-        at = slice(None) if f.where is None else f.where
-        z = (np.asarray(f.part, np.float64) - f.mean) / f.std
-        views = self._recent.corrected(z, at)
-        if not (f.standing or f.stopped):
-            self._recent.add(z, at)
-        return float(answer_view(self.graph, f.ref, f.where, views).max())

@@ -69,10 +69,7 @@ class ProbabilityVerdict:
         place = place_probability(f.best, places, values, self.graph.near(f.ref, ANSWER_SLACK), rivals,
                                   None if beta is None else PLACE_SCALE * beta)
         if not f.standing:   # a standing frame's view again says nothing new
-            at = slice(None) if f.where is None else f.where
-            z = (f.part - f.mean) / f.std
-            views = self._recent.corrected(z, at)   # the frame's views less this stream's hubs
-            self._recent.add(z, at)
+            views = self._recent.read(f.z, f.places, learn=True)   # the frame's views less this stream's hubs
             here = answer_view(self.graph, f.ref, f.where, views)
             null = local_best(views, f.where, near)
             self._view.update(view_quantile(null, float(here.max())), trajectory >= VIEW_LEARN)

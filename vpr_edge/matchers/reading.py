@@ -36,6 +36,16 @@ class FrameReading:
     standing: bool
     stopped: bool = False
 
+    @property
+    def places(self) -> np.ndarray | slice:
+        """The places ``part`` covers, as an index: ``where``, or every place."""
+        return slice(None) if self.where is None else self.where
+
+    @property
+    def z(self) -> np.ndarray:
+        """``part`` in standard deviations above the frame's mean, (n,)."""
+        return (np.asarray(self.part, np.float64) - self.mean) / self.std
+
 
 @dataclass(frozen=True)
 class Judgement:

@@ -220,7 +220,8 @@ class RecentViews:
     """Each place's mean z-score over the stream's recent frames that saw it (``memory`` frames, an
     exponential memory per sighting), shrunk towards 0 by a prior of ``prior`` frames. ``corrected(z,
     places)``: the frame's z-scores (n,) of ``places`` (n,) less those means, as they stood before the frame;
-    ``add(z, places)``: the frame joins the means."""
+    ``add(z, places)``: the frame joins the means; ``read(z, places, learn)``: both, the frame joining only where
+    ``learn``."""
 
     def __init__(self, n_places: int, memory: float = HUB_MEMORY, prior: float = HUB_PRIOR) -> None:
         self.keep, self.prior = 1.0 - 1.0 / memory, prior
@@ -234,6 +235,13 @@ class RecentViews:
         w = self.weight[places] * self.keep + 1.0
         self.weight[places] = w
         self.mean[places] += (np.asarray(z, np.float64) - self.mean[places]) / w
+
+    def read(self, z: np.ndarray, places: np.ndarray | slice, learn: bool) -> np.ndarray:
+        """``corrected(z, places)``, then the frame joins the means if ``learn``."""
+        views = self.corrected(z, places)
+        if learn:
+            self.add(z, places)
+        return views
 
 
 class ViewFilter:
