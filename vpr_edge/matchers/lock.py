@@ -85,6 +85,5 @@ class LockVerdict:
         own = rival if (first, last) == (0, n_refs - 1) else max_outside(
             f.values, f.where, merge([*near, (0, first), (last + 1, n_refs)]))
         why = lock_verdict(self._evidence, f.best, 1.0 - (own + 1.0) / (f.best + 1.0), self.evidence, self.lock,
-                           self.unique, *(() if self._hub is None else (self._hub, self.hub)))
+                           self.unique, np.inf if self._hub is None else self._hub, self.hub)
         return Judgement(float(why == LOCKED) + uniqueness, f.best >= self.hold * self.lock, why)
-
