@@ -178,12 +178,28 @@ def test_writer_lock_serialises_two_writers(tmp_path: Path) -> None:
     with writer_lock(tmp_path / "m.npz"):
         waiting = subprocess.Popen([sys.executable, "-c", code, str(tmp_path / "m.npz")], stdout=subprocess.PIPE,
                                    stderr=subprocess.PIPE, text=True)
-        time.sleep(1.5)
+        said = _stderr_until(waiting, "waiting for it to finish", seconds=300)   # slow starts (QEMU) included
+        assert "another vpr-edge is writing it" in said, said
+        time.sleep(0.5)
         assert waiting.poll() is None                     # still waiting while this process holds the lock
         released = time.time()
-    out, err = waiting.communicate(timeout=60)
-    assert waiting.returncode == 0 and float(out.split()[1]) >= released, (out, err)
-    assert "another vpr-edge is writing it" in err and "waiting for it to finish" in err
+    out, err = waiting.communicate(timeout=300)
+    assert waiting.returncode == 0 and float(out.split()[1]) >= released, (out, said + err)
+
+
+def _stderr_until(process: subprocess.Popen, text: str, seconds: float) -> str:
+    """What ``process`` writes on stderr up to the first ``text`` (all of it if it ends or ``seconds`` pass
+    first): waits on what the process says, not on a guess of how long it takes to start."""
+    import select
+
+    said, fd, deadline = b"", process.stderr.fileno(), time.monotonic() + seconds
+    while text.encode() not in said and time.monotonic() < deadline:
+        ready, _, _ = select.select([fd], [], [], max(0.0, deadline - time.monotonic()))
+        chunk = os.read(fd, 65536) if ready else b""
+        if not chunk:
+            break
+        said += chunk
+    return said.decode(errors="replace")
 
 
 def test_outputs_at_the_name_limit_and_fifos(tmp_path: Path) -> None:
