@@ -192,15 +192,17 @@ def planted_drives(order: list[int], counts: list[int], noise: float, seed: int,
 
 
 def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, stop_gain, stop_decay, still=0.0,
-               cues=None, route=None, evidence=None, evidence_decay=None, unique=None, why=None):
+               cues=None, route=None, evidence=None, evidence_decay=None, unique=None, confirm=None, why=None):
     """RoadMatcher written as plain loops over states, from its docstring, on one drive, every reference read
     every frame -> [(ref, score)] a frame. ``cues``: each frame's motion cue (NaN = none); ``route``: the
-    references where the map's drive stood; ``evidence``, ``evidence_decay``, ``unique``: None = the default;
+    references where the map's drive stood; ``evidence``, ``evidence_decay``, ``unique``, ``confirm``: None = the
+    default;
     ``why``: a list that gets each frame's reason, as ``RoadMatcher.why``."""
     from vpr_edge.matchers import MATCHERS
 
     defaults = MATCHERS["stream"].params
     unique = defaults["unique"] if unique is None else unique
+    confirm = defaults["confirm"] if confirm is None else confirm
     evidence = defaults["evidence"] if evidence is None else evidence
     evidence_decay = defaults["evidence_decay"] if evidence_decay is None else evidence_decay
     recent = None   # the answer's standing out of its rows, averaged over moving frames
@@ -208,6 +210,7 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, s
     n_speeds, n_pos = int(round(vmax * grid)) + 1, n_refs * grid
     h = np.zeros((n_speeds, n_pos))
     mean, weight, stopped, out, position = np.zeros(n_refs), memory, False, [], None
+    held, last = 0, None   # frames the answer's place has held (each within rival_window of the one before)
     for t, s in enumerate(sim):
         cue = np.nan if cues is None else cues[t]
         gain, s_decay, stands = stop_gain, stop_decay, False   # no cue: the stop_gain rule
@@ -243,20 +246,24 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, s
             avg = evidence_decay * recent + (1 - evidence_decay) * here
             recent = max(recent, avg) if stands else avg
         uniqueness = 1 - (rival + 1) / (best + 1)
-        out.append((ref, float(best >= lock and recent >= evidence and uniqueness >= unique) + uniqueness))
+        held = held + 1 if last is not None and abs(ref - last) <= rival_window else 1
+        last = ref
+        out.append((ref, float(best >= lock and held >= confirm and recent >= evidence and uniqueness >= unique)
+                    + uniqueness))
         if why is not None:   # the first condition of the lock that fails
-            why.append("weak-view" if recent < evidence else "no-trajectory" if best < lock else
+            why.append("weak-view" if recent < evidence else "no-trajectory" if best < lock or held < confirm else
                        "ambiguous" if uniqueness < unique else "locked")
     return out
 
 
 def naive_road_local(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, window, probe, check, span,
-                     hold, stop_gain, stop_decay, evidence, evidence_decay, unique, **_):
+                     hold, stop_gain, stop_decay, evidence, evidence_decay, unique, confirm=1, **_):
     """RoadMatcher's local search as plain loops, from its docstring (no motion cue): while firmly locked
     (H >= hold * lock, nothing beyond the window half as strong) the next frame reads only the references
     within ``window`` of the answer and the ``probe`` sample (which gives the frame's mean and spread), state
     outside the window held at 0; ``span`` frames in every ``check`` firmly locked ones, and every frame not
-    firmly locked, read the whole route. Running means count time, not updates. -> [(ref, score, local)]."""
+    firmly locked, read the whole route. Running means count time, not updates. ``confirm``: frames the
+    answer's place must have held (each within rival_window of the one before). -> [(ref, score, local)]."""
     n_refs = sim.shape[1]
     n_speeds, n_pos = int(round(vmax * grid)) + 1, n_refs * grid
     w = window if window and n_refs > 4 * window else 0
@@ -264,6 +271,7 @@ def naive_road_local(sim, vmax, grid, decay, bias, turn, memory, lock, rival_win
     h = np.zeros((n_speeds, n_pos))
     mean, weight, seen = np.zeros(n_refs), np.full(n_refs, float(memory)), np.zeros(n_refs, int)
     t, stopped, win, held_for, recent, out = 0, False, None, 0, None, []
+    place_held, last = 0, None
     for s in sim:
         lo, hi = win if win is not None else (0, n_refs)
         sample = s[probe_refs] if win is not None else s
@@ -296,8 +304,10 @@ def naive_road_local(sim, vmax, grid, decay, bias, turn, memory, lock, rival_win
         here = max((s[r] - mu) / sd for r in range(max(lo, ref - 1), min(hi, ref + 2)))
         recent = here if recent is None else evidence_decay * recent + (1 - evidence_decay) * here
         uniqueness = 1 - (rival + 1) / (best + 1)
-        out.append((ref, float(best >= lock and recent >= evidence and uniqueness >= unique) + uniqueness,
-                    win is not None))
+        place_held = place_held + 1 if last is not None and abs(ref - last) <= rival_window else 1
+        last = ref
+        out.append((ref, float(best >= lock and place_held >= confirm and recent >= evidence and uniqueness >= unique)
+                    + uniqueness, win is not None))
         far = max([x for r, x in per_ref.items() if abs(r - ref) > w], default=0.0)
         held = bool(w) and best >= hold * lock and far < 0.5 * best
         held_for = held_for + 1 if held else 0

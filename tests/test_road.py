@@ -90,7 +90,8 @@ def test_road_matcher_detour_through_look_alikes() -> None:
     as strongly as a true match (strength 1.0, each frame another place) or in short runs that follow the
     route for three frames at 0.8 of a true match. No such run is a trajectory, so once the lock's evidence
     has faded (its memory: 8-12 frames, docs/results.md, "Right or silent") the frames are reported lost, and
-    the vehicle is found again within a few frames of re-entering the map. Eight noise draws each."""
+    the vehicle is found again within a few frames of re-entering the map (a new place waits ``confirm`` 3
+    frames: 8 at most). Eight noise draws each."""
     matcher = get_matcher("stream")
     for strength, run in ((1.0, 1), (0.8, 3)):
         lost, found = [], []
@@ -108,7 +109,7 @@ def test_road_matcher_detour_through_look_alikes() -> None:
             ok = (np.abs(res.refs[back] - places[back]) <= 2) & (res.scores[back] >= matcher.min_confidence)
             found.append(int(np.argmax(ok)) if ok.any() else len(ok))
         assert np.mean(lost) > 0.9 and min(lost) > 0.8, (strength, run, lost)
-        assert max(found) <= 6, (strength, run, found)
+        assert max(found) <= 8, (strength, run, found)
 
 
 def test_evaluate_reports_lock_on_and_exit_delays() -> None:

@@ -14,7 +14,7 @@ from vpr_edge.matchers.route import RouteGraph
 
 from helpers import places_at_speeds, planted
 
-RULES = {"lock": 6.0, "evidence": 1.5, "evidence_decay": 0.0, "hub": -99.0, "unique": 0.25, "hold": 2.0}
+RULES = {"lock": 6.0, "evidence": 1.5, "evidence_decay": 0.0, "hub": -99.0, "unique": 0.25, "confirm": 1, "hold": 2.0}
 
 
 def reading(values: np.ndarray, part: np.ndarray, standing: bool = False) -> FrameReading:
@@ -175,5 +175,42 @@ def test_the_recursion_hands_each_frame_to_its_verdict(strong: bool) -> None:
 
 def test_the_decoy_reads_trajectories_only() -> None:
     m = RoadMatcher(50, **MATCHERS["stream-prob"].params | {"decoy": True, "lock": 6.0, "evidence": 1.5,
-                                                           "evidence_decay": 0.5, "hub": 1.0, "unique": 0.25, "hold": 2.0})
+                                                           "evidence_decay": 0.5, "hub": 1.0, "unique": 0.25,
+                                                           "confirm": 1, "hold": 2.0})
     assert isinstance(m._decoy.verdict, TrajectoryOnly) and m._decoy._decoy is None and m._decoy.window == 0
+
+
+def test_place_jumped_against_a_loop() -> None:
+    """Whether the answer jumped (``lock.place_jumped``) against a plain test on a map of two drives: the first
+    frame does; then a place of the frame before's drive more than the window from it does, a place of the
+    other drive (the same road driven again, perhaps) does not."""
+    from vpr_edge.matchers.lock import place_jumped
+
+    rng = np.random.default_rng(5)
+    graph, w = RouteGraph(40, np.array([0, 20])), 3
+    refs = np.cumsum(rng.integers(-2, 3, 400)) % 40
+    refs[::17] = rng.integers(0, 40, len(refs[::17]))   # and now and then anywhere
+    prev = None
+    for ref in map(int, refs):
+        want = prev is None or ((prev < 20) == (ref < 20) and abs(ref - prev) > w)
+        assert place_jumped(graph, prev, ref, w) == want
+        prev = ref
+
+
+@pytest.mark.parametrize("confirm", [1, 3])
+def test_a_jump_is_answered_from_its_confirm_th_frame(confirm: int) -> None:
+    """The lock verdict alone: a stream locked moving along places 5-14 whose best place jumps to 40 (a
+    look-alike ahead; everything else as locked as before) is lost ("no-trajectory") on the jump's first
+    ``confirm`` - 1 frames, and locked from there on, as the stream's first frames are; at confirm 1 (off)
+    every frame is locked."""
+    n = 60
+    verdict = LockVerdict(RouteGraph.line(n), 10, **RULES | {"confirm": confirm})
+    rng = np.random.default_rng(4)
+    whys = []
+    for t in range(16):
+        ref = 5 + t if t < 10 else 40 + (t - 10)
+        values, part = np.zeros(n), rng.normal(0, 1, n)
+        values[ref], part[ref] = 20.0, 6.0
+        whys.append(verdict.judge(reading(values, part)).why)
+    assert whys[:10] == ["no-trajectory"] * (confirm - 1) + ["locked"] * (11 - confirm)
+    assert whys[10:] == ["no-trajectory"] * (confirm - 1) + ["locked"] * (7 - confirm)

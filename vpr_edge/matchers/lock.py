@@ -6,10 +6,11 @@ A frame is locked when its answer stands out of what the frame sees (the evidenc
 and of what this stream's recent frames saw there (the same average of the answer's view less its place's
 mean over the stream's recent moving frames, ``verdict.RecentViews``: >= ``hub``; a place that looks like
 every frame, imagery of somewhere else the map's place happens to resemble most, does not), its trajectory
-has built up (H_best >= ``lock``) and no rival along the answer's own drive is nearly as strong
-(uniqueness against it >= ``unique``); the first rule that fails names why it is lost (``lock_verdict``).
-So locked frames rank above lost ones, each by uniqueness. The answer is strong enough for a local search at
-H_best >= ``hold`` * ``lock``.
+has built up (H_best >= ``lock``) and held its place for ``confirm`` frames (``place_jumped``: a best place
+that jumps, back onto the map after a detour or onto a look-alike ahead, is answered from its ``confirm``-th
+frame there on) and no rival along the answer's own drive is nearly as strong (uniqueness against it >=
+``unique``); the first rule that fails names why it is lost (``lock_verdict``). So locked frames rank above
+lost ones, each by uniqueness. The answer is strong enough for a local search at H_best >= ``hold`` * ``lock``.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import numpy as np
 
 from vpr_edge.matchers.base import AMBIGUOUS, LOCKED, NO_TRAJECTORY, WEAK_VIEW
 from vpr_edge.matchers.reading import FrameReading, Judgement, answer_view
-from vpr_edge.matchers.route import RouteGraph, max_outside, merge
+from vpr_edge.matchers.route import RouteGraph, inside, max_outside, merge
 from vpr_edge.matchers.verdict import RecentViews
 
 
@@ -31,27 +32,38 @@ def evidence_average(previous: float | None, here: float, keep: float, standing:
     return max(previous, recent) if standing else recent
 
 
+def place_jumped(graph: RouteGraph, previous: int | None, ref: int, w: int) -> bool:
+    """Whether this frame's answer ``ref`` jumped from the frame before's, ``previous`` (None: the stream's
+    first frame, which starts a place): it lies in ``previous``'s drive beyond ``w`` places of it along the
+    route (``RouteGraph.near``). A place of another drive is no jump: it may be the same road driven again (as
+    the uniqueness rule reads other drives)."""
+    if previous is None:
+        return True
+    return graph.bounds(ref) == graph.bounds(previous) and not inside(np.array([ref]), graph.near(previous, w))[0]
+
+
 def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_line: float, lock: float,
-                 unique: float, hub_evidence: float = np.inf, hub_line: float = -np.inf) -> str:
+                 unique: float, hub_evidence: float = np.inf, hub_line: float = -np.inf, held: int = 1,
+                 confirm: int = 1) -> str:
     """The lock's rules, in order: the first that fails names why the frame is lost (``base.LOST_WHY``):
     "weak-view" (``evidence`` below ``evidence_line``, or ``hub_evidence``, the same less the answer's place's
-    recent mean, below ``hub_line``), "no-trajectory" (``best`` below ``lock``), "ambiguous"
-    (``own_uniqueness``, against the best rival along the answer's own drive, below ``unique``); else
-    "locked"."""
+    recent mean, below ``hub_line``), "no-trajectory" (``best`` below ``lock``, or the place ``held`` for
+    fewer than ``confirm`` frames), "ambiguous" (``own_uniqueness``, against the best rival along the
+    answer's own drive, below ``unique``); else "locked"."""
     if not (evidence >= evidence_line and hub_evidence >= hub_line):
         return WEAK_VIEW
-    if best < lock:
+    if best < lock or held < confirm:
         return NO_TRAJECTORY
     return AMBIGUOUS if own_uniqueness < unique else LOCKED
 
 
 class LockVerdict:
     """The lock's rules over a stream (module docstring); parameters as ``matchers.params.STREAM`` names them
-    (``lock``, ``evidence``, ``evidence_decay``, ``hub``, ``unique``, ``hold``). ``rival_window``: places either
-    side of the answer that a rival trajectory must lie beyond."""
+    (``lock``, ``evidence``, ``evidence_decay``, ``hub``, ``unique``, ``confirm``, ``hold``). ``rival_window``:
+    places either side of the answer that a rival trajectory must lie beyond."""
 
     def __init__(self, graph: RouteGraph, rival_window: int, *, lock: float, evidence: float, evidence_decay: float,
-                 hub: float, unique: float, hold: float) -> None:
+                 hub: float, unique: float, confirm: int, hold: float) -> None:
         if not 0.0 <= evidence_decay < 1.0:
             raise ValueError(f"evidence_decay must be in [0, 1), got {evidence_decay}")
         if not 0.0 <= unique < 1.0:
@@ -60,12 +72,17 @@ class LockVerdict:
         self.lock, self.evidence, self.evidence_decay, self.unique, self.hold = lock, evidence, evidence_decay, \
             unique, hold
         self.hub = hub
+        if int(confirm) < 1:
+            raise ValueError(f"confirm must be at least 1, got {confirm}")
+        self.confirm = int(confirm)
         self.reset()
 
     def reset(self) -> None:
         self._evidence: float | None = None   # the answer's recent standing out of its rows
         self._hub: float | None = None        # the same, less its place's mean over the stream's recent frames
         self._recent = RecentViews(self.graph.n_refs) if self.hub > -99 else None   # this stream's views per place
+        self._prev: int | None = None   # the frame before's answer
+        self._held = 0                    # frames the answer's place has held, this one included
 
     def judge(self, f: FrameReading) -> Judgement:
         graph, n_refs = self.graph, self.graph.n_refs
@@ -84,6 +101,8 @@ class LockVerdict:
         first, last = graph.bounds(f.ref)
         own = rival if (first, last) == (0, n_refs - 1) else max_outside(
             f.values, f.where, merge([*near, (0, first), (last + 1, n_refs)]))
+        self._held = 1 if place_jumped(graph, self._prev, f.ref, self.rival_window) else self._held + 1
+        self._prev = f.ref
         why = lock_verdict(self._evidence, f.best, 1.0 - (own + 1.0) / (f.best + 1.0), self.evidence, self.lock,
-                           self.unique, np.inf if self._hub is None else self._hub, self.hub)
+                           self.unique, np.inf if self._hub is None else self._hub, self.hub, self._held, self.confirm)
         return Judgement(float(why == LOCKED) + uniqueness, f.best >= self.hold * self.lock, why)

@@ -44,6 +44,10 @@ STREAM: dict[str, Param] = {
     "unique": Param(0.25, "the answer is reported lost unless its uniqueness (1 - (H_rival + 1) / (H_best + 1): "
                          "how far the best trajectory leads the best one beyond rival_window) is at least this; "
                          "0 = off"),
+    "confirm": Param(3, "the answer is reported lost until the best trajectory's place has held for this many "
+                        "frames (each within rival_window of the frame before's, counted from the stream's first "
+                        "frame or the place's last jump: back onto the map after a detour, onto a look-alike "
+                        "ahead); 1 = off"),
     "rival_window": Param(10, "references either side of the answer that a rival trajectory must lie beyond "
                               "(the uniqueness part of the score); on a map whose references stay alike further "
                               "along the route, as far as they do (likeness.reach, measured on the map)"),
@@ -77,7 +81,7 @@ STREAM: dict[str, Param] = {
                           "while the gate is closed every frame does"),
 }
 # the stream matcher's lock rules; ``stream-prob`` replaces them by a model of "not this place" (``verdict``)
-LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "hub", "unique", "hold")
+LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "hub", "unique", "confirm", "hold")
 STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM.items() if k not in LOCK_RULES}
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),

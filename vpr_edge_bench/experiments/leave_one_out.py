@@ -83,6 +83,8 @@ RULES: tuple[Rule, ...] = (
          "mapped right more than 0.05 below at -99 (off)", most_lost_within(0.05)),
     Rule("unique", (0, 0.01, 0.02, 0.03, 0.04, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5), "highest with no "
          "stream's mapped right, away from one-view runs, more than 0.05 below at 0", highest_within(0.05, True)),
+    Rule("confirm", (1, 2, 3, 4), "most of the detour's unmapped frames lost, no stream's mapped right more than "
+         "0.02 below at 1 (off)", most_lost_within(0.02)),
 )
 
 

@@ -98,6 +98,8 @@ SECTIONS = (
     Section("lost-unique", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "unique",
                                              "--values=0,0.01,0.02,0.03,0.04,0.05,0.1,0.15,0.2,0.25,0.3,0.4,0.5",
                                              "--against", "0")),
+    Section("lost-confirm", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "confirm",
+                                              "--values=1,2,3,4", "--against", "1")),
     Section("lost-still", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "still",
                                             "--values=0.3,0.4,0.5,0.6,0.7")),
     Section("lost-still-memory", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary",
