@@ -261,7 +261,7 @@ def test_bench_e2e_and_calibration_check(tmp_path: Path, small_refs: Path, small
     # the same streams under two names: each dataset's choice is the other's, so held out scores as its own
     text = tool("leave-one-out", "--streams", str(tmp_path / "one"), str(tmp_path / "two"))
     choices = [line.split("|")[1:-1] for line in text.splitlines() if line.startswith("| `")]
-    assert [c[0].strip() for c in choices] == ["`still`", "`lock`", "`evidence`", "`unique`"]
+    assert [c[0].strip() for c in choices] == ["`still`", "`lock`", "`evidence`", "`unique`", "`confirm`"]
     assert all(c[3] == c[4] and float(c[3]) in [float(v) for v in c[1].split(",")] for c in choices)
     rows = {tuple(c.strip() for c in line.split("|")[1:4]): line.split("|")[4:-1]
             for line in text.splitlines() if line.startswith("| one") or line.startswith("| two")}
