@@ -76,7 +76,8 @@ def test_image_map_times_each_precision_and_stage(image_map: Path, tmp_path: Pat
     assert [r[:2] for r in rows] == [["fp32", "1"], ["int8", "1"]]         # the bundled model has an int8 form
     for r in rows:
         stages = [float(v) for v in r[2:6]]
-        assert all(v > 0 for v in stages) and float(r[6]) == pytest.approx(sum(stages), abs=0.02)
+        # the four stages and their total are each printed rounded to 0.01: they may differ by 5 x 0.005
+        assert all(v > 0 for v in stages) and float(r[6]) == pytest.approx(sum(stages), abs=0.026)
     assert lines[-1].startswith("fastest: ")
     # a frame rate nothing sustains: said, exit code 1
     code, out, _ = invoke("bench", image_map, "--frames", "2", "--threads", "1", "--fps", "1e6")
