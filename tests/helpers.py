@@ -192,17 +192,19 @@ def planted_drives(order: list[int], counts: list[int], noise: float, seed: int,
 
 
 def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, stop_gain, stop_decay, still=0.0,
-               cues=None, route=None, evidence=None, evidence_decay=None, unique=None, confirm=None, why=None):
+               cues=None, route=None, evidence=None, evidence_decay=None, unique=None, confirm=None, stuck=None,
+               why=None):
     """RoadMatcher written as plain loops over states, from its docstring, on one drive, every reference read
     every frame -> [(ref, score)] a frame. ``cues``: each frame's motion cue (NaN = none); ``route``: the
-    references where the map's drive stood; ``evidence``, ``evidence_decay``, ``unique``, ``confirm``: None = the
-    default;
+    references where the map's drive stood; ``evidence``, ``evidence_decay``, ``unique``, ``confirm``,
+    ``stuck``: None = the default;
     ``why``: a list that gets each frame's reason, as ``RoadMatcher.why``."""
     from vpr_edge.matchers import MATCHERS
 
     defaults = MATCHERS["stream"].params
     unique = defaults["unique"] if unique is None else unique
     confirm = defaults["confirm"] if confirm is None else confirm
+    stuck = defaults["stuck"] if stuck is None else stuck
     evidence = defaults["evidence"] if evidence is None else evidence
     evidence_decay = defaults["evidence_decay"] if evidence_decay is None else evidence_decay
     recent = None   # the answer's standing out of its rows, averaged over moving frames
@@ -211,6 +213,7 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, s
     h = np.zeros((n_speeds, n_pos))
     mean, weight, stopped, out, position = np.zeros(n_refs), memory, False, [], None
     held, last = 0, None   # frames the answer's place has held (each within rival_window of the one before)
+    anchor, kept = None, 0   # where the answer last moved on to (one ahead, or more than one back); moving frames since
     for t, s in enumerate(sim):
         cue = np.nan if cues is None else cues[t]
         gain, s_decay, stands = stop_gain, stop_decay, False   # no cue: the stop_gain rule
@@ -248,10 +251,16 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, s
         uniqueness = 1 - (rival + 1) / (best + 1)
         held = held + 1 if last is not None and abs(ref - last) <= rival_window else 1
         last = ref
-        out.append((ref, float(best >= lock and held >= confirm and recent >= evidence and uniqueness >= unique)
-                    + uniqueness))
+        if anchor is None or ref - anchor >= 1 or ref - anchor < -1:
+            anchor, kept = ref, 0
+        elif still > 0 and cue == cue and not stands:   # the cue says the camera moved
+            kept += 1
+        stuck_now = 0 < stuck <= kept
+        out.append((ref, float(best >= lock and held >= confirm and not stuck_now and recent >= evidence
+                               and uniqueness >= unique) + uniqueness))
         if why is not None:   # the first condition of the lock that fails
-            why.append("weak-view" if recent < evidence else "no-trajectory" if best < lock or held < confirm else
+            why.append("weak-view" if recent < evidence else "no-trajectory" if best < lock or held < confirm
+                       or stuck_now else
                        "ambiguous" if uniqueness < unique else "locked")
     return out
 

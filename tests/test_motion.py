@@ -292,3 +292,25 @@ def test_a_front_end_that_sees_every_image_alike_is_followed() -> None:
     res = matcher.run(frames @ refs.T, k=1, still=cue)
     right = np.abs(res.refs - places) <= 2
     assert right[15:].mean() > 0.9 and (res.scores[15:] >= 1.0).mean() > 0.5
+
+
+def test_road_matcher_stuck_rule_against_plain_loops() -> None:
+    """A vehicle moving along places 1-12, then imagery of somewhere else that resembles place 14 while
+    the cue says the camera moves (with two standing frames among it): the matcher's answers and scores, the
+    stuck rule included, equal the plain loops', and the rule loses frames that it would answer without it."""
+    rng = np.random.default_rng(11)
+    places = np.concatenate([places_at_speeds([(1.0, 12)], start=1), -np.ones(14, int)])
+    sim = planted(rng, 20, places, noise=0.3)
+    sim[12:, 14] += 1.5
+    cues = np.zeros(len(places))
+    cues[[17, 18]] = 0.9   # a standing camera: these frames do not count
+    params = {"vmax": 1.5, "grid": 2, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 50.0, "lock": 3.0,
+              "rival_window": 2, "stop_gain": 0.3, "stop_decay": 0.95, "still": 0.5}
+    for stuck in (0, 3):
+        got = MATCHERS["stream"].with_params(**params | {"stuck": stuck, "hub": -99.0}).run(sim, k=1, still=cues)
+        want = naive_road(sim, **params, cues=cues, stuck=stuck)
+        assert list(got.refs) == [r for r, _ in want]
+        np.testing.assert_allclose(got.scores, [c for _, c in want], atol=1e-5)
+        if stuck == 0:
+            off = got.scores
+    assert np.sum((got.scores < 1.0) & (off >= 1.0)) >= 3 and not np.any((got.scores >= 1.0) & (off < 1.0))

@@ -2,6 +2,8 @@
 and the trajectory recursion (``road.RoadMatcher``) handing each frame to whatever verdict it is given."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -14,7 +16,7 @@ from vpr_edge.matchers.route import RouteGraph
 
 from helpers import places_at_speeds, planted
 
-RULES = {"lock": 6.0, "evidence": 1.5, "evidence_decay": 0.0, "hub": -99.0, "unique": 0.25, "confirm": 1, "hold": 2.0}
+RULES = {"lock": 6.0, "evidence": 1.5, "evidence_decay": 0.0, "hub": -99.0, "unique": 0.25, "confirm": 1, "stuck": 0, "hold": 2.0}
 
 
 def reading(values: np.ndarray, part: np.ndarray, standing: bool = False) -> FrameReading:
@@ -55,7 +57,8 @@ def test_the_lock_verdict_alone_against_its_rules(case: str) -> None:
 
 def test_the_lock_verdicts_hub_line_against_a_loop() -> None:
     """The hub line alone: each frame's answer view less its place's mean over the stream's recent moving
-    frames (an exponential memory per place, ``HUB_MEMORY``, shrunk by ``HUB_PRIOR``; plain loops), averaged as
+    frames (an exponential memory per place, ``HUB_MEMORY``, shrunk by ``HUB_PRIOR`` against the place's
+    sightings; plain loops), averaged as
     the evidence is, below ``hub`` -> "weak-view". A place that looks most like every frame is soon weak; the
     same views moving along the route stay locked; a stopped trajectory's frames neither teach the means nor
     lower the average."""
@@ -65,7 +68,7 @@ def test_the_lock_verdicts_hub_line_against_a_loop() -> None:
     rng = np.random.default_rng(2)
     for case in ("hub", "moving", "stopped"):
         verdict = LockVerdict(RouteGraph.line(n), 5, **rules)
-        mean, weight, avg, whys, want = np.zeros(n), np.zeros(n), None, [], []
+        mean, weight, seen, avg, whys, want = np.zeros(n), np.zeros(n), np.zeros(n), None, [], []
         for t in range(25):
             ref = 20 if case != "moving" else 5 + t
             values = np.zeros(n)
@@ -76,9 +79,10 @@ def test_the_lock_verdicts_hub_line_against_a_loop() -> None:
             whys.append(verdict.judge(FrameReading(ref, 20.0, values, None, part, part, float(part.mean()),
                                                    float(part.std()), False, stopped)).why)
             z = (part - part.mean()) / part.std()
-            views = [z[i] - mean[i] * weight[i] / (weight[i] + HUB_PRIOR) for i in range(n)]
+            views = [z[i] - mean[i] * seen[i] / (seen[i] + HUB_PRIOR) for i in range(n)]
             if not stopped:
                 for i in range(n):
+                    seen[i] += 1
                     weight[i] = weight[i] * (1 - 1 / HUB_MEMORY) + 1
                     mean[i] += (z[i] - mean[i]) / weight[i]
             here = max(views[max(0, ref - 1):ref + 2])
@@ -174,7 +178,7 @@ def test_the_recursion_hands_each_frame_to_its_verdict(strong: bool) -> None:
 
 
 def test_the_decoy_reads_trajectories_only() -> None:
-    m = RoadMatcher(50, **MATCHERS["stream-prob"].params | {"decoy": True, "lock": 6.0, "evidence": 1.5,
+    m = RoadMatcher(50, **MATCHERS["stream-prob"].params | {"decoy": True, "lock": 6.0, "stuck": 0, "evidence": 1.5,
                                                            "evidence_decay": 0.5, "hub": 1.0, "unique": 0.25,
                                                            "confirm": 1, "hold": 2.0})
     assert isinstance(m._decoy.verdict, TrajectoryOnly) and m._decoy._decoy is None and m._decoy.window == 0
@@ -214,3 +218,45 @@ def test_a_jump_is_answered_from_its_confirm_th_frame(confirm: int) -> None:
         whys.append(verdict.judge(reading(values, part)).why)
     assert whys[:10] == ["no-trajectory"] * (confirm - 1) + ["locked"] * (11 - confirm)
     assert whys[10:] == ["no-trajectory"] * (confirm - 1) + ["locked"] * (7 - confirm)
+
+
+def test_place_advanced_against_a_loop() -> None:
+    """Whether the answer moved on from where it last moved to (``lock.place_advanced``) against a plain test
+    on a map of two drives: the first frame does; then a place of the anchor's drive at least one ahead of it
+    or more than one behind it does, one behind or the same does not; another drive's place does."""
+    from vpr_edge.matchers.lock import place_advanced
+
+    rng = np.random.default_rng(6)
+    graph = RouteGraph(40, np.array([0, 20]))
+    refs = np.cumsum(rng.integers(-2, 3, 400)) % 40
+    anchor = None
+    for ref in map(int, refs):
+        want = anchor is None or (anchor < 20) != (ref < 20) or ref - anchor >= 1 or ref - anchor < -1
+        assert place_advanced(graph, anchor, ref) == want
+        if want:
+            anchor = ref
+
+
+@pytest.mark.parametrize("cued", [True, False])
+def test_an_answer_kept_while_the_camera_moves_is_lost_at_stuck(cued: bool) -> None:
+    """The lock verdict alone: a stream locked moving along places 5-12, then kept at place 12 and 11 by turns
+    (a place every frame resembles) while the motion cue says the camera moves: lost ("no-trajectory") from
+    the ``stuck``-th such frame; frames of a standing camera do not count, and the answer moving on again is
+    locked at once. Without a cue nothing says the camera moves: every frame stays locked."""
+    n, stuck = 60, 4
+    verdict = LockVerdict(RouteGraph.line(n), 10, **RULES | {"stuck": stuck})
+    rng = np.random.default_rng(4)
+    refs = list(range(5, 13)) + [12, 11, 12, 11, 11, 12, 11, 12] + [13, 14]
+    standing = [False] * 8 + [False, False, True, True, False, False, False, False] + [False, False]
+    whys = []
+    for ref, stands in zip(refs, standing):
+        values, part = np.zeros(n), rng.normal(0, 1, n)
+        values[ref], part[ref] = 20.0, 6.0
+        f = reading(values, part, stands)
+        whys.append(verdict.judge(replace(f, cued=cued)).why)
+    if not cued:
+        assert whys == ["locked"] * len(refs)
+        return
+    # moving frames kept at 12 (anchor 12 from the 8th frame): 12, 11, (standing x2), 11, 12, 11, 12 -> 6
+    kept = [0] * 8 + [1, 2, 2, 2, 3, 4, 5, 6] + [0, 0]
+    assert whys == ["no-trajectory" if k >= stuck else "locked" for k in kept], whys

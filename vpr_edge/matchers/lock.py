@@ -8,7 +8,8 @@ mean over the stream's recent moving frames, ``verdict.RecentViews``: >= ``hub``
 every frame, imagery of somewhere else the map's place happens to resemble most, does not), its trajectory
 has built up (H_best >= ``lock``) and held its place for ``confirm`` frames (``place_jumped``: a best place
 that jumps, back onto the map after a detour or onto a look-alike ahead, is answered from its ``confirm``-th
-frame there on) and no rival along the answer's own drive is nearly as strong (uniqueness against it >=
+frame there on), has moved with a moving camera (``place_advanced``: a place the answer keeps while the camera
+moves on for ``stuck`` frames, as the motion cue says, is a place every frame resembles, not where the vehicle is) and no rival along the answer's own drive is nearly as strong (uniqueness against it >=
 ``unique``); the first rule that fails names why it is lost (``lock_verdict``). So locked frames rank above
 lost ones, each by uniqueness. The answer is strong enough for a local search at H_best >= ``hold`` * ``lock``.
 """
@@ -42,28 +43,39 @@ def place_jumped(graph: RouteGraph, previous: int | None, ref: int, w: int) -> b
     return graph.bounds(ref) == graph.bounds(previous) and not inside(np.array([ref]), graph.near(previous, w))[0]
 
 
+def place_advanced(graph: RouteGraph, anchor: int | None, ref: int) -> bool:
+    """Whether this frame's answer ``ref`` has moved on from ``anchor``, where the answer's place last moved
+    to (None: none yet): at least one place ahead of it along its drive, more than one behind it (a new
+    trajectory: they only run forward), or on another drive. One place back is no move: a trajectory stuck on
+    a place answers it and the place just behind it by turns."""
+    if anchor is None or graph.bounds(ref) != graph.bounds(anchor):
+        return True
+    return not -1 <= ref - anchor < 1
+
+
 def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_line: float, lock: float,
                  unique: float, hub_evidence: float = np.inf, hub_line: float = -np.inf, held: int = 1,
-                 confirm: int = 1) -> str:
+                 confirm: int = 1, kept: int = 0, stuck: int = 0) -> str:
     """The lock's rules, in order: the first that fails names why the frame is lost (``base.LOST_WHY``):
     "weak-view" (``evidence`` below ``evidence_line``, or ``hub_evidence``, the same less the answer's place's
-    recent mean, below ``hub_line``), "no-trajectory" (``best`` below ``lock``, or the place ``held`` for
-    fewer than ``confirm`` frames), "ambiguous" (``own_uniqueness``, against the best rival along the
+    recent mean, below ``hub_line``), "no-trajectory" (``best`` below ``lock``, the place ``held`` for
+    fewer than ``confirm`` frames, or ``kept`` while the camera moved for ``stuck`` frames or more; 0: off),
+    "ambiguous" (``own_uniqueness``, against the best rival along the
     answer's own drive, below ``unique``); else "locked"."""
     if not (evidence >= evidence_line and hub_evidence >= hub_line):
         return WEAK_VIEW
-    if best < lock or held < confirm:
+    if best < lock or held < confirm or 0 < stuck <= kept:
         return NO_TRAJECTORY
     return AMBIGUOUS if own_uniqueness < unique else LOCKED
 
 
 class LockVerdict:
     """The lock's rules over a stream (module docstring); parameters as ``matchers.params.STREAM`` names them
-    (``lock``, ``evidence``, ``evidence_decay``, ``hub``, ``unique``, ``confirm``, ``hold``). ``rival_window``:
+    (``lock``, ``evidence``, ``evidence_decay``, ``hub``, ``unique``, ``confirm``, ``stuck``, ``hold``). ``rival_window``:
     places either side of the answer that a rival trajectory must lie beyond."""
 
     def __init__(self, graph: RouteGraph, rival_window: int, *, lock: float, evidence: float, evidence_decay: float,
-                 hub: float, unique: float, confirm: int, hold: float) -> None:
+                 hub: float, unique: float, confirm: int, stuck: int, hold: float) -> None:
         if not 0.0 <= evidence_decay < 1.0:
             raise ValueError(f"evidence_decay must be in [0, 1), got {evidence_decay}")
         if not 0.0 <= unique < 1.0:
@@ -75,6 +87,9 @@ class LockVerdict:
         if int(confirm) < 1:
             raise ValueError(f"confirm must be at least 1, got {confirm}")
         self.confirm = int(confirm)
+        if int(stuck) < 0:
+            raise ValueError(f"stuck must be at least 0 (0: off), got {stuck}")
+        self.stuck = int(stuck)
         self.reset()
 
     def reset(self) -> None:
@@ -83,6 +98,8 @@ class LockVerdict:
         self._recent = RecentViews(self.graph.n_refs) if self.hub > -99 else None   # this stream's views per place
         self._prev: int | None = None   # the frame before's answer
         self._held = 0                    # frames the answer's place has held, this one included
+        self._anchor: int | None = None   # where the answer's place last moved on to
+        self._kept = 0                    # frames the camera moved since, the answer kept there
 
     def judge(self, f: FrameReading) -> Judgement:
         graph, n_refs = self.graph, self.graph.n_refs
@@ -103,6 +120,11 @@ class LockVerdict:
             f.values, f.where, merge([*near, (0, first), (last + 1, n_refs)]))
         self._held = 1 if place_jumped(graph, self._prev, f.ref, self.rival_window) else self._held + 1
         self._prev = f.ref
+        if place_advanced(graph, self._anchor, f.ref):
+            self._anchor, self._kept = f.ref, 0
+        elif f.cued and not f.standing:   # the cue says the camera moved (without a cue nothing says so)
+            self._kept += 1
         why = lock_verdict(self._evidence, f.best, 1.0 - (own + 1.0) / (f.best + 1.0), self.evidence, self.lock,
-                           self.unique, np.inf if self._hub is None else self._hub, self.hub, self._held, self.confirm)
+                           self.unique, np.inf if self._hub is None else self._hub, self.hub, self._held, self.confirm,
+                           self._kept, self.stuck)
         return Judgement(float(why == LOCKED) + uniqueness, f.best >= self.hold * self.lock, why)

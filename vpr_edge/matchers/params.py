@@ -48,6 +48,10 @@ STREAM: dict[str, Param] = {
                         "frames (each within rival_window of the frame before's, counted from the stream's first "
                         "frame or the place's last jump: back onto the map after a detour, onto a look-alike "
                         "ahead); 1 = off"),
+    "stuck": Param(4, "the answer is reported lost once its place has not moved on (one reference ahead, or a "
+                      "jump) while the camera moved for this many frames (as the motion cue says: frames of a standing "
+                      "camera do not count; without a cue the rule is off): a place every frame resembles; "
+                      "0 = off"),
     "rival_window": Param(10, "references either side of the answer that a rival trajectory must lie beyond "
                               "(the uniqueness part of the score); on a map whose references stay alike further "
                               "along the route, as far as they do (likeness.reach, measured on the map)"),
@@ -81,7 +85,7 @@ STREAM: dict[str, Param] = {
                           "while the gate is closed every frame does"),
 }
 # the stream matcher's lock rules; ``stream-prob`` replaces them by a model of "not this place" (``verdict``)
-LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "hub", "unique", "confirm", "hold")
+LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "hub", "unique", "confirm", "stuck", "hold")
 STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM.items() if k not in LOCK_RULES}
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),

@@ -23,7 +23,8 @@ class FrameReading:
     ``probe``: its similarities that estimate its ``mean`` and spread ``std`` (the probe sample while searching
     locally, else every reference); ``standing``: the frame shows a standing camera (its view again);
     ``stopped``: no motion cue is given and the best trajectory has speed 0 (the vehicle stands as the
-    trajectories read it)."""
+    trajectories read it); ``cued``: a motion cue is given (so a frame not ``standing`` shows a moving
+    camera)."""
 
     ref: int
     best: float
@@ -35,6 +36,7 @@ class FrameReading:
     std: float
     standing: bool
     stopped: bool = False
+    cued: bool = False
 
     @property
     def places(self) -> np.ndarray | slice:

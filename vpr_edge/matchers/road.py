@@ -51,7 +51,8 @@ The answer is the position of the best state. How sure it is, and why a frame is
 "not this place" (``probability.ProbabilityVerdict``); the ``stream`` matcher's is the lock's rules
 (``lock.LockVerdict``), described here. Their score does two jobs, so it has two parts:
 
-    score = [H_best >= lock and held >= confirm and E >= evidence and uniqueness >= unique] + uniqueness,
+    score = [H_best >= lock and held >= confirm and not kept >= stuck and E >= evidence
+             and uniqueness >= unique] + uniqueness,
     uniqueness = 1 - (H_rival + 1) / (H_best + 1)
 
 H_best is about the summed excess of z over ``bias`` along the last ~1/(1 - decay) frames: below ``lock``
@@ -72,7 +73,10 @@ lost too, so that the vehicle is told nothing rather than a coin's toss; a rival
 several does not count there, as that drive may be the same road driven again. ``held`` counts the frames
 the best trajectory's place has held (each within ``rival_window`` of the frame before's, along its drive):
 a trajectory that ran ahead on a lock's remembered score onto a look-alike off the map waits ``confirm``
-frames, by when that score has decayed (``lock.place_jumped``). So locked frames rank above lost ones, each by
+frames, by when that score has decayed (``lock.place_jumped``). ``kept`` counts the frames the camera moved
+(the motion cue says so; without one the rule is off: a stop's best trajectory creeps on by half-references) while the answer's place
+did not move on by a reference: at ``stuck`` the frame is lost, as a place that every frame of a moving
+camera resembles (imagery of somewhere else) is no trajectory of the map (``lock.place_advanced``). So locked frames rank above lost ones, each by
 uniqueness, and ``--min-confidence`` between 1 and 2 asks for a more unambiguous answer still.
 
 The max over speeds with the speed penalty is a distance transform (two passes over the speeds), so a frame
@@ -123,7 +127,7 @@ class RoadMatcher:
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
                  hold: float, seek: int, peaks: int, seek_frames: int, stop_gain: float, stop_decay: float, still: float,
                  still_memory: int,
-                 evidence: float, evidence_decay: float, hub: float, unique: float, confirm: int, decoy: bool = False,
+                 evidence: float, evidence_decay: float, hub: float, unique: float, confirm: int, stuck: int, decoy: bool = False,
                  route: np.ndarray | None = None, graph: RouteGraph | None = None, reach: int = 0,
                  verdict: VerdictFactory | None = None) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
@@ -168,7 +172,7 @@ class RoadMatcher:
             raise ValueError(f"route graph of {self.graph.n_refs} references for {n_refs}")
         self.verdict = verdict(self.graph, self.rival_window) if verdict is not None else LockVerdict(
             self.graph, self.rival_window, lock=lock, evidence=evidence, evidence_decay=evidence_decay, hub=hub,
-            unique=unique, confirm=confirm, hold=hold)
+            unique=unique, confirm=confirm, stuck=stuck, hold=hold)
         # trajectories across drives: state entries whose predecessor in map order is another drive's (cut),
         # and what the junctions carry from their sources' ends into their targets (fed)
         self._cut = self.graph.cuts(grid, self.n_speeds)
@@ -511,8 +515,9 @@ class RoadMatcher:
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
         self._last = (values, where)   # for ``around``'s hypotheses held
         # without a motion cue, a best trajectory at speed 0 is what says the vehicle stands; with one, the cue
+        cued = still is not None and bool(self.still)
         judged = self.verdict.judge(FrameReading(ref, best, values, where, part, probe, mean, std, standing,
-                                                 stopped and still is None))
+                                                 stopped and still is None, cued))
         score, self._why, self._probability = judged.score, judged.why, judged.probability
         # a firm lock: a strong answer, and no trajectory beyond the window half as strong (seen in global frames)
         held = bool(self.window) and judged.strong and \
@@ -526,8 +531,8 @@ class RoadMatcher:
     def why(self) -> str:
         """Why the last frame is not answered, as its verdict says (``base.LOST_WHY``; "locked" when it is);
         the lock's rules: "weak-view" (its answer does not stand out of what the frame sees: E < ``evidence``),
-        "no-trajectory" (none has built up: H < ``lock``, or its place has held fewer than ``confirm``
-        frames), "ambiguous" (a rival along the drive nearly as strong: uniqueness < ``unique``); with a decoy, "no-trajectory" while its gate is closed."""
+        "no-trajectory" (none has built up: H < ``lock``, its place has held fewer than ``confirm``
+        frames, or it has kept one place while the camera moved ``stuck`` frames), "ambiguous" (a rival along the drive nearly as strong: uniqueness < ``unique``); with a decoy, "no-trajectory" while its gate is closed."""
         return self._why
 
     def probability(self) -> float | None:

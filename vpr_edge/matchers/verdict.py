@@ -218,23 +218,27 @@ def view_quantile(null: np.ndarray, here: float) -> float:
 
 class RecentViews:
     """Each place's mean z-score over the stream's recent frames that saw it (``memory`` frames, an
-    exponential memory per sighting), shrunk towards 0 by a prior of ``prior`` frames. ``corrected(z,
-    places)``: the frame's z-scores (n,) of ``places`` (n,) less those means, as they stood before the frame;
-    ``add(z, places)``: the frame joins the means; ``read(z, places, learn)``: both, the frame joining only where
+    exponential memory per sighting), shrunk towards 0 by a prior of ``prior`` sightings against every sighting
+    of the place so far (a place seen by every frame is, after a few, corrected in full: shrinking by the
+    memory's weight alone would leave 1 / (memory + 1) of any z-score standing). ``corrected(z, places)``: the
+    frame's z-scores (n,) of ``places`` (n,) less those means, as they stood before the frame; ``add(z,
+    places)``: the frame joins the means; ``read(z, places, learn)``: both, the frame joining only where
     ``learn``."""
 
     def __init__(self, n_places: int, memory: float = HUB_MEMORY, prior: float = HUB_PRIOR) -> None:
         self.keep, self.prior = 1.0 - 1.0 / memory, prior
         self.mean, self.weight = np.zeros(n_places), np.zeros(n_places)
+        self.seen = np.zeros(n_places)   # sightings of each place so far (not forgotten)
 
     def corrected(self, z: np.ndarray, places: np.ndarray | slice) -> np.ndarray:
-        w = self.weight[places]
-        return np.asarray(z, np.float64) - self.mean[places] * (w / (w + self.prior))
+        n = self.seen[places]
+        return np.asarray(z, np.float64) - self.mean[places] * (n / (n + self.prior))
 
     def add(self, z: np.ndarray, places: np.ndarray | slice) -> None:
         w = self.weight[places] * self.keep + 1.0
         self.weight[places] = w
         self.mean[places] += (np.asarray(z, np.float64) - self.mean[places]) / w
+        self.seen[places] += 1.0
 
     def read(self, z: np.ndarray, places: np.ndarray | slice, learn: bool) -> np.ndarray:
         """``corrected(z, places)``, then the frame joins the means if ``learn``."""

@@ -100,6 +100,8 @@ SECTIONS = (
                                              "--against", "0")),
     Section("lost-confirm", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "confirm",
                                               "--values=1,2,3,4", "--against", "1")),
+    Section("lost-stuck", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "stuck",
+                                            "--values=0,2,4,8", "--against", "0")),
     Section("lost-still", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "still",
                                             "--values=0.3,0.4,0.5,0.6,0.7")),
     Section("lost-still-memory", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary",
