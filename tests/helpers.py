@@ -193,11 +193,11 @@ def planted_drives(order: list[int], counts: list[int], noise: float, seed: int,
 
 def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, stop_gain, stop_decay, still=0.0,
                cues=None, route=None, evidence=None, evidence_decay=None, unique=None, confirm=None, stuck=None,
-               why=None):
+               trust=None, why=None):
     """RoadMatcher written as plain loops over states, from its docstring, on one drive, every reference read
     every frame -> [(ref, score)] a frame. ``cues``: each frame's motion cue (NaN = none); ``route``: the
     references where the map's drive stood; ``evidence``, ``evidence_decay``, ``unique``, ``confirm``,
-    ``stuck``: None = the default;
+    ``stuck``, ``trust``: None = the default;
     ``why``: a list that gets each frame's reason, as ``RoadMatcher.why``."""
     from vpr_edge.matchers import MATCHERS
 
@@ -205,6 +205,7 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, s
     unique = defaults["unique"] if unique is None else unique
     confirm = defaults["confirm"] if confirm is None else confirm
     stuck = defaults["stuck"] if stuck is None else stuck
+    trust = defaults["trust"] if trust is None else trust
     evidence = defaults["evidence"] if evidence is None else evidence
     evidence_decay = defaults["evidence_decay"] if evidence_decay is None else evidence_decay
     recent = None   # the answer's standing out of its rows, averaged over moving frames
@@ -256,23 +257,25 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, s
         elif still > 0 and cue == cue and not stands:   # the cue says the camera moved
             kept += 1
         stuck_now = 0 < stuck <= kept
-        out.append((ref, float(best >= lock and held >= confirm and not stuck_now and recent >= evidence
+        view = recent >= evidence or uniqueness >= trust   # an unambiguous trajectory outweighs a weak view
+        out.append((ref, float(best >= lock and held >= confirm and not stuck_now and view
                                and uniqueness >= unique) + uniqueness))
         if why is not None:   # the first condition of the lock that fails
-            why.append("weak-view" if recent < evidence else "no-trajectory" if best < lock or held < confirm
+            why.append("weak-view" if not view else "no-trajectory" if best < lock or held < confirm
                        or stuck_now else
                        "ambiguous" if uniqueness < unique else "locked")
     return out
 
 
 def naive_road_local(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, window, probe, check, span,
-                     hold, stop_gain, stop_decay, evidence, evidence_decay, unique, confirm=1, **_):
+                     hold, stop_gain, stop_decay, evidence, evidence_decay, unique, confirm=1, trust=1.0, **_):
     """RoadMatcher's local search as plain loops, from its docstring (no motion cue): while firmly locked
     (H >= hold * lock, nothing beyond the window half as strong) the next frame reads only the references
     within ``window`` of the answer and the ``probe`` sample (which gives the frame's mean and spread), state
     outside the window held at 0; ``span`` frames in every ``check`` firmly locked ones, and every frame not
     firmly locked, read the whole route. Running means count time, not updates. ``confirm``: frames the
-    answer's place must have held (each within rival_window of the one before). -> [(ref, score, local)]."""
+    answer's place must have held (each within rival_window of the one before); ``trust``: the uniqueness at
+    which a weak view does not lose the frame. -> [(ref, score, local)]."""
     n_refs = sim.shape[1]
     n_speeds, n_pos = int(round(vmax * grid)) + 1, n_refs * grid
     w = window if window and n_refs > 4 * window else 0
@@ -315,8 +318,8 @@ def naive_road_local(sim, vmax, grid, decay, bias, turn, memory, lock, rival_win
         uniqueness = 1 - (rival + 1) / (best + 1)
         place_held = place_held + 1 if last is not None and abs(ref - last) <= rival_window else 1
         last = ref
-        out.append((ref, float(best >= lock and place_held >= confirm and recent >= evidence and uniqueness >= unique)
-                    + uniqueness, win is not None))
+        out.append((ref, float(best >= lock and place_held >= confirm and (recent >= evidence or uniqueness >= trust)
+                               and uniqueness >= unique) + uniqueness, win is not None))
         far = max([x for r, x in per_ref.items() if abs(r - ref) > w], default=0.0)
         held = bool(w) and best >= hold * lock and far < 0.5 * best
         held_for = held_for + 1 if held else 0

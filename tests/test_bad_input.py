@@ -231,6 +231,7 @@ CASES = [
     Case("loc-param-bad-hub", LOC + " --param hub=high", ("--param", "hub=high", "not a number")),
     Case("loc-param-confirm-refused", LOC + " --param confirm=0", ("--param", "confirm must be at least 1")),
     Case("loc-param-stuck-refused", LOC + " --param stuck=-1", ("--param", "stuck must be at least 0")),
+    Case("loc-param-trust-refused", LOC + " --param trust=0", ("--param", "trust must be in (0, 1]")),
     Case("loc-param-refused", LOC + " --param decay=1.5", ("--param", "decay must be in (0, 1)")),
     Case("loc-param-still-refused", LOC + " --param still=1.5", ("--param", "still must be in [0, 1]")),
     Case("loc-param-twice", LOC + " --decay 0.8 --param decay=0.7", ("--param decay", "--decay")),

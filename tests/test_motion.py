@@ -314,3 +314,25 @@ def test_road_matcher_stuck_rule_against_plain_loops() -> None:
         if stuck == 0:
             off = got.scores
     assert np.sum((got.scores < 1.0) & (off >= 1.0)) >= 3 and not np.any((got.scores >= 1.0) & (off < 1.0))
+
+
+def test_road_matcher_trust_against_plain_loops() -> None:
+    """A vehicle whose view of its place fades on about a third of its frames (its similarity there drops to
+    the noise): the matcher's answers and scores equal the plain loops' with ``trust`` on and off, and with it
+    on some of those weak views are answered (an unambiguous trajectory outweighs them)."""
+    rng = np.random.default_rng(2)
+    places = places_at_speeds([(1.0, 30)], start=1)
+    sim = planted(rng, 40, places, noise=0.3)
+    weak = np.flatnonzero(rng.random(len(places)) < 0.3)
+    sim[weak, places[weak]] -= 1.0
+    params = {"vmax": 1.5, "grid": 2, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 6.0, "lock": 3.0,
+              "rival_window": 2, "stop_gain": 0.3, "stop_decay": 0.95, "still": 0.0, "evidence_decay": 0.0}
+    scores = {}
+    for trust in (1.0, 0.3):
+        got = MATCHERS["stream"].with_params(**params | {"trust": trust, "hub": -99.0}).run(sim, k=1)
+        want = naive_road(sim, **params, trust=trust)   # the loops have no hub line
+        assert list(got.refs) == [r for r, _ in want]
+        np.testing.assert_allclose(got.scores, [c for _, c in want], atol=1e-5)
+        scores[trust] = got.scores
+    gained = (scores[0.3] >= 1.0) & (scores[1.0] < 1.0)
+    assert gained.sum() >= 3 and not np.any((scores[1.0] >= 1.0) & (scores[0.3] < 1.0))

@@ -16,7 +16,7 @@ from vpr_edge.matchers.route import RouteGraph
 
 from helpers import places_at_speeds, planted
 
-RULES = {"lock": 6.0, "evidence": 1.5, "evidence_decay": 0.0, "hub": -99.0, "unique": 0.25, "confirm": 1, "stuck": 0, "hold": 2.0}
+RULES = {"lock": 6.0, "evidence": 1.5, "evidence_decay": 0.0, "hub": -99.0, "unique": 0.25, "confirm": 1, "stuck": 0, "trust": 1.0, "hold": 2.0}
 
 
 def reading(values: np.ndarray, part: np.ndarray, standing: bool = False) -> FrameReading:
@@ -178,7 +178,7 @@ def test_the_recursion_hands_each_frame_to_its_verdict(strong: bool) -> None:
 
 
 def test_the_decoy_reads_trajectories_only() -> None:
-    m = RoadMatcher(50, **MATCHERS["stream-prob"].params | {"decoy": True, "lock": 6.0, "stuck": 0, "evidence": 1.5,
+    m = RoadMatcher(50, **MATCHERS["stream-prob"].params | {"decoy": True, "lock": 6.0, "stuck": 0, "trust": 1.0, "evidence": 1.5,
                                                            "evidence_decay": 0.5, "hub": 1.0, "unique": 0.25,
                                                            "confirm": 1, "hold": 2.0})
     assert isinstance(m._decoy.verdict, TrajectoryOnly) and m._decoy._decoy is None and m._decoy.window == 0
@@ -260,3 +260,19 @@ def test_an_answer_kept_while_the_camera_moves_is_lost_at_stuck(cued: bool) -> N
     # moving frames kept at 12 (anchor 12 from the 8th frame): 12, 11, (standing x2), 11, 12, 11, 12 -> 6
     kept = [0] * 8 + [1, 2, 2, 2, 3, 4, 5, 6] + [0, 0]
     assert whys == ["no-trajectory" if k >= stuck else "locked" for k in kept], whys
+
+
+def test_a_weak_view_does_not_overrule_an_unambiguous_trajectory() -> None:
+    """The lock verdict alone (``lock.lock_verdict``): a frame whose evidence average is below the line is lost
+    ("weak-view") unless its uniqueness reaches ``trust``; the hub line is not overruled; at trust 1 (off)
+    the evidence line alone decides, as a plain test of each case says."""
+    from vpr_edge.matchers.lock import lock_verdict
+
+    rng = np.random.default_rng(9)
+    for _ in range(500):
+        ev, uniq, hub = rng.uniform(0, 3), rng.uniform(0, 1), rng.uniform(-1, 3)
+        trust = float(rng.choice([0.3, 0.6, 1.0]))
+        got = lock_verdict(ev, 10.0, uniq, 1.5, 6.0, 0.25, hub, 1.0, 3, 3, 0, 4, trust)
+        view = (ev >= 1.5 or uniq >= trust) and hub >= 1.0
+        want = "weak-view" if not view else "ambiguous" if uniq < 0.25 else "locked"
+        assert got == want, (ev, uniq, hub, trust)

@@ -2,7 +2,9 @@
 
     score = [locked] + uniqueness,   uniqueness = 1 - (H_rival + 1) / (H_best + 1)
 
-A frame is locked when its answer stands out of what the frame sees (the evidence average E >= ``evidence``)
+A frame is locked when its answer stands out of what the frame sees (the evidence average E >= ``evidence``,
+or its trajectory is unambiguous enough to outweigh a weak view: uniqueness against the answer's own drive
+>= ``trust``)
 and of what this stream's recent frames saw there (the same average of the answer's view less its place's
 mean over the stream's recent moving frames, ``verdict.RecentViews``: >= ``hub``; a place that looks like
 every frame, imagery of somewhere else the map's place happens to resemble most, does not), its trajectory
@@ -55,14 +57,14 @@ def place_advanced(graph: RouteGraph, anchor: int | None, ref: int) -> bool:
 
 def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_line: float, lock: float,
                  unique: float, hub_evidence: float = np.inf, hub_line: float = -np.inf, held: int = 1,
-                 confirm: int = 1, kept: int = 0, stuck: int = 0) -> str:
+                 confirm: int = 1, kept: int = 0, stuck: int = 0, trust: float = np.inf) -> str:
     """The lock's rules, in order: the first that fails names why the frame is lost (``base.LOST_WHY``):
-    "weak-view" (``evidence`` below ``evidence_line``, or ``hub_evidence``, the same less the answer's place's
-    recent mean, below ``hub_line``), "no-trajectory" (``best`` below ``lock``, the place ``held`` for
+    "weak-view" (``evidence`` below ``evidence_line`` unless ``own_uniqueness`` reaches ``trust``, or
+    ``hub_evidence``, the same less the answer's place's recent mean, below ``hub_line``), "no-trajectory" (``best`` below ``lock``, the place ``held`` for
     fewer than ``confirm`` frames, or ``kept`` while the camera moved for ``stuck`` frames or more; 0: off),
     "ambiguous" (``own_uniqueness``, against the best rival along the
     answer's own drive, below ``unique``); else "locked"."""
-    if not (evidence >= evidence_line and hub_evidence >= hub_line):
+    if not ((evidence >= evidence_line or own_uniqueness >= trust) and hub_evidence >= hub_line):
         return WEAK_VIEW
     if best < lock or held < confirm or 0 < stuck <= kept:
         return NO_TRAJECTORY
@@ -71,11 +73,12 @@ def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_l
 
 class LockVerdict:
     """The lock's rules over a stream (module docstring); parameters as ``matchers.params.STREAM`` names them
-    (``lock``, ``evidence``, ``evidence_decay``, ``hub``, ``unique``, ``confirm``, ``stuck``, ``hold``). ``rival_window``:
+    (``lock``, ``evidence``, ``evidence_decay``, ``hub``, ``unique``, ``confirm``, ``stuck``, ``trust``,
+    ``hold``). ``rival_window``:
     places either side of the answer that a rival trajectory must lie beyond."""
 
     def __init__(self, graph: RouteGraph, rival_window: int, *, lock: float, evidence: float, evidence_decay: float,
-                 hub: float, unique: float, confirm: int, stuck: int, hold: float) -> None:
+                 hub: float, unique: float, confirm: int, stuck: int, trust: float, hold: float) -> None:
         if not 0.0 <= evidence_decay < 1.0:
             raise ValueError(f"evidence_decay must be in [0, 1), got {evidence_decay}")
         if not 0.0 <= unique < 1.0:
@@ -90,6 +93,9 @@ class LockVerdict:
         if int(stuck) < 0:
             raise ValueError(f"stuck must be at least 0 (0: off), got {stuck}")
         self.stuck = int(stuck)
+        if not 0.0 < trust <= 1.0:
+            raise ValueError(f"trust must be in (0, 1] (1: off), got {trust}")
+        self.trust = float(trust)
         self.reset()
 
     def reset(self) -> None:
@@ -126,5 +132,5 @@ class LockVerdict:
             self._kept += 1
         why = lock_verdict(self._evidence, f.best, 1.0 - (own + 1.0) / (f.best + 1.0), self.evidence, self.lock,
                            self.unique, np.inf if self._hub is None else self._hub, self.hub, self._held, self.confirm,
-                           self._kept, self.stuck)
+                           self._kept, self.stuck, self.trust)
         return Judgement(float(why == LOCKED) + uniqueness, f.best >= self.hold * self.lock, why)

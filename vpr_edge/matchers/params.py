@@ -52,6 +52,9 @@ STREAM: dict[str, Param] = {
                       "jump) while the camera moved for this many frames (as the motion cue says: frames of a standing "
                       "camera do not count; without a cue the rule is off): a place every frame resembles; "
                       "0 = off"),
+    "trust": Param(0.6, "a frame that fails the evidence line alone is answered when its uniqueness (against the "
+                        "answer's own drive) is at least this: an unambiguous trajectory outweighs a weak view "
+                        "(the hub line still applies); 1 = off"),
     "rival_window": Param(10, "references either side of the answer that a rival trajectory must lie beyond "
                               "(the uniqueness part of the score); on a map whose references stay alike further "
                               "along the route, as far as they do (likeness.reach, measured on the map)"),
@@ -85,7 +88,7 @@ STREAM: dict[str, Param] = {
                           "while the gate is closed every frame does"),
 }
 # the stream matcher's lock rules; ``stream-prob`` replaces them by a model of "not this place" (``verdict``)
-LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "hub", "unique", "confirm", "stuck", "hold")
+LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "hub", "unique", "confirm", "stuck", "trust", "hold")
 STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM.items() if k not in LOCK_RULES}
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),

@@ -51,8 +51,8 @@ The answer is the position of the best state. How sure it is, and why a frame is
 "not this place" (``probability.ProbabilityVerdict``); the ``stream`` matcher's is the lock's rules
 (``lock.LockVerdict``), described here. Their score does two jobs, so it has two parts:
 
-    score = [H_best >= lock and held >= confirm and not kept >= stuck and E >= evidence
-             and uniqueness >= unique] + uniqueness,
+    score = [H_best >= lock and held >= confirm and not kept >= stuck
+             and (E >= evidence or uniqueness >= trust) and uniqueness >= unique] + uniqueness,
     uniqueness = 1 - (H_rival + 1) / (H_best + 1)
 
 H_best is about the summed excess of z over ``bias`` along the last ~1/(1 - decay) frames: below ``lock``
@@ -62,7 +62,9 @@ reference) in standard deviations above the frame's similarities to the route (t
 as z uses them; the bulk of a row is the "not this place" distribution of that frame, whatever the route or
 conditions), averaged over frames (E = evidence_decay * E + (1 - evidence_decay) * e; a standing frame may
 raise E, never lower it). H remembers ~1/(1 - decay) frames, so alone it reports a vehicle that left the
-map lost only after that memory fades; E says so within a frame or two.
+map lost only after that memory fades; E says so within a frame or two. A weak view does not overrule an
+unambiguous trajectory, though: a frame whose uniqueness (below) reaches ``trust`` is answered whatever its E
+(a front end whose single frames are weak gives many weak views of places its trajectories hold well).
 H_rival is the best trajectory ending more than ``rival_window`` references away (or more than the map's
 ``reach``, how far along it references stay alike, ``likeness.reach``, where that is further: on a densely
 sampled map a trajectory a few places on shares the answer's evidence and is no rival): like SeqSLAM's
@@ -127,7 +129,8 @@ class RoadMatcher:
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
                  hold: float, seek: int, peaks: int, seek_frames: int, stop_gain: float, stop_decay: float, still: float,
                  still_memory: int,
-                 evidence: float, evidence_decay: float, hub: float, unique: float, confirm: int, stuck: int, decoy: bool = False,
+                 evidence: float, evidence_decay: float, hub: float, unique: float, confirm: int, stuck: int, trust: float,
+                 decoy: bool = False,
                  route: np.ndarray | None = None, graph: RouteGraph | None = None, reach: int = 0,
                  verdict: VerdictFactory | None = None) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
@@ -172,7 +175,7 @@ class RoadMatcher:
             raise ValueError(f"route graph of {self.graph.n_refs} references for {n_refs}")
         self.verdict = verdict(self.graph, self.rival_window) if verdict is not None else LockVerdict(
             self.graph, self.rival_window, lock=lock, evidence=evidence, evidence_decay=evidence_decay, hub=hub,
-            unique=unique, confirm=confirm, stuck=stuck, hold=hold)
+            unique=unique, confirm=confirm, stuck=stuck, trust=trust, hold=hold)
         # trajectories across drives: state entries whose predecessor in map order is another drive's (cut),
         # and what the junctions carry from their sources' ends into their targets (fed)
         self._cut = self.graph.cuts(grid, self.n_speeds)

@@ -102,6 +102,8 @@ SECTIONS = (
                                               "--values=1,2,3,4", "--against", "1")),
     Section("lost-stuck", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "stuck",
                                             "--values=0,2,4,8", "--against", "0")),
+    Section("lost-trust", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "trust",
+                                            "--values=0.4,0.5,0.6,0.7,0.8,1", "--against", "1")),
     Section("lost-still", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "still",
                                             "--values=0.3,0.4,0.5,0.6,0.7")),
     Section("lost-still-memory", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary",
