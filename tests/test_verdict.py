@@ -233,7 +233,8 @@ def test_foreign_imagery_with_a_look_alike_is_lost(mode: str) -> None:
     assert run(sim, places, mode=mode).lost_unmapped >= 0.99
 
 
-@pytest.mark.parametrize("rule, width, lift", [({"hub": 1.0, "stuck": 0}, 5, 3.0), ({"hub": -99.0, "stuck": 4}, 2, 5.0)])
+@pytest.mark.parametrize("rule, width, lift", [({"hub": 1.0, "stuck": 0}, 5, 3.0),
+                                               ({"hub": -99.0, "stuck": 4}, 2, 5.0)])
 def test_the_hub_line_and_the_stuck_rule_lose_more_of_a_look_alike(rule: dict, width: int, lift: float) -> None:
     """Imagery of somewhere else that resembles a stretch of ``width`` references by ``lift`` (a camera that
     moves, by its motion cue): ``stream``'s trajectories can creep along the stretch or sit on it; the hub line

@@ -178,9 +178,9 @@ def test_the_recursion_hands_each_frame_to_its_verdict(strong: bool) -> None:
 
 
 def test_the_decoy_reads_trajectories_only() -> None:
-    m = RoadMatcher(50, **MATCHERS["stream-prob"].params | {"decoy": True, "lock": 6.0, "stuck": 0, "trust": 1.0, "evidence": 1.5,
+    m = RoadMatcher(50, **MATCHERS["stream-prob"].params | {"decoy": True, "lock": 6.0, "evidence": 1.5,
                                                            "evidence_decay": 0.5, "hub": 1.0, "unique": 0.25,
-                                                           "confirm": 1, "hold": 2.0})
+                                                           "confirm": 1, "stuck": 0, "trust": 1.0, "hold": 2.0})
     assert isinstance(m._decoy.verdict, TrajectoryOnly) and m._decoy._decoy is None and m._decoy.window == 0
 
 

@@ -11,9 +11,10 @@ every frame, imagery of somewhere else the map's place happens to resemble most,
 has built up (H_best >= ``lock``) and held its place for ``confirm`` frames (``place_jumped``: a best place
 that jumps, back onto the map after a detour or onto a look-alike ahead, is answered from its ``confirm``-th
 frame there on), has moved with a moving camera (``place_advanced``: a place the answer keeps while the camera
-moves on for ``stuck`` frames, as the motion cue says, is a place every frame resembles, not where the vehicle is) and no rival along the answer's own drive is nearly as strong (uniqueness against it >=
-``unique``); the first rule that fails names why it is lost (``lock_verdict``). So locked frames rank above
-lost ones, each by uniqueness. The answer is strong enough for a local search at H_best >= ``hold`` * ``lock``.
+moves on for ``stuck`` frames, as the motion cue says, is a place every frame resembles, not where the vehicle
+is) and no rival along the answer's own drive is nearly as strong (uniqueness against it >= ``unique``); the
+first rule that fails names why it is lost (``lock_verdict``). So locked frames rank above lost ones, each by
+uniqueness. The answer is strong enough for a local search at H_best >= ``hold`` * ``lock``.
 """
 from __future__ import annotations
 
@@ -60,10 +61,10 @@ def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_l
                  confirm: int = 1, kept: int = 0, stuck: int = 0, trust: float = np.inf) -> str:
     """The lock's rules, in order: the first that fails names why the frame is lost (``base.LOST_WHY``):
     "weak-view" (``evidence`` below ``evidence_line`` unless ``own_uniqueness`` reaches ``trust``, or
-    ``hub_evidence``, the same less the answer's place's recent mean, below ``hub_line``), "no-trajectory" (``best`` below ``lock``, the place ``held`` for
-    fewer than ``confirm`` frames, or ``kept`` while the camera moved for ``stuck`` frames or more; 0: off),
-    "ambiguous" (``own_uniqueness``, against the best rival along the
-    answer's own drive, below ``unique``); else "locked"."""
+    ``hub_evidence``, the same less the answer's place's recent mean, below ``hub_line``), "no-trajectory"
+    (``best`` below ``lock``, the place ``held`` for fewer than ``confirm`` frames, or ``kept`` while the camera
+    moved for ``stuck`` frames or more; 0: off), "ambiguous" (``own_uniqueness``, against the best rival along
+    the answer's own drive, below ``unique``); else "locked"."""
     if not ((evidence >= evidence_line or own_uniqueness >= trust) and hub_evidence >= hub_line):
         return WEAK_VIEW
     if best < lock or held < confirm or 0 < stuck <= kept:

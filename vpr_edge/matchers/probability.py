@@ -33,7 +33,8 @@ from vpr_edge.matchers.verdict import (RecentViews, TailScale, ViewFilter, block
                                        trajectory_probability, view_quantile)
 
 # the lock's rules of the ``stream`` matcher, which this one's verdict replaces (``params.LOCK_RULES``)
-_UNUSED = {"lock": 0.0, "evidence": 0.0, "evidence_decay": 0.0, "hub": 0.0, "unique": 0.0, "confirm": 1, "stuck": 0, "trust": 1.0, "hold": 1.0}
+_UNUSED = {"lock": 0.0, "evidence": 0.0, "evidence_decay": 0.0, "hub": 0.0, "unique": 0.0, "confirm": 1, "stuck": 0,
+           "trust": 1.0, "hold": 1.0}
 
 
 def probability_matcher(n_refs: int, **params) -> RoadMatcher:

@@ -76,10 +76,11 @@ several does not count there, as that drive may be the same road driven again. `
 the best trajectory's place has held (each within ``rival_window`` of the frame before's, along its drive):
 a trajectory that ran ahead on a lock's remembered score onto a look-alike off the map waits ``confirm``
 frames, by when that score has decayed (``lock.place_jumped``). ``kept`` counts the frames the camera moved
-(the motion cue says so; without one the rule is off: a stop's best trajectory creeps on by half-references) while the answer's place
-did not move on by a reference: at ``stuck`` the frame is lost, as a place that every frame of a moving
-camera resembles (imagery of somewhere else) is no trajectory of the map (``lock.place_advanced``). So locked frames rank above lost ones, each by
-uniqueness, and ``--min-confidence`` between 1 and 2 asks for a more unambiguous answer still.
+(the motion cue says so; without one the rule is off: a stop's best trajectory creeps on by half-references)
+while the answer's place did not move on by a reference: at ``stuck`` the frame is lost, as a place that every
+frame of a moving camera resembles (imagery of somewhere else) is no trajectory of the map
+(``lock.place_advanced``). So locked frames rank above lost ones, each by uniqueness, and ``--min-confidence``
+between 1 and 2 asks for a more unambiguous answer still.
 
 The max over speeds with the speed penalty is a distance transform (two passes over the speeds), so a frame
 costs O(grid * speeds * R) vectorised work in preallocated buffers, and the state is (grid * speeds + 1) * R
@@ -129,8 +130,8 @@ class RoadMatcher:
                  memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
                  hold: float, seek: int, peaks: int, seek_frames: int, stop_gain: float, stop_decay: float, still: float,
                  still_memory: int,
-                 evidence: float, evidence_decay: float, hub: float, unique: float, confirm: int, stuck: int, trust: float,
-                 decoy: bool = False,
+                 evidence: float, evidence_decay: float, hub: float, unique: float, confirm: int, stuck: int,
+                 trust: float, decoy: bool = False,
                  route: np.ndarray | None = None, graph: RouteGraph | None = None, reach: int = 0,
                  verdict: VerdictFactory | None = None) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
@@ -533,9 +534,11 @@ class RoadMatcher:
 
     def why(self) -> str:
         """Why the last frame is not answered, as its verdict says (``base.LOST_WHY``; "locked" when it is);
-        the lock's rules: "weak-view" (its answer does not stand out of what the frame sees: E < ``evidence``),
-        "no-trajectory" (none has built up: H < ``lock``, its place has held fewer than ``confirm``
-        frames, or it has kept one place while the camera moved ``stuck`` frames), "ambiguous" (a rival along the drive nearly as strong: uniqueness < ``unique``); with a decoy, "no-trajectory" while its gate is closed."""
+        the lock's rules: "weak-view" (its answer does not stand out of what the frame sees: E < ``evidence``
+        and uniqueness < ``trust``), "no-trajectory" (none has built up: H < ``lock``, its place has held fewer
+        than ``confirm`` frames, or it has kept one place while the camera moved ``stuck`` frames), "ambiguous"
+        (a rival along the drive nearly as strong: uniqueness < ``unique``); with a decoy, "no-trajectory" while
+        its gate is closed."""
         return self._why
 
     def probability(self) -> float | None:
