@@ -444,10 +444,14 @@ class RoadMatcher:
         nxt = int(round(self._position)) + 1
         return not (nxt < self.n_refs and self.route[nxt])
 
+    def _cued(self, still: float | None) -> bool:
+        """Whether a frame with motion cue ``still`` is read by the cue (one is given and ``still`` is not 0)."""
+        return still is not None and bool(self.still)
+
     def _stop_rule(self, still: float | None) -> tuple[float, float]:
         """(share of a positive z counted at speed 0, speed 0's decay) for a frame that moves, with motion cue
         ``still`` (see the module docstring)."""
-        if still is None or not self.still:
+        if not self._cued(still):
             return self.stop_gain, self.stop_decay
         return 0.0, self.decay
 
@@ -519,9 +523,8 @@ class RoadMatcher:
         values = per_ref[0] if len(per_ref) == 1 else np.concatenate(per_ref)
         self._last = (values, where)   # for ``around``'s hypotheses held
         # without a motion cue, a best trajectory at speed 0 is what says the vehicle stands; with one, the cue
-        cued = still is not None and bool(self.still)
         judged = self.verdict.judge(FrameReading(ref, best, values, where, part, probe, mean, std, standing,
-                                                 stopped and still is None, cued))
+                                                 stopped and still is None, self._cued(still)))
         score, self._why, self._probability = judged.score, judged.why, judged.probability
         # a firm lock: a strong answer, and no trajectory beyond the window half as strong (seen in global frames)
         held = bool(self.window) and judged.strong and \
