@@ -253,6 +253,8 @@ CASES = [
     Case("ev-min-confidence-inf", EV + " --min-confidence inf", ("--min-confidence inf", "finite")),
     Case("loc-target-precision-one", LOC + " --mode stream-prob --target-precision 1", ("--target-precision 1",
                                                                                        "between 0 and 1")),
+    Case("loc-target-precision-on-stream", LOC + " --target-precision 0.99", ("--target-precision 0.99",
+                                                                             "not the probability", "--min-confidence")),
     Case("ev-target-precision-negative", EV + " --target-precision -0.5", ("--target-precision -0.5", "between 0 and 1")),
     Case("ev-answers-is-the-gt", EV + " --answers {w}/gt.csv", ("gt.csv", "--answers", "an input")),
     Case("loc-threads-absurd", LOC + " --threads 100000", ("--threads 100000", "per core")),

@@ -86,8 +86,9 @@ class Localizer:
 
     ``mode`` names a registered matcher (``vpr_edge.matchers.MATCHERS``), ``params`` overrides its
     parameters, ``min_confidence`` its lost threshold (default: the matcher's own); ``target_precision`` the
-    line of a matcher whose score is the probability that its answer is right (``stream-prob``). ``precision``: the model's form (``features.choice``: auto runs its int8 form where the CPU has int8
-    dot products; fp32; int8). ``threads`` > 0 sets
+    line of a matcher whose score is the probability that its answer is right (``stream-prob``; for another
+    mode, VprError: it sets no line there). ``precision``: the model's form (``features.choice``: auto runs
+    its int8 form where the CPU has int8 dot products; fp32; int8). ``threads`` > 0 sets
     onnxruntime's threads and, process-wide, NumPy's BLAS pool to that count (0: one per core for both;
     None: onnxruntime's default, BLAS untouched). ``coarse``: a local-search matcher's whole-route frames use
     ``coarse.CoarseSearch`` (signs, exact values for the best candidates); None = on maps of at least
@@ -105,7 +106,8 @@ class Localizer:
                  calibration: str | os.PathLike[str] | None = None, precision: str = DEFAULT_PRECISION,
                  target_precision: float | None = None) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
-        self.threshold = self.matcher.lost_line(min_confidence, target_precision)   # checked before the map opens
+        # checked before the map opens
+        self.threshold = self.matcher.lost_line(min_confidence, target_precision, live=True)
         ort_threads = 0 if threads is None else use_threads(threads)
         self.query = MapQuery(map_path, model, ort_threads, precision)   # the map and its front end, once
         self.map.check_scores(self.matcher.scores, map_path)
