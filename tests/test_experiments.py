@@ -500,3 +500,35 @@ def test_front_end_cache_then_lines(every_stream: Path, tmp_path: Path) -> None:
     assert {(r[2].strip(), r[3].strip()) for r in per_stream} == {(m, k) for m in ("stream", "stream-prob")
                                                                    for k in (*KINDS, "foreign")}
     assert any(r[2].strip() == "`stream`" for r in rows)        # the ranges' table
+
+
+def test_front_end_line_targets_count_as_a_plain_loop() -> None:
+    """front-end-lines' count of the streams that meet each target of the line, against the targets counted one
+    stream at a time: eligible where the best line reaches at least half the best R@1, a NaN gap not counted, a
+    stream without one-view frames judged on every frame."""
+    from vpr_edge_bench.experiments.front_end_lines import StreamFigures, targets
+
+    nan = float("nan")
+    rng = np.random.default_rng(3)
+    streams = [StreamFigures(*rng.uniform(0, 1, 6).round(2), rng.uniform(0.9, 1) if i % 3 == 0 else nan)
+               for i in range(40)]
+    streams[5] = StreamFigures(0.8, nan, nan, 0.0, 0.1, nan, nan)   # a silent stream: no answers, no gap
+    streams[6] = StreamFigures(0.8, 0.97, nan, 0.5, 0.6, 0.01, nan)  # eligible, no one-view frames, below 0.98
+    got = targets(streams, "3/4", 0.98)
+    gap_met = gap_all = elig = met = met_d = loud = det = det_met = 0
+    for f in streams:
+        if f.line_gap == f.line_gap:
+            gap_all += 1
+            gap_met += f.line_gap <= 0.05
+        if f.best_line > 0 and f.best_line >= 0.5 * f.best_r1:
+            elig += 1
+            met += f.answered_right >= 0.98
+            d = f.answered_right if f.distinct_answered_right != f.distinct_answered_right else f.distinct_answered_right
+            met_d += d >= 0.98
+        loud += f.mapped_right >= 0.5 * f.best_r1
+        if f.unmapped_lost == f.unmapped_lost:
+            det += 1
+            det_met += f.unmapped_lost >= 0.95
+    assert got == {"line gap <= 0.05": f"{gap_met}/{gap_all}", "precision >= target where eligible": f"{met}/{elig}",
+                   "... over distinct frames": f"{met_d}/{elig}", "not silent": f"{loud}/40",
+                   "detour unmapped lost >= 0.95": f"{det_met}/{det}", "foreign lost >= 0.99": "3/4"}

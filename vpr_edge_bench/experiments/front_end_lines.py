@@ -14,12 +14,19 @@ and recall the line delivers (answered right, mapped right), the best line's rec
 delivered recall), and on the detour the unmapped frames lost and the first lost after leaving; foreign
 imagery (the other dataset's aligned frames against this map): the share of frames lost. Tolerance 2 (the
 derived streams' truth names one place). Then the same as ranges over the derived streams, one row per
-dataset, front end and mode (docs/results.md's table).
+dataset, front end and mode (docs/results.md's table), and per dataset and mode the streams that meet each
+target of the line (``targets``): a line gap of at most ``GAP``; where the front end allows the target
+(*eligible*: the best line reaches it with at least half of the best answers' R@1), a precision of answers
+at least the target, over every frame and over the frames whose truth is not where the map shows one view
+(a stop of the mapping drive: its references alike, the truth's one of them by convention); not silent (mapped
+right at least half the best answers' R@1); the detour's unmapped frames and foreign imagery lost for at
+least ``UNMAPPED_LOST`` and ``FOREIGN_LOST``.
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
+from dataclasses import dataclass
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -31,6 +38,43 @@ from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.threads import use_threads
 from vpr_edge_bench.runner import parser, run_checked
+
+
+GAP = 0.05              # the largest line gap a stream meets the target with
+UNMAPPED_LOST = 0.95    # the detour's unmapped frames lost
+FOREIGN_LOST = 0.99     # foreign imagery lost
+
+
+@dataclass(frozen=True)
+class StreamFigures:
+    """One mode's figures on one derived stream (``ModeReport``'s, NaN where they do not apply)."""
+
+    best_r1: float
+    answered_right: float
+    distinct_answered_right: float
+    mapped_right: float
+    best_line: float
+    line_gap: float
+    unmapped_lost: float
+
+
+def targets(streams: Sequence[StreamFigures], foreign: float | None, target: float) -> dict[str, str]:
+    """Per target of the line, how many of one dataset's ``streams`` (one mode, every front end) meet it, as
+    "met/of": line gap (of the streams where it is defined), target precision where eligible (over every frame;
+    over the distinct frames, where a stream has one-view frames), not silent, detour's unmapped frames lost;
+    ``foreign``: None, or (met, of) of the front ends' foreign imagery, passed in as "met/of" by the caller."""
+    gaps = [f.line_gap for f in streams if not np.isnan(f.line_gap)]
+    eligible = [f for f in streams if f.best_line > 0 and f.best_line >= 0.5 * f.best_r1]
+    distinct = [f.answered_right if np.isnan(f.distinct_answered_right) else f.distinct_answered_right
+                for f in eligible]
+    detours = [f.unmapped_lost for f in streams if not np.isnan(f.unmapped_lost)]
+    return {"line gap <= %.2f" % GAP: f"{sum(g <= GAP for g in gaps)}/{len(gaps)}",
+            "precision >= target where eligible": f"{sum(f.answered_right >= target for f in eligible)}/{len(eligible)}",
+            "... over distinct frames": f"{sum(d >= target for d in distinct)}/{len(distinct)}",
+            "not silent": f"{sum(f.mapped_right >= 0.5 * f.best_r1 for f in streams)}/{len(streams)}",
+            "detour unmapped lost >= %.2f" % UNMAPPED_LOST:
+                f"{sum(d >= UNMAPPED_LOST for d in detours)}/{len(detours)}"} | (
+        {} if foreign is None else {"foreign lost >= %.2f" % FOREIGN_LOST: str(foreign)})
 
 
 def load(path: Path) -> dict[str, np.ndarray]:
@@ -81,6 +125,8 @@ def _run(a: argparse.Namespace) -> int:
     use_threads(2)
     modes = a.modes.split(",")
     seen: dict[tuple[str, str, str], list[tuple]] = {}   # (dataset, front, mode) -> per-stream figures
+    figures: dict[tuple[str, str], list[StreamFigures]] = {}   # (dataset, mode) -> every front end's streams
+    foreign: dict[tuple[str, str], list[float]] = {}          # (dataset, mode) -> each front end's foreign lost
     print(f"tolerance {a.tolerance}, target precision {a.target_precision}")
     row = (lambda text: None) if a.ranges else (lambda text: print(text, flush=True))   # the per-stream rows
     row("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
@@ -103,6 +149,7 @@ def _run(a: argparse.Namespace) -> int:
                         row(f"| {ds.name} | {front} | {mode} | foreign | - | - | - | - | - | - | "
                             f"{r.lost_unmapped:.3f} |")
                         seen.setdefault((ds.name, front, mode), []).append(("foreign", r.lost_unmapped))
+                        foreign.setdefault((ds.name, mode), []).append(r.lost_unmapped)
                         continue
                     first = f" ({r.exit_frames[0]:.0f})" if r.exit_frames else ""
                     unm = "-" if np.isnan(r.lost_unmapped) else f"{r.lost_unmapped:.3f}{first}"
@@ -112,8 +159,28 @@ def _run(a: argparse.Namespace) -> int:
                     seen.setdefault((ds.name, front, mode), []).append(
                         (f.stem, single, r.recall[1], r.answered_right, r.mapped_right, r.best_line_recall,
                          r.line_gap, unm if f.stem == "detour" else None))
+                    figures.setdefault((ds.name, mode), []).append(StreamFigures(
+                        r.recall[1], r.answered_right, r.distinct_answered_right, r.mapped_right,
+                        r.best_line_recall, r.line_gap, r.lost_unmapped if f.stem == "detour" else np.nan))
     print_ranges(seen)
+    print_targets(figures, foreign, a.target_precision)
     return 0
+
+
+def print_targets(figures: dict[tuple[str, str], list[StreamFigures]], foreign: dict[tuple[str, str], list[float]],
+                  target: float) -> None:
+    """Per dataset and mode, the streams of every front end that meet each target of the line (``targets``)."""
+    rows = {key: targets(streams, None if key not in foreign else
+                         f"{sum(x >= FOREIGN_LOST for x in foreign[key])}/{len(foreign[key])}", target)
+            for key, streams in figures.items()}
+    if not rows:
+        return
+    names = list(next(iter(rows.values())))
+    print("\nstreams (every front end) that meet each target, tolerance as above, target precision", target)
+    print("\n| dataset | mode | " + " | ".join(names) + " |")
+    print("|---|---|" + "---|" * len(names))
+    for (ds, mode), row in rows.items():
+        print(f"| {ds} | `{mode}` | " + " | ".join(row.get(n, "-") for n in names) + " |")
 
 
 def print_ranges(seen: dict[tuple[str, str, str], list[tuple]]) -> None:
