@@ -176,10 +176,10 @@ def test_reversed_stands_against_a_loop() -> None:
     assert rev.tolist() == want
 
 
-@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("mode", [*MODES, "stream"])
 def test_the_same_probability_for_a_narrow_and_a_wide_band_of_cosines(mode: str) -> None:
     """A front end whose cosines all lie in 0.9-1.0 and one whose cosines spread over 0-1: the same answers,
-    the same probabilities."""
+    the same probabilities (``stream``: the same lock and uniqueness)."""
     rng = np.random.default_rng(4)
     places = np.r_[np.arange(10, 90), -np.ones(20, int), np.arange(100, 150)]
     sim = planted(rng, 160, places, 3.0)
@@ -199,7 +199,7 @@ def test_a_strong_front_end_is_answered_at_the_target_and_leaves_the_map_at_once
     assert r.lost_unmapped >= 0.95 and r.exit_frames[0] <= 3
 
 
-@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("mode", [*MODES, "stream"])
 def test_a_front_end_right_one_frame_in_four_is_not_silent(mode: str) -> None:
     """Each frame alone finds its place about one time in four: the sequence does, and the line says so."""
     rng = np.random.default_rng(6)
@@ -212,7 +212,7 @@ def test_a_front_end_right_one_frame_in_four_is_not_silent(mode: str) -> None:
     assert r.mapped_right >= 0.5 and r.answered_right >= 0.95
 
 
-@pytest.mark.parametrize("mode", MODES)
+@pytest.mark.parametrize("mode", [*MODES, "stream"])
 def test_foreign_imagery_is_lost(mode: str) -> None:
     """Frames of a place the map does not hold at all: similarities with no structure, nearly all lost."""
     rng = np.random.default_rng(7)
