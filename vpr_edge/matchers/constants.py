@@ -13,6 +13,9 @@ SAMPLE = 2048        # references the estimate reads, from the route's start
 MAX_LAG = 64         # the longest reach measured
 PAIRS = 2048         # pairs per lag (and of unrelated references) at most
 
+# --- the lock's rules (``lock``) ---------------------------------------------------------------------------
+OFF = -99.0          # the value of ``evidence`` or ``hub`` that turns that line off (their help says "-99 = off")
+
 # --- the road matcher's searches (``road``) -----------------------------------------------------------------
 LOCAL_ROUTE = 4      # a local search runs on routes of more than this many windows (shorter: the whole route)
 FIRM_RIVAL = 0.5     # a lock is firm while no trajectory beyond the window has this share of its score

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from vpr_edge.matchers.base import AMBIGUOUS, LOCKED, NO_TRAJECTORY, WEAK_VIEW
+from vpr_edge.matchers.constants import OFF
 from vpr_edge.matchers.reading import FrameReading, Judgement, answer_view
 from vpr_edge.matchers.route import RouteGraph, inside, max_outside, merge
 from vpr_edge.matchers.verdict import RecentViews
@@ -102,7 +103,7 @@ class LockVerdict:
     def reset(self) -> None:
         self._evidence: float | None = None   # the answer's recent standing out of its rows
         self._hub: float | None = None        # the same, less its place's mean over the stream's recent frames
-        self._recent = RecentViews(self.graph.n_refs) if self.hub > -99 else None   # this stream's views per place
+        self._recent = RecentViews(self.graph.n_refs) if self.hub > OFF else None   # this stream's views per place
         self._prev: int | None = None   # the frame before's answer
         self._held = 0                    # frames the answer's place has held, this one included
         self._anchor: int | None = None   # where the answer's place last moved on to

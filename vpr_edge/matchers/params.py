@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from vpr_edge.errors import Message
-from vpr_edge.matchers.constants import MEMORY
+from vpr_edge.matchers.constants import MEMORY, OFF
 
 
 @dataclass(frozen=True)
@@ -35,12 +35,12 @@ STREAM: dict[str, Param] = {
     "evidence": Param(1.5, "the answer is reported lost unless its similarity stands at least this many "
                            "standard deviations above its frame's similarities to the route (best within 1 "
                            "reference, averaged over frames with evidence_decay; a standing frame may raise the "
-                           "average, not lower it); -99 = off"),
+                           "average, not lower it); %g = off" % OFF),
     "evidence_decay": Param(0.5, "weight of the past in that average (0: this frame alone)"),
     "hub": Param(1.0, "the answer is reported lost unless that similarity, less its place's mean over this "
                       "stream's recent moving frames (a place that looks like every frame: imagery of somewhere "
                       "else), stands at least this many standard deviations above them too (averaged the same "
-                      "way); -99 = off"),
+                      "way); %g = off" % OFF),
     "unique": Param(0.25, "the answer is reported lost unless its uniqueness (1 - (H_rival + 1) / (H_best + 1): "
                          "how far the best trajectory leads the best one beyond rival_window) is at least this; "
                          "0 = off"),
