@@ -514,7 +514,7 @@ def test_front_end_line_targets_count_as_a_plain_loop() -> None:
                for i in range(40)]
     streams[5] = StreamFigures(0.8, nan, nan, 0.0, 0.1, nan, nan)   # a silent stream: no answers, no gap
     streams[6] = StreamFigures(0.8, 0.97, nan, 0.5, 0.6, 0.01, nan)  # eligible, no one-view frames, below 0.98
-    got = targets(streams, "3/4", 0.98)
+    got = targets(streams, [1.0, 0.99, 0.5, 0.995], 0.98)
     gap_met = gap_all = elig = met = met_d = loud = det = det_met = 0
     for f in streams:
         if f.line_gap == f.line_gap:
@@ -523,7 +523,8 @@ def test_front_end_line_targets_count_as_a_plain_loop() -> None:
         if f.best_line > 0 and f.best_line >= 0.5 * f.best_r1:
             elig += 1
             met += f.answered_right >= 0.98
-            d = f.answered_right if f.distinct_answered_right != f.distinct_answered_right else f.distinct_answered_right
+            nan_d = f.distinct_answered_right != f.distinct_answered_right
+            d = f.answered_right if nan_d else f.distinct_answered_right
             met_d += d >= 0.98
         loud += f.mapped_right >= 0.5 * f.best_r1
         if f.unmapped_lost == f.unmapped_lost:

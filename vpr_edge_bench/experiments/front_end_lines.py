@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-from dataclasses import dataclass
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -45,7 +44,7 @@ UNMAPPED_LOST = 0.95    # the detour's unmapped frames lost
 FOREIGN_LOST = 0.99     # foreign imagery lost
 
 
-@dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True)
 class StreamFigures:
     """One mode's figures on one derived stream (``ModeReport``'s, NaN where they do not apply)."""
 
@@ -58,23 +57,27 @@ class StreamFigures:
     unmapped_lost: float
 
 
-def targets(streams: Sequence[StreamFigures], foreign: float | None, target: float) -> dict[str, str]:
+def targets(streams: Sequence[StreamFigures], foreign: Sequence[float] | None, target: float) -> dict[str, str]:
     """Per target of the line, how many of one dataset's ``streams`` (one mode, every front end) meet it, as
     "met/of": line gap (of the streams where it is defined), target precision where eligible (over every frame;
-    over the distinct frames, where a stream has one-view frames), not silent, detour's unmapped frames lost;
-    ``foreign``: None, or (met, of) of the front ends' foreign imagery, passed in as "met/of" by the caller."""
+    over the distinct frames, where a stream has one-view frames), not silent, the detour's unmapped frames lost,
+    and with ``foreign`` (each front end's share of foreign imagery lost; None: not measured) foreign imagery."""
+    def count(met: Sequence[bool]) -> str:
+        return f"{sum(met)}/{len(met)}"
+
     gaps = [f.line_gap for f in streams if not np.isnan(f.line_gap)]
     eligible = [f for f in streams if f.best_line > 0 and f.best_line >= 0.5 * f.best_r1]
     distinct = [f.answered_right if np.isnan(f.distinct_answered_right) else f.distinct_answered_right
                 for f in eligible]
     detours = [f.unmapped_lost for f in streams if not np.isnan(f.unmapped_lost)]
-    return {"line gap <= %.2f" % GAP: f"{sum(g <= GAP for g in gaps)}/{len(gaps)}",
-            "precision >= target where eligible": f"{sum(f.answered_right >= target for f in eligible)}/{len(eligible)}",
-            "... over distinct frames": f"{sum(d >= target for d in distinct)}/{len(distinct)}",
-            "not silent": f"{sum(f.mapped_right >= 0.5 * f.best_r1 for f in streams)}/{len(streams)}",
-            "detour unmapped lost >= %.2f" % UNMAPPED_LOST:
-                f"{sum(d >= UNMAPPED_LOST for d in detours)}/{len(detours)}"} | (
-        {} if foreign is None else {"foreign lost >= %.2f" % FOREIGN_LOST: str(foreign)})
+    out = {"line gap <= %.2f" % GAP: count([g <= GAP for g in gaps]),
+           "precision >= target where eligible": count([f.answered_right >= target for f in eligible]),
+           "... over distinct frames": count([d >= target for d in distinct]),
+           "not silent": count([f.mapped_right >= 0.5 * f.best_r1 for f in streams]),
+           "detour unmapped lost >= %.2f" % UNMAPPED_LOST: count([d >= UNMAPPED_LOST for d in detours])}
+    if foreign is not None:
+        out["foreign lost >= %.2f" % FOREIGN_LOST] = count([x >= FOREIGN_LOST for x in foreign])
+    return out
 
 
 def load(path: Path) -> dict[str, np.ndarray]:
@@ -170,9 +173,7 @@ def _run(a: argparse.Namespace) -> int:
 def print_targets(figures: dict[tuple[str, str], list[StreamFigures]], foreign: dict[tuple[str, str], list[float]],
                   target: float) -> None:
     """Per dataset and mode, the streams of every front end that meet each target of the line (``targets``)."""
-    rows = {key: targets(streams, None if key not in foreign else
-                         f"{sum(x >= FOREIGN_LOST for x in foreign[key])}/{len(foreign[key])}", target)
-            for key, streams in figures.items()}
+    rows = {key: targets(streams, foreign.get(key), target) for key, streams in figures.items()}
     if not rows:
         return
     names = list(next(iter(rows.values())))
