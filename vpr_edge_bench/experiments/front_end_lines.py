@@ -46,7 +46,10 @@ FOREIGN_LOST = 0.99     # foreign imagery lost
 
 @dataclasses.dataclass(frozen=True)
 class StreamFigures:
-    """One mode's figures on one derived stream (``ModeReport``'s, NaN where they do not apply)."""
+    """One mode's figures on one stream (``ModeReport``'s, NaN where they do not apply: foreign imagery has
+    only ``unmapped_lost``, and only the detour and foreign imagery have that); ``single``: the front end
+    alone's R@1, ``first_exit``: frames until the first lost one after leaving the map (NaN: none lost there;
+    None: the mode has no lost state or the stream no unmapped run)."""
 
     best_r1: float
     answered_right: float
@@ -55,6 +58,9 @@ class StreamFigures:
     best_line: float
     line_gap: float
     unmapped_lost: float
+    stream: str = ""
+    single: float = float("nan")
+    first_exit: float | None = None
 
 
 def targets(streams: Sequence[StreamFigures], foreign: Sequence[float] | None, target: float) -> dict[str, str]:
@@ -127,9 +133,7 @@ def _run(a: argparse.Namespace) -> int:
         raise VprError(f"--modes: {e}") from None
     use_threads(2)
     modes = a.modes.split(",")
-    seen: dict[tuple[str, str, str], list[tuple]] = {}   # (dataset, front, mode) -> per-stream figures
-    figures: dict[tuple[str, str], list[StreamFigures]] = {}   # (dataset, mode) -> every front end's streams
-    foreign: dict[tuple[str, str], list[float]] = {}          # (dataset, mode) -> each front end's foreign lost
+    seen: dict[tuple[str, str, str], list[StreamFigures]] = {}   # (dataset, front, mode) -> each stream's
     print(f"tolerance {a.tolerance}, target precision {a.target_precision}")
     row = (lambda text: None) if a.ranges else (lambda text: print(text, flush=True))   # the per-stream rows
     row("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
@@ -147,33 +151,41 @@ def _run(a: argparse.Namespace) -> int:
                     if "sim" not in case:   # the map, the noise drawn
                         continue
                     r = score(mode, case, a.tolerance, a.target_precision)
-                    single = float(case.get("single_r1_tol", np.nan))
+                    nan = float("nan")
                     if f.stem == "foreign":
+                        fig = StreamFigures(nan, nan, nan, nan, nan, nan, r.lost_unmapped, f.stem)
                         row(f"| {ds.name} | {front} | {mode} | foreign | - | - | - | - | - | - | "
                             f"{r.lost_unmapped:.3f} |")
-                        seen.setdefault((ds.name, front, mode), []).append(("foreign", r.lost_unmapped))
-                        foreign.setdefault((ds.name, mode), []).append(r.lost_unmapped)
-                        continue
-                    first = f" ({r.exit_frames[0]:.0f})" if r.exit_frames else ""
-                    unm = "-" if np.isnan(r.lost_unmapped) else f"{r.lost_unmapped:.3f}{first}"
-                    row(f"| {ds.name} | {front} | {mode} | {f.stem} | {single:.3f} | {r.recall[1]:.3f} | "
-                        f"{r.answered_right:.3f} | {r.mapped_right:.3f} | {r.best_line_recall:.3f} | "
-                        f"{r.line_gap:.3f} | {unm} |")
-                    seen.setdefault((ds.name, front, mode), []).append(
-                        (f.stem, single, r.recall[1], r.answered_right, r.mapped_right, r.best_line_recall,
-                         r.line_gap, unm if f.stem == "detour" else None))
-                    figures.setdefault((ds.name, mode), []).append(StreamFigures(
-                        r.recall[1], r.answered_right, r.distinct_answered_right, r.mapped_right,
-                        r.best_line_recall, r.line_gap, r.lost_unmapped if f.stem == "detour" else np.nan))
+                    else:
+                        fig = StreamFigures(r.recall[1], r.answered_right, r.distinct_answered_right, r.mapped_right,
+                                            r.best_line_recall, r.line_gap,
+                                            r.lost_unmapped if f.stem == "detour" else nan, f.stem,
+                                            float(case.get("single_r1_tol", nan)),
+                                            r.exit_frames[0] if r.exit_frames else None)
+                        row(f"| {ds.name} | {front} | {mode} | {f.stem} | {fig.single:.3f} | {r.recall[1]:.3f} | "
+                            f"{r.answered_right:.3f} | {r.mapped_right:.3f} | {r.best_line_recall:.3f} | "
+                            f"{r.line_gap:.3f} | {unmapped(r.lost_unmapped, fig.first_exit)} |")
+                    seen.setdefault((ds.name, front, mode), []).append(fig)
     print_ranges(seen)
-    print_targets(figures, foreign, a.target_precision)
+    print_targets(seen, a.target_precision)
     return 0
 
 
-def print_targets(figures: dict[tuple[str, str], list[StreamFigures]], foreign: dict[tuple[str, str], list[float]],
-                  target: float) -> None:
+def unmapped(lost: float, first_exit: float | None) -> str:
+    """The share of unmapped frames lost and, in brackets, the frames until the first ("-": none unmapped)."""
+    if np.isnan(lost):
+        return "-"
+    return f"{lost:.3f}" + ("" if first_exit is None else f" ({first_exit:.0f})")
+
+
+def print_targets(seen: dict[tuple[str, str, str], list[StreamFigures]], target: float) -> None:
     """Per dataset and mode, the streams of every front end that meet each target of the line (``targets``)."""
-    rows = {key: targets(streams, foreign.get(key), target) for key, streams in figures.items()}
+    streams: dict[tuple[str, str], list[StreamFigures]] = {}   # (dataset, mode) -> every front end's streams
+    foreign: dict[tuple[str, str], list[float]] = {}          # (dataset, mode) -> each front end's foreign lost
+    for (ds, _, mode), figs in seen.items():
+        streams.setdefault((ds, mode), []).extend(f for f in figs if f.stream != "foreign")
+        foreign.setdefault((ds, mode), []).extend(f.unmapped_lost for f in figs if f.stream == "foreign")
+    rows = {key: targets(figs, foreign[key] or None, target) for key, figs in streams.items()}
     if not rows:
         return
     names = list(next(iter(rows.values())))
@@ -184,7 +196,7 @@ def print_targets(figures: dict[tuple[str, str], list[StreamFigures]], foreign: 
         print(f"| {ds} | `{mode}` | " + " | ".join(row.get(n, "-") for n in names) + " |")
 
 
-def print_ranges(seen: dict[tuple[str, str, str], list[tuple]]) -> None:
+def print_ranges(seen: dict[tuple[str, str, str], list[StreamFigures]]) -> None:
     """Per dataset, front end and mode: each figure's range over the derived streams, the detour's unmapped
     frames lost (first lost after leaving) and foreign imagery lost."""
     def span(values: list[float]) -> str:
@@ -193,10 +205,10 @@ def print_ranges(seen: dict[tuple[str, str, str], list[tuple]]) -> None:
     print("\n| dataset | front end | mode | single R@1 | best R@1 | answered right | mapped right | "
           "best line @P | line gap | detour unmapped lost (first) | foreign lost |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    for (ds, front, mode), rows in seen.items():
-        streams = [r for r in rows if r[0] != "foreign"]
-        foreign = next((f"{r[1]:.3f}" for r in rows if r[0] == "foreign"), "-")
-        detour = next((r[7] for r in streams if r[7] is not None), "-")
-        cols = [span([r[i] for r in streams]) for i in range(1, 7)]
+    for (ds, front, mode), figs in seen.items():
+        streams = [f for f in figs if f.stream != "foreign"]
+        foreign = next((f"{f.unmapped_lost:.3f}" for f in figs if f.stream == "foreign"), "-")
+        detour = next((unmapped(f.unmapped_lost, f.first_exit) for f in streams if f.stream == "detour"), "-")
+        cols = [span([getattr(f, k) for f in streams])
+                for k in ("single", "best_r1", "answered_right", "mapped_right", "best_line", "line_gap")]
         print(f"| {ds} | {front} | `{mode}` | " + " | ".join(cols) + f" | {detour} | {foreign} |")
-
