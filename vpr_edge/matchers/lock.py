@@ -37,6 +37,11 @@ def evidence_average(previous: float | None, here: float, keep: float, standing:
     return max(previous, recent) if standing else recent
 
 
+def uniqueness(rival: float, best: float) -> float:
+    """How far the best trajectory score ``best`` leads a ``rival``'s: 1 - (rival + 1) / (best + 1)."""
+    return 1.0 - (rival + 1.0) / (best + 1.0)
+
+
 def place_jumped(graph: RouteGraph, previous: int | None, ref: int, w: int) -> bool:
     """Whether this frame's answer ``ref`` jumped from the frame before's, ``previous`` (None: the stream's
     first frame, which starts a place): it lies in ``previous``'s drive beyond ``w`` places of it along the
@@ -120,7 +125,6 @@ class LockVerdict:
             views = self._recent.read(f.z, f.places, learn=not repeats)
             hub_view = float(answer_view(graph, f.ref, f.where, views).max())
             self._hub = evidence_average(self._hub, hub_view, self.evidence_decay, repeats)
-        uniqueness = 1.0 - (rival + 1.0) / (f.best + 1.0)
         # the rule asks for an answer unambiguous along its own drive: another drive may be the same road
         # driven again, whose places are no rival to it
         first, last = graph.bounds(f.ref)
@@ -132,7 +136,7 @@ class LockVerdict:
             self._anchor, self._kept = f.ref, 0
         elif f.cued and not f.standing:   # the cue says the camera moved (without a cue nothing says so)
             self._kept += 1
-        why = lock_verdict(self._evidence, f.best, 1.0 - (own + 1.0) / (f.best + 1.0), self.evidence, self.lock,
+        why = lock_verdict(self._evidence, f.best, uniqueness(own, f.best), self.evidence, self.lock,
                            self.unique, np.inf if self._hub is None else self._hub, self.hub, self._held, self.confirm,
                            self._kept, self.stuck, self.trust)
-        return Judgement(float(why == LOCKED) + uniqueness, f.best >= self.hold * self.lock, why)
+        return Judgement(float(why == LOCKED) + uniqueness(rival, f.best), f.best >= self.hold * self.lock, why)
