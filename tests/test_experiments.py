@@ -515,7 +515,7 @@ def test_front_end_line_targets_count_as_a_plain_loop() -> None:
     streams[5] = StreamFigures(0.8, nan, nan, 0.0, 0.1, nan, nan)   # a silent stream: no answers, no gap
     streams[6] = StreamFigures(0.8, 0.97, nan, 0.5, 0.6, 0.01, nan)  # eligible, no one-view frames, below 0.98
     got = targets(streams, [1.0, 0.99, 0.5, 0.995], 0.98)
-    gap_met = gap_all = elig = met = met_d = loud = det = det_met = 0
+    gap_met = gap_all = elig = met = met_d = loud = det = det_met = beyond = loud_beyond = 0
     for f in streams:
         if f.line_gap == f.line_gap:
             gap_all += 1
@@ -526,10 +526,42 @@ def test_front_end_line_targets_count_as_a_plain_loop() -> None:
             nan_d = f.distinct_answered_right != f.distinct_answered_right
             d = f.answered_right if nan_d else f.distinct_answered_right
             met_d += d >= 0.98
-        loud += f.mapped_right >= 0.5 * f.best_r1
+            loud += f.mapped_right >= 0.5 * f.best_r1
+        elif f.best_r1 >= 0.5:   # followed, the target precision out of reach at half the best R@1
+            beyond += 1
+            loud_beyond += f.mapped_right >= 0.5 * f.best_r1
         if f.unmapped_lost == f.unmapped_lost:
             det += 1
             det_met += f.unmapped_lost >= 0.95
     assert got == {"line gap <= 0.05": f"{gap_met}/{gap_all}", "precision >= target where eligible": f"{met}/{elig}",
-                   "... over distinct frames": f"{met_d}/{elig}", "not silent": f"{loud}/40",
+                   "... over distinct frames": f"{met_d}/{elig}", "not silent where eligible": f"{loud}/{elig}",
+                   "... followed, not eligible": f"{loud_beyond}/{beyond}",
                    "detour unmapped lost >= 0.95": f"{det_met}/{det}", "foreign lost >= 0.99": "3/4"}
+    assert beyond > 0 and elig > 0
+
+
+def test_front_end_line_reliability_and_lead_as_plain_loops() -> None:
+    """The reliability table's bins (the last closed) and each frame's lead, against plain loops."""
+    from vpr_edge_bench.experiments.front_end_lines import EDGES, lead, reliability
+
+    rng = np.random.default_rng(5)
+    p = np.concatenate([rng.uniform(0, 1, 300), [0.5, 0.8, 0.98, 1.0]])
+    right = rng.uniform(0, 1, len(p)) < p
+    got = reliability(p, right)
+    for i, (lo, hi) in enumerate(zip(EDGES[:-1], EDGES[1:])):
+        members = [r for q, r in zip(p, right) if lo <= q < hi or (i == len(EDGES) - 2 and q == hi)]
+        assert got[i][1] == len(members)
+        assert got[i][0] == pytest.approx(sum(members) / len(members))
+    assert np.isnan(reliability(np.array([0.1]), np.array([True]))[0][0])
+
+    sim = rng.normal(size=(30, 20))
+    truth = np.full((30, 2), -1)
+    truth[:, 0] = rng.integers(-1, 20, 30)
+    want = []
+    for q in range(30):
+        t = truth[q, 0]
+        if t < 0:
+            continue
+        near = [(sim[q, r], r) for r in range(max(0, t - 3), min(20, t + 4))]
+        want.append(max(near)[1] - t)
+    assert lead(sim, truth, 3).tolist() == want

@@ -19,8 +19,15 @@ target of the line (``targets``): a line gap of at most ``GAP``; where the front
 (*eligible*: the best line reaches it with at least half of the best answers' R@1), a precision of answers
 at least the target, over every frame and over the frames whose truth is not where the map shows one view
 (a stop of the mapping drive: its references alike, the truth's one of them by convention); not silent (mapped
-right at least half the best answers' R@1); the detour's unmapped frames and foreign imagery lost for at
-least ``UNMAPPED_LOST`` and ``FOREIGN_LOST``.
+right at least half the best answers' R@1) on the eligible streams and, apart, on the streams the matcher
+follows (best answers' R@1 at least ``FOLLOWED``) that are not eligible: there no line on the mode's score
+answers half at the target precision, so not silent means answers below it; the detour's unmapped frames and
+foreign imagery lost for at least ``UNMAPPED_LOST`` and ``FOREIGN_LOST``. Last, for the modes whose score is a
+probability (``stream-prob``, ``stream-decoy``), its reliability (``reliability``): per bin of the probability,
+the share of answers right, over the derived streams' frames but those whose truth lies where the map shows one
+view (foreign imagery: its own column), per front end and pooled; beside it each front end's lead, the median
+of how far ahead of the truth the frame's best match within ``LEAD_REACH`` of it lies (the truth's convention
+against what the front end sees).
 """
 from __future__ import annotations
 
@@ -40,8 +47,11 @@ from vpr_edge_bench.runner import parser, run_checked
 
 
 GAP = 0.05              # the largest line gap a stream meets the target with
+FOLLOWED = 0.5          # the best answers' R@1 of a stream the matcher follows (right for most of its frames)
 UNMAPPED_LOST = 0.95    # the detour's unmapped frames lost
 FOREIGN_LOST = 0.99     # foreign imagery lost
+EDGES = (0.5, 0.8, 0.9, 0.95, 0.98, 1.0)   # the reliability table's bins of the probability (the last closed)
+LEAD_REACH = 8          # references either side of the truth where a frame's best match gives the lead
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,24 +76,53 @@ class StreamFigures:
 def targets(streams: Sequence[StreamFigures], foreign: Sequence[float] | None, target: float) -> dict[str, str]:
     """Per target of the line, how many of one dataset's ``streams`` (one mode, every front end) meet it, as
     "met/of": line gap (of the streams where it is defined), target precision where eligible (over every frame;
-    over the distinct frames, where a stream has one-view frames), not silent, the detour's unmapped frames lost,
-    and with ``foreign`` (each front end's share of foreign imagery lost; None: not measured) foreign imagery."""
+    over the distinct frames, where a stream has one-view frames), not silent where eligible and where followed
+    (best R@1 >= ``FOLLOWED``) but not eligible, the detour's unmapped frames lost, and with ``foreign`` (each
+    front end's share of foreign imagery lost; None: not measured) foreign imagery."""
     def count(met: Sequence[bool]) -> str:
         return f"{sum(met)}/{len(met)}"
 
     gaps = [f.line_gap for f in streams if not np.isnan(f.line_gap)]
-    eligible = [f for f in streams if f.best_line > 0 and f.best_line >= 0.5 * f.best_r1]
+    def allows(f: StreamFigures) -> bool:
+        return f.best_line > 0 and f.best_line >= 0.5 * f.best_r1
+
+    eligible = [f for f in streams if allows(f)]
+    beyond = [f for f in streams if not allows(f) and f.best_r1 >= FOLLOWED]
     distinct = [f.answered_right if np.isnan(f.distinct_answered_right) else f.distinct_answered_right
                 for f in eligible]
     detours = [f.unmapped_lost for f in streams if not np.isnan(f.unmapped_lost)]
     out = {"line gap <= %.2f" % GAP: count([g <= GAP for g in gaps]),
            "precision >= target where eligible": count([f.answered_right >= target for f in eligible]),
            "... over distinct frames": count([d >= target for d in distinct]),
-           "not silent": count([f.mapped_right >= 0.5 * f.best_r1 for f in streams]),
+           "not silent where eligible": count([f.mapped_right >= 0.5 * f.best_r1 for f in eligible]),
+           "... followed, not eligible": count([f.mapped_right >= 0.5 * f.best_r1 for f in beyond]),
            "detour unmapped lost >= %.2f" % UNMAPPED_LOST: count([d >= UNMAPPED_LOST for d in detours])}
     if foreign is not None:
         out["foreign lost >= %.2f" % FOREIGN_LOST] = count([x >= FOREIGN_LOST for x in foreign])
     return out
+
+
+def reliability(probability: np.ndarray, right: np.ndarray, edges: Sequence[float] = EDGES) -> list[tuple[float, int]]:
+    """Per bin [edges[i], edges[i+1]) of ``probability`` (Q,) (the last bin closed): (the share of ``right``
+    (Q,) bool among the answers in it, NaN where none; how many)."""
+    p, ok = np.asarray(probability, np.float64), np.asarray(right, bool)
+    out = []
+    for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        inside = (p >= lo) & ((p <= hi) if i == len(edges) - 2 else (p < hi))
+        out.append((float(ok[inside].mean()) if inside.any() else float("nan"), int(inside.sum())))
+    return out
+
+
+def lead(sim: np.ndarray, truth: np.ndarray, reach: int = LEAD_REACH) -> np.ndarray:
+    """How far ahead of the truth each mapped frame's best match lies, among the references within ``reach``
+    of it: ``sim`` (Q, R), ``truth`` (Q, T) padded with -1 (its first column the truth) -> (M,) int, one per
+    mapped frame (negative: behind)."""
+    t = np.asarray(truth)[:, 0]
+    rows = np.flatnonzero(t >= 0)
+    cols = t[rows, None] + np.arange(-reach, reach + 1)
+    valid = (cols >= 0) & (cols < sim.shape[1])
+    near = np.where(valid, np.asarray(sim)[rows[:, None], np.clip(cols, 0, sim.shape[1] - 1)], -np.inf)
+    return np.argmax(near, axis=1) - reach
 
 
 def load(path: Path) -> dict[str, np.ndarray]:
@@ -134,6 +173,8 @@ def _run(a: argparse.Namespace) -> int:
     use_threads(2)
     modes = a.modes.split(",")
     seen: dict[tuple[str, str, str], list[StreamFigures]] = {}   # (dataset, front, mode) -> each stream's
+    sure: dict[tuple[str, str, str], list[tuple[np.ndarray, np.ndarray]]] = {}   # ... (probability, right) per stream
+    leads: dict[tuple[str, str], list[np.ndarray]] = {}   # (dataset, front) -> each stream's leads
     print(f"tolerance {a.tolerance}, target precision {a.target_precision}")
     row = (lambda text: None) if a.ranges else (lambda text: print(text, flush=True))   # the per-stream rows
     row("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
@@ -152,6 +193,11 @@ def _run(a: argparse.Namespace) -> int:
                         continue
                     r = score(mode, case, a.tolerance, a.target_precision)
                     nan = float("nan")
+                    if r.probability and f.stem != "foreign":   # frames whose truth is not at one view
+                        keep = np.ones(len(r.correct), bool) if r.one_view is None else ~r.one_view
+                        sure.setdefault((ds.name, front, mode), []).append((r.probabilities[keep], r.correct[keep]))
+                    if mode == modes[0] and f.stem != "foreign":
+                        leads.setdefault((ds.name, front), []).append(lead(case["sim"], case["truth"]))
                     if f.stem == "foreign":
                         fig = StreamFigures(nan, nan, nan, nan, nan, nan, r.lost_unmapped, f.stem)
                         row(f"| {ds.name} | {front} | {mode} | foreign | - | - | - | - | - | - | "
@@ -168,6 +214,7 @@ def _run(a: argparse.Namespace) -> int:
                     seen.setdefault((ds.name, front, mode), []).append(fig)
     print_ranges(seen)
     print_targets(seen, a.target_precision)
+    print_reliability(sure, leads)
     return 0
 
 
@@ -194,6 +241,33 @@ def print_targets(seen: dict[tuple[str, str, str], list[StreamFigures]], target:
     print("|---|---|" + "---|" * len(names))
     for (ds, mode), row in rows.items():
         print(f"| {ds} | `{mode}` | " + " | ".join(row.get(n, "-") for n in names) + " |")
+
+
+def print_reliability(sure: dict[tuple[str, str, str], list[tuple[np.ndarray, np.ndarray]]],
+                      leads: dict[tuple[str, str], list[np.ndarray]]) -> None:
+    """Per dataset, probability mode and front end (and pooled over the front ends): the share of answers right
+    per bin of the probability (``reliability``), with the front end's median lead (``lead``)."""
+    if not sure:
+        return
+    bins = [f"p {lo:.2f}-{hi:.2f}" for lo, hi in zip(EDGES[:-1], EDGES[1:])]
+    print("\nthe probability's reliability on the derived streams: share of answers right (answers) per bin, frames "
+          "whose truth lies where the map shows one view left out; lead: the median of how far ahead of the truth "
+          f"each frame's best match within {LEAD_REACH} lies")
+    print("\n| dataset | mode | front end | lead | " + " | ".join(bins) + " |")
+    print("|---|---|---|---|" + "---|" * len(bins))
+
+    def cells(parts: list[tuple[np.ndarray, np.ndarray]]) -> str:
+        table = reliability(np.concatenate([p for p, _ in parts]), np.concatenate([r for _, r in parts]))
+        return " | ".join("-" if n == 0 else f"{share:.2f} ({n})" for share, n in table)
+
+    pooled: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = {}
+    for (ds, front, mode), parts in sure.items():
+        pooled.setdefault((ds, mode), []).extend(parts)
+        ahead = np.concatenate(leads.get((ds, front), [np.zeros(0)]))
+        median = f"{np.median(ahead):+.0f}" if len(ahead) else "-"
+        print(f"| {ds} | `{mode}` | {front} | {median} | {cells(parts)} |")
+    for (ds, mode), parts in pooled.items():
+        print(f"| {ds} | `{mode}` | every one | | {cells(parts)} |")
 
 
 def print_ranges(seen: dict[tuple[str, str, str], list[StreamFigures]]) -> None:
