@@ -283,6 +283,16 @@ def test_evaluate_target_precision_line_gap_and_answers(tmp_path: Path) -> None:
     given = [r for r in rows if r["mode"] == "stream-prob" and r["lost"] == "0"]
     # an answer given is at least the floor sure, scored by the precision expected of the answers as sure
     assert given and all(float(r["score"]) >= float(r["probability"]) >= 0.9 for r in given)
+    # without --calibration, the probability's own reliability over every frame, against a plain loop
+    p = np.array([float(r["probability"]) for r in rows if r["mode"] == "stream-prob"])
+    right = np.array([r["right"] == "1" for r in rows if r["mode"] == "stream-prob"])
+    ece = 0.0
+    for b in range(10):
+        members = [(q, ok) for q, ok in zip(p, right) if b / 10 <= q < (b + 1) / 10 or (b == 9 and q == 1.0)]
+        if members:
+            ece += len(members) / len(p) * abs(np.mean([ok for _, ok in members]) - np.mean([q for q, _ in members]))
+    assert prob["ece"] == pytest.approx(ece, abs=1e-6) and sum(b["n"] for b in prob["reliability"]) == 80 // 2
+    assert doc["modes"]["stream"]["ece"] is None
     for bad in ("1", "0", "-0.5", "nan"):
         proc = run("evaluate", "--similarity", s, "--gt", gt, "--target-precision", bad, "--json", tmp_path / "x.json")
         assert proc.returncode == 2

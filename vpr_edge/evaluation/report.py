@@ -24,7 +24,8 @@ def table(reports: dict[str, ModeReport]) -> str:
     a stream took to answer correctly after entering mapped places (its start, then each re-entry) / to report
     lost after leaving them, one figure per entry / exit joined by '/' ('never': not within that stretch).
     ans.ok / map.ok: share of answered (not lost) frames that are right / of mapped frames answered right.
-    ECE: the expected calibration error of the confidence, with a calibration ('-' without)."""
+    ECE: the expected calibration error of the confidence, with a calibration, over the answers given; without
+    one, of a probability mode's probability over every frame ('-' for the other modes)."""
     def cell(v: float, fmt: str = "{:.3f}") -> str:
         return "-" if v != v else fmt.format(v)
 

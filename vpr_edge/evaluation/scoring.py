@@ -90,7 +90,8 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     """Run ``matcher`` on ``sim`` (Q, R) and score it against ``truth`` (Q, T) padded (see metrics); with the
     references' ``positions``, the error in metres too; with a ``calibration`` (score -> probability right,
     ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error over the answers
-    given. ``still`` (Q,): each
+    given; without one, for a matcher whose score is a probability (``Matcher.probability``), that
+    probability's over every frame (it is the answer's, lost or not). ``still`` (Q,): each
     frame's motion cue (``Matcher.cue`` of the query encodings; None: a bare similarity matrix). ``drive`` (R,):
     each reference's drive in a map of several (answers within ``tolerance`` count only in the truth's drive).
     ``one_view`` (Q,) bool: the frames whose truth lies where the map shows one view (``truth.one_view``): the
@@ -108,6 +109,9 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     if calibration is not None:   # over the answers given: a lost frame carries no confidence
         given = ~report.lost
         ece, table = metrics.reliability(calibration.of(report.scores[given]), report.correct[given])
+        report = replace(report, ece=ece, reliability=tuple(table))
+    elif report.probabilities is not None:   # the probability that each frame's answer is right, lost or not
+        ece, table = metrics.reliability(report.probabilities, report.correct)
         report = replace(report, ece=ece, reliability=tuple(table))
     return report
 
