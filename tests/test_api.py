@@ -67,6 +67,24 @@ def test_bad_frames_and_options(api_map: Path) -> None:
         Localizer(api_map.with_name("missing.npz"))
 
 
+def test_a_labelled_drives_line_sets_the_target_precision_of_any_mode(api_map: Path, tmp_path: Path) -> None:
+    """With a calibration, ``target_precision`` is the line of any mode: the score its drive's answers at least
+    as high were right that often at; without one, ``stream`` refuses it (its score is no probability)."""
+    from vpr_edge.calibration import fit, write
+    from vpr_edge.errors import InputError
+
+    rng = np.random.default_rng(4)
+    s = rng.uniform(0, 2, 300)
+    curve = fit(s, rng.random(300) < s / 2, 1, answered=s >= 1.0)
+    write(tmp_path / "cal.json", {"stream": curve}, "test")
+    for target in (0.7, 0.9):
+        loc = Localizer(api_map, calibration=tmp_path / "cal.json", target_precision=target)
+        assert loc.threshold == curve.line(target) and np.isfinite(loc.threshold)
+    assert Localizer(api_map, calibration=tmp_path / "cal.json").threshold == 1.0   # stream's own line
+    with pytest.raises(InputError, match="not the probability"):
+        Localizer(api_map, target_precision=0.9)
+
+
 def test_constructed_and_pushed_from_threads(api_map: Path, small_queries: Path) -> None:
     images = [load_image(f) for f in sorted(small_queries.iterdir())[:6]]
     results: dict[int, list] = {}

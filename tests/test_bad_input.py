@@ -95,6 +95,13 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     write_npz(w / "nan_codebook.npz", arrays | {"encoder_gmm_means": arrays["encoder_gmm_means"] * np.nan}, meta)
     np.savez_compressed(w / "compressed.npz", **arrays, __meta__=np.array(__import__("json").dumps(meta)))
     np.savez(w / "meta_list.npz", **arrays, __meta__=np.array("[1, 2, 3]"))
+    # calibrations of mode stream: one of schema 1 (no line), one whose line falls as its thresholds rise
+    curve = {"scores": [0.0, 2.0], "confidence": [0.2, 0.9], "n": 24, "tolerance": 1}
+    for name, schema, extra in (("cal_v1", 1, {}), ("cal_badline", 2, {"line": {"scores": [1.0, 2.0],
+                                                                               "precision": [0.9, 0.8]}})):
+        (w / f"{name}.json").write_text(__import__("json").dumps(
+            {"kind": "calibration", "schema": schema, "source": "test", "method": "logistic",
+             "modes": {"stream": curve | extra}}))
     return w
 
 
@@ -256,6 +263,10 @@ CASES = [
     Case("loc-target-precision-on-stream", LOC + " --target-precision 0.99", ("--target-precision 0.99",
                                                                              "not the probability", "--min-confidence")),
     Case("ev-target-precision-negative", EV + " --target-precision -0.5", ("--target-precision -0.5", "between 0 and 1")),
+    Case("loc-target-precision-calibration-without-line", LOC + " --calibration {w}/cal_v1.json --target-precision 0.99",
+         ("--target-precision 0.99", "not the probability", "--calibration")),
+    Case("loc-calibration-line-falls", LOC + " --calibration {w}/cal_badline.json", ("cal_badline.json", "line",
+                                                                                     "rising")),
     Case("ev-answers-is-the-gt", EV + " --answers {w}/gt.csv", ("gt.csv", "--answers", "an input")),
     Case("loc-threads-absurd", LOC + " --threads 100000", ("--threads 100000", "per core")),
     Case("ev-json-and-similarity-out", EV + " --json {w}/x.out --save-similarity {w}/x.out", ("x.out", "same file")),

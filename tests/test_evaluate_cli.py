@@ -260,6 +260,31 @@ def test_evaluate_scores_a_calibration_from_other_frames(tmp_path: Path) -> None
     assert_one_line_error(bad, "gt.csv", "not a vpr-edge calibration")
 
 
+def test_evaluate_draws_a_calibrations_line_at_the_target_precision(tmp_path: Path) -> None:
+    """--calibration with --target-precision: each mode it holds is lost below its drive's line at that
+    precision (the file's), as localize draws it; without --target-precision, the mode's own line."""
+    import csv
+
+    from vpr_edge.calibration import load
+
+    s, gt = planted_similarity(tmp_path)
+    cal = tmp_path / "cal.json"
+    saved = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream", "--save-calibration", cal)
+    assert saved.returncode == 0, saved.stderr
+    line = load(cal, "stream").line(0.9)
+    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream", "--calibration", cal,
+               "--target-precision", "0.9", "--answers", tmp_path / "a.csv", "--json", tmp_path / "r.json")
+    assert proc.returncode == 0, proc.stderr
+    stream = json.loads((tmp_path / "r.json").read_text())["modes"]["stream"]
+    assert stream["settings"]["min_confidence"] == pytest.approx(line)
+    rows = list(csv.DictReader(open(tmp_path / "a.csv")))
+    assert [r["lost"] == "1" for r in rows] == [float(r["score"]) < line - 1e-5 for r in rows]
+    assert run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream", "--calibration", cal, "--json",
+               tmp_path / "own.json").returncode == 0
+    own = json.loads((tmp_path / "own.json").read_text())["modes"]["stream"]["settings"]["min_confidence"]
+    assert own == 1.0
+
+
 def test_evaluate_target_precision_line_gap_and_answers(tmp_path: Path) -> None:
     """``--target-precision`` is stream-prob's line; every mode gets the best line and the line gap; ``--answers``
     writes each frame's answer per mode; a target outside (0, 1) is one line, exit 2, before any output."""

@@ -500,6 +500,11 @@ def test_front_end_cache_then_lines(every_stream: Path, tmp_path: Path) -> None:
     assert {(r[2].strip(), r[3].strip()) for r in per_stream} == {(m, k) for m in ("stream", "stream-prob")
                                                                    for k in (*KINDS, "foreign")}
     assert any(r[2].strip() == "`stream`" for r in rows)        # the ranges' table
+    # each line from a labelled drive's calibration: that drive left out of the rows
+    fitted = tool("front-end-lines", "--cache", str(cache), "--modes", "stream", "--calibrate-on", "aligned")
+    assert "each line from a calibration on aligned" in fitted
+    cells = [line.split("|")[4].strip() for line in fitted.splitlines() if line.startswith("| corridor | ifv |")]
+    assert {c for c in cells if c in (*KINDS, "foreign")} == {*KINDS, "foreign"} - {"aligned"}
 
 
 def test_front_end_line_targets_count_as_a_plain_loop() -> None:

@@ -1,6 +1,8 @@
 """Metrics against cases worked by hand and against scikit-learn where the definitions coincide."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -238,3 +240,43 @@ def test_distinct_shares_leave_out_one_view_frames() -> None:
     assert rep.one_view_frames == int((view & (truth[:, 0] >= 0)).sum())
     plain = score_result(res, truth, 0, 0.2)
     assert plain.one_view_frames == -1 and np.isnan(plain.distinct_answered_right)
+
+
+def test_calibration_line_against_a_plain_loop_and_through_its_file(tmp_path: Path) -> None:
+    """A calibration's line: for a target precision, the lowest score whose answers at least as high (every
+    answer, lost or not) were right that often by Wilson's 95% lower bound, against a plain loop over the
+    thresholds; a drive too short to show the target gives no line; written and read back exactly; a file of
+    schema 1 reads without one."""
+    import json
+    import math
+
+    from vpr_edge.calibration import fit, line_points, load, write
+
+    def wilson(k: int, n: int, z: float = 1.645) -> float:
+        p = k / n
+        return (p + z * z / (2 * n) - z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))) / (1 + z * z / n)
+
+    assert wilson(57, 57) == pytest.approx(0.955, abs=5e-4) and wilson(150, 150) == pytest.approx(0.982, abs=5e-4)
+    rng = np.random.default_rng(9)
+    s = np.round(rng.uniform(0, 3, 400), 2)   # ties
+    ok = rng.random(400) < s / 3
+    curve = fit(s, ok, 2, answered=s > 1.0)   # the line ranks every answer, the curve the answers given
+    for target in (0.5, 0.7, 0.8, 0.9, 0.95, 0.99, 1.0):
+        reach = [t for t in sorted(set(s)) if wilson(int(ok[s >= t].sum()), int((s >= t).sum())) >= target - 1e-12]
+        assert curve.line(target) == (reach[0] if reach else np.inf)
+    assert fit(np.ones(57), np.ones(57, bool), 2).line(0.98) == np.inf   # 57 of 57 right do not show 0.98
+    assert fit(np.arange(150.0), np.ones(150, bool), 2).line(0.98) == 0.0
+    t, p = line_points(s, ok)
+    assert (np.diff(t) > 0).all() and (np.diff(p) > 0).all() and curve.has_line
+    assert line_points(np.zeros(0), np.zeros(0, bool))[0].size == 0
+    write(tmp_path / "cal.json", {"stream": curve}, "test")
+    back = load(tmp_path / "cal.json", "stream")
+    assert all(back.line(x) == curve.line(x) for x in (0.5, 0.8, 0.9, 0.99))
+    doc = json.loads((tmp_path / "cal.json").read_text())
+    assert doc["schema"] == 2
+    doc["schema"] = 1
+    for m in doc["modes"].values():
+        del m["line"]
+    (tmp_path / "v1.json").write_text(json.dumps(doc))
+    old = load(tmp_path / "v1.json", "stream")
+    assert not old.has_line and old(1.5) == back(1.5)

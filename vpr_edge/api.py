@@ -87,7 +87,9 @@ class Localizer:
     ``mode`` names a registered matcher (``vpr_edge.matchers.MATCHERS``), ``params`` overrides its
     parameters, ``min_confidence`` its lost threshold (default: the matcher's own); ``target_precision`` the
     line of a matcher whose score is the probability that its answer is right (``stream-prob``; for another
-    mode, VprError: it sets no line there). ``precision``: the model's form (``features.choice``: auto runs
+    mode, VprError: it sets no line there) or, with a ``calibration`` (``evaluate --save-calibration`` on a
+    labelled drive), of any mode: the lowest score whose answers at least as high were right that often on
+    the drive (``calibration.Curve.line``). ``precision``: the model's form (``features.choice``: auto runs
     its int8 form where the CPU has int8 dot products; fp32; int8). ``threads`` > 0 sets
     onnxruntime's threads and, process-wide, NumPy's BLAS pool to that count (0: one per core for both;
     None: onnxruntime's default, BLAS untouched). ``coarse``: a local-search matcher's whole-route frames use
@@ -106,18 +108,19 @@ class Localizer:
                  calibration: str | os.PathLike[str] | None = None, precision: str = DEFAULT_PRECISION,
                  target_precision: float | None = None) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
-        # checked before the map opens
-        self.threshold = self.matcher.lost_line(min_confidence, target_precision, live=True)
-        ort_threads = 0 if threads is None else use_threads(threads)
-        self.query = MapQuery(map_path, model, ort_threads, precision)   # the map and its front end, once
-        self.map.check_scores(self.matcher.scores, map_path)
-        # where the map's drives stood, where they start and where they meet
-        self.matcher = self.matcher.on_route(self.query.references(), RouteGraph(*self.query.joins()))
+        # checked before the map opens; a calibration's line (its labelled drive's) sets a target precision's
         self._calibration = None
         if calibration is not None:
             from vpr_edge.calibration import load
 
             self._calibration = load(calibration, self.matcher.name)
+        line = self._calibration.line if self._calibration is not None and self._calibration.has_line else None
+        self.threshold = self.matcher.lost_line(min_confidence, target_precision, live=True, line=line)
+        ort_threads = 0 if threads is None else use_threads(threads)
+        self.query = MapQuery(map_path, model, ort_threads, precision)   # the map and its front end, once
+        self.map.check_scores(self.matcher.scores, map_path)
+        # where the map's drives stood, where they start and where they meet
+        self.matcher = self.matcher.on_route(self.query.references(), RouteGraph(*self.query.joins()))
         self._online = self.matcher.stream(len(self.map.names)) if self.matcher.online else None
         # what each frame reads from the map: the rows asked for, coarse whole-route rows on a long map, the
         # index's candidates (``map.search``: evaluate runs the same)

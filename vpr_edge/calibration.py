@@ -12,24 +12,34 @@ docs/results.md, "Confidence across datasets") and ``isotonic`` (pool-adjacent-v
 non-decreasing fit in least squares). Either way a higher score never means a lower confidence, and the
 file holds the curve as points: between them the confidence is interpolated linearly, beyond them it is the
 end value.
+
+Beside the curve each mode carries its *line* on the drive: for each score, the share right among the drive's
+answers scoring at least that (every frame's answer, lost or not: the answers ranked by score, as ``evaluate``
+reads the best line) that the drive shows at 95% confidence (Wilson's lower bound: 57 answers all right show
+0.955, 150 show 0.982). ``Curve.line(P)`` is the lowest score whose answers at least as high were right P of
+the time so counted: ``localize --calibration FILE --target-precision P`` draws the lost line there, for any
+mode, so a target precision means on a new front end what it meant on the labelled drive of the route, and a
+drive too short to show it gives no line (every answer lost) rather than the lowest score.
 """
 from __future__ import annotations
 
 import json
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from vpr_edge.errors import InputError, VprError
 from vpr_edge.files import atomic_output
 
-CALIBRATION_SCHEMA = 1
+CALIBRATION_SCHEMA = 2     # 2: each mode's line
+READ_SCHEMAS = (1, 2)      # 1: no line (a target precision refused with it)
 METHODS = ("logistic", "isotonic")
 DEFAULT_METHOD = "logistic"
 _POINTS = 129                   # a logistic fit written as this many points, evenly spaced in log-odds
 _LOGIT_SPAN = math.log(999)     # ... from confidence 0.001 to 0.999
+LINE_Z = 1.645                  # the line's precision: Wilson's lower bound at 95% (one-sided)
 
 
 def isotonic(scores: np.ndarray, correct: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -55,14 +65,55 @@ def isotonic(scores: np.ndarray, correct: np.ndarray) -> tuple[np.ndarray, np.nd
     return np.asarray(sums) / w, np.asarray(means)
 
 
+def wilson_lower(right: np.ndarray, n: np.ndarray, z: float = LINE_Z) -> np.ndarray:
+    """Wilson's lower confidence bound on a share from ``right`` of ``n`` (arrays alike, n > 0): the share the
+    counts show at the one-sided level of ``z`` standard normal deviations."""
+    n = np.asarray(n, np.float64)
+    p = np.asarray(right, np.float64) / n
+    z2 = z * z
+    return (p + z2 / (2 * n) - z * np.sqrt(p * (1 - p) / n + z2 / (4 * n * n))) / (1 + z2 / n)
+
+
+def line_points(scores: np.ndarray, correct: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The answers' line: ``scores`` (Q,) and whether each answer was right (Q,) bool -> (thresholds (L,)
+    ascending, precision (L,) increasing): the share right among the answers scoring at least each threshold,
+    as its lower bound (``wilson_lower``), kept where it is higher than at every lower threshold (the only
+    thresholds a line at some precision can sit on: the lowest one reaching it). No answer: both empty."""
+    s = np.asarray(scores, np.float64)
+    order = np.argsort(-s, kind="stable")
+    s, ok = s[order], np.asarray(correct, bool)[order]
+    if len(s) == 0:
+        return np.zeros(0), np.zeros(0)
+    last = np.r_[s[1:] != s[:-1], True]                      # the last answer of each run of tied scores
+    precision = wilson_lower(np.cumsum(ok), np.arange(1, len(s) + 1))[last]
+    thresholds = s[last]
+    t, p = thresholds[::-1], precision[::-1]                 # ascending thresholds
+    record = p > np.maximum.accumulate(np.r_[-1.0, p[:-1]])  # higher than at every lower threshold
+    return t[record], p[record]
+
+
 @dataclass(frozen=True)
 class Curve:
-    """One mode's calibration: confidence (B,) at block scores (B,), from ``n`` answers at ``tolerance``."""
+    """One mode's calibration: confidence (B,) at block scores (B,), from ``n`` answers at ``tolerance``; its
+    line on the drive (``line_points``: thresholds (L,) ascending, precision (L,); empty: a file without one)."""
 
     scores: np.ndarray
     confidence: np.ndarray
     n: int
     tolerance: int
+    line_scores: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    line_precision: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def has_line(self) -> bool:
+        """Whether the calibration holds the drive's line (schema 2)."""
+        return len(self.line_scores) > 0
+
+    def line(self, target: float) -> float:
+        """The lowest score whose answers at least as high the drive shows right at least ``target`` of the
+        time (``line_points``; inf where none does: every answer is then lost)."""
+        reach = np.flatnonzero(self.line_precision >= target - 1e-12)
+        return float(self.line_scores[reach[0]]) if len(reach) else math.inf
 
     def __call__(self, score: float) -> float:
         """The probability that an answer with this score is right, in [0, 1]."""
@@ -106,13 +157,15 @@ def fit(scores: np.ndarray, correct: np.ndarray, tolerance: int, answered: np.nd
         method: str = DEFAULT_METHOD) -> Curve:
     """A mode's calibration from its answers' ``scores`` (Q,) and whether each was right (Q,) bool, fitted on
     the ``answered`` (Q,) bool ones (None: all; the rest are lost frames, which carry no confidence) by
-    ``method`` (``METHODS``). No answer at all: the confidence is 0 everywhere."""
+    ``method`` (``METHODS``); its line (``line_points``) over every answer, lost or not. No answer given: the
+    confidence is 0 everywhere."""
     if method not in METHODS:
         raise ValueError(f"calibration method {method!r}: expected one of {', '.join(METHODS)}")
+    line = line_points(scores, correct)
     keep = np.ones(len(scores), bool) if answered is None else np.asarray(answered, bool)
     s, ok = np.asarray(scores, np.float64)[keep], np.asarray(correct, bool)[keep]
     if len(s) == 0:
-        return Curve(np.zeros(1), np.zeros(1), 0, tolerance)
+        return Curve(np.zeros(1), np.zeros(1), 0, tolerance, *line)
     if method == "isotonic":
         x, y = isotonic(s, ok)
     else:
@@ -122,16 +175,19 @@ def fit(scores: np.ndarray, correct: np.ndarray, tolerance: int, answered: np.nd
         else:
             x = np.array([float(np.median(s))])
         y = 1 / (1 + np.exp(-np.clip(a * x + b, -50, 50)))
-    return Curve(x, y, len(s), tolerance)
+    return Curve(x, y, len(s), tolerance, *line)
 
 
 def write(path: str | os.PathLike[str], curves: dict[str, Curve], source: str,
           method: str = DEFAULT_METHOD) -> None:
     """The calibration file: JSON with ``kind``, ``schema``, the fit's ``method`` (for the reader; the curve is
-    all that is applied) and per mode its curve, written atomically."""
+    all that is applied) and per mode its curve and its line (its thresholds exact: an answer at a threshold
+    stays on its side), written atomically."""
     doc = {"kind": "calibration", "schema": CALIBRATION_SCHEMA, "source": source, "method": method,
            "modes": {name: {"scores": c.scores.round(6).tolist(), "confidence": c.confidence.round(6).tolist(),
-                            "n": c.n, "tolerance": c.tolerance} for name, c in curves.items()}}
+                            "n": c.n, "tolerance": c.tolerance,
+                            "line": {"scores": c.line_scores.tolist(), "precision": c.line_precision.tolist()}}
+                     for name, c in curves.items()}}
     with atomic_output(path) as tmp:
         tmp.write_text(json.dumps(doc, indent=1) + "\n")
 
@@ -147,9 +203,9 @@ def _read(path: str | os.PathLike[str]) -> dict:
         raise VprError(f"{path}: not a vpr-edge calibration (not JSON: {e})") from None
     if not isinstance(doc, dict) or doc.get("kind") != "calibration":
         raise InputError("{path}: not a vpr-edge calibration (evaluate {opt.save_calibration} writes one)", path=path)
-    if doc.get("schema") != CALIBRATION_SCHEMA:
+    if doc.get("schema") not in READ_SCHEMAS:
         raise VprError(f"{path}: calibration schema {doc.get('schema')} is not supported (this vpr-edge reads "
-                       f"{CALIBRATION_SCHEMA})")
+                       f"{', '.join(map(str, READ_SCHEMAS))})")
     modes = doc.get("modes")
     if not isinstance(modes, dict):
         raise VprError(f"{path}: not a vpr-edge calibration (no modes)")
@@ -184,4 +240,12 @@ def _curve(path: str | os.PathLike[str], modes: dict, mode: str) -> Curve:
           and (np.diff(x) >= 0).all() and (np.diff(y) >= 0).all() and (y >= 0).all() and (y <= 1).all())
     if not ok or not math.isfinite(n):
         raise VprError(f"{path}: mode {mode}'s calibration is not a non-decreasing curve of confidences in [0, 1]")
-    return Curve(x, y, n, tolerance)
+    line = m.get("line", {"scores": [], "precision": []})
+    try:
+        t, p = np.asarray(line["scores"], np.float64), np.asarray(line["precision"], np.float64)
+    except (KeyError, TypeError, ValueError):
+        raise VprError(f"{path}: mode {mode}'s line is malformed (scores, precision)") from None
+    if not (t.ndim == 1 and t.shape == p.shape and np.isfinite(t).all() and np.isfinite(p).all()
+            and (np.diff(t) > 0).all() and (np.diff(p) > 0).all() and (p >= 0).all() and (p <= 1).all()):
+        raise VprError(f"{path}: mode {mode}'s line is not thresholds rising with their precision in [0, 1]")
+    return Curve(x, y, n, tolerance, t, p)

@@ -80,7 +80,8 @@ def evaluate_cmd(
                                                    "(default: each mode's own)."),
     target_precision: Optional[float] = typer.Option(
         None, help="The line of modes whose score is the probability that the answer is right (stream-prob; "
-                   "default %.2f), and the precision at which every mode's best line is read." % TARGET_PRECISION),
+                   "default %.2f), and of every mode --calibration holds (where its drive's answers reached it); "
+                   "and the precision at which every mode's best line is read." % TARGET_PRECISION),
     answers_text: Optional[str] = typer.Option(None, "--answers", help="Write each frame's answer per mode "
                                                "here (CSV: frame, mode, ref, score, probability, lost, why, "
                                                "right)."),
@@ -99,7 +100,8 @@ def evaluate_cmd(
                                              "frame, over the ground truth."),
     calibration_text: Optional[str] = typer.Option(None, "--save-calibration", help="Write each mode's "
                                                    "calibration here (score -> probability the answer is right, "
-                                                   "on these frames' answers given), for localize "
+                                                   "on these frames' answers given; and the line at each "
+                                                   "precision, over every answer), for localize "
                                                    "--calibration."),
     calibration_fit: FitOpt = typer.Option(DEFAULT_METHOD, "--calibration-fit", help="How --save-calibration "
                                            "fits: logistic (Platt scaling, two numbers; carries to another "
@@ -107,7 +109,8 @@ def evaluate_cmd(
     calibration_in: Optional[Path] = typer.Option(None, "--calibration", help="A calibration from another drive "
                                                   "or route (evaluate --save-calibration): score each mode's "
                                                   "confidence against these frames (ECE and the reliability "
-                                                  "table in --json) for the modes it holds."),
+                                                  "table in --json) for the modes it holds; with "
+                                                  "--target-precision, their lost line is its drive's."),
     similarity_text: Optional[str] = typer.Option(None, "--save-similarity",
                                                   help="Also save the (Q, R) similarity matrix (.npy)."),
     model: Optional[Path] = typer.Option(None, help="With --map: the map's model, if not where it was."),

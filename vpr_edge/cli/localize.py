@@ -61,8 +61,9 @@ def localize_cmd(
                    % MATCHERS["stream"].min_confidence),
     target_precision: Optional[float] = typer.Option(
         None, help="Modes whose score is the probability that the answer is right (stream-prob): the line, "
-                   "answers below it are lost (default %.2f); refused for another mode (stream: its line is "
-                   "--min-confidence)." % TARGET_PRECISION),
+                   "answers below it are lost (default %.2f). With --calibration, any mode: the line where the "
+                   "labelled drive's answers at least as sure were right this often; else refused for another "
+                   "mode (stream: its line is --min-confidence)." % TARGET_PRECISION),
     param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE", help=PARAM_HELP),
     calibration: Optional[Path] = typer.Option(None, help="A calibration (evaluate --save-calibration on a "
                                                "labelled drive of this route): each line's confidence is then "

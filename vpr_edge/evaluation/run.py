@@ -140,8 +140,8 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     """Run every matcher (default: ``default_matchers``) on one similarity matrix from ``source`` and score
     it against ``truth`` (frames that do not decode go to ``on_skip`` and lose their ground-truth row); the
     modes with a curve in ``calibration`` (mode -> score-to-probability) also get its calibration error;
-    ``target_precision``: the line of the modes whose score is a probability, and where every mode's best
-    line is read (``scoring.evaluate_mode``).
+    ``target_precision``: the line of the modes whose score is a probability and of those with a curve (its
+    drive's line), and where every mode's best line is read (``scoring.evaluate_mode``).
     VprError, before the work where it can be, for a bad source, ground truth or combination."""
     source.check()
     check_lost_line(min_confidence)

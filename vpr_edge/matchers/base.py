@@ -210,21 +210,25 @@ class Matcher:
                              f"definitions {sorted(self.definitions)}")
 
     def lost_line(self, min_confidence: float | None = None, target_precision: float | None = None,
-                  live: bool = False) -> float | None:
+                  live: bool = False, line: Callable[[float], float] | None = None) -> float | None:
         """The score below which this matcher's answers are lost: ``min_confidence`` if given (checked:
-        ``check_lost_line``), else for a matcher whose score is a probability (``probability``) the
-        ``target_precision`` if given (checked: ``check_target_precision``), else its own ``min_confidence``
-        (None: no lost state). ``live``: the line of a stream the matcher answers (``Localizer``), where a
-        target precision is nothing but the line: given to a matcher whose score is no probability, InputError
-        (``evaluate`` also reads every mode's best line at it)."""
+        ``check_lost_line``), else with a ``target_precision`` (checked: ``check_target_precision``) and a
+        ``line`` (a labelled drive's score at each precision: ``calibration.Curve.line``) the score it gives,
+        else for a matcher whose score is a probability (``probability``) the ``target_precision``, else its own
+        ``min_confidence`` (None: no lost state). ``live``: the line of a stream the matcher answers
+        (``Localizer``), where a target precision is nothing but the line: given to a matcher whose score is no
+        probability, without a ``line``, InputError (``evaluate`` also reads every mode's best line at it)."""
         given = check_lost_line(min_confidence)
         target = check_target_precision(target_precision)
-        if live and target is not None and not self.probability:
+        if live and target is not None and not self.probability and line is None:
             raise InputError("{opt.target_precision} {v}: mode {name}'s score is not the probability that its "
-                             "answer is right, so no target precision sets its line ({opt.min_confidence} does; "
-                             "stream-prob's score is one)", v=target, name=self.name)
+                             "answer is right, so no target precision sets its line ({opt.min_confidence} does, "
+                             "or a {opt.calibration} from a labelled drive; stream-prob's score is one)",
+                             v=target, name=self.name)
         if given is not None:
             return float(given)
+        if target is not None and line is not None:
+            return float(line(target))
         return target if self.probability and target is not None else self.min_confidence
 
     def params_help(self) -> str:

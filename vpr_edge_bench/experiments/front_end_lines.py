@@ -28,6 +28,10 @@ the share of answers right, over the derived streams' frames but those whose tru
 view (foreign imagery: its own column), per front end and pooled; beside it each front end's lead, the median
 of how far ahead of the truth the frame's best match within ``LEAD_REACH`` of it lies (the truth's convention
 against what the front end sees).
+
+With ``--calibrate-on STREAM`` each front end's and mode's calibration is fitted on that stream, a labelled
+drive (``evaluate --save-calibration``: ``calibration.fit``), and every other stream is lost below the line
+where that drive's answers showed the target precision (``localize --calibration FILE --target-precision P``).
 """
 from __future__ import annotations
 
@@ -38,6 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from vpr_edge import calibration
+from vpr_edge.calibration import Curve
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import get_matcher
@@ -138,12 +144,14 @@ def matcher_of(mode: str):
     return m.with_params(**m.parse_params(spec.split(";"))) if spec else m
 
 
-def score(mode: str, case: dict[str, np.ndarray], tolerance: int, target: float):
+def score(mode: str, case: dict[str, np.ndarray], tolerance: int, target: float, curve: Curve | None = None):
+    """``mode``'s report on one cached stream (``evaluate_mode``); with a calibration ``curve``, lost below its
+    drive's line at ``target`` (as ``localize --calibration --target-precision`` draws it)."""
     m = matcher_of(mode)
     if m.reads_route and "route" in case:
         m = dataclasses.replace(m, route=case["route"].astype(bool), reach=int(case["reach"]))
     still = case.get("cue")
-    return evaluate_mode(m, case["sim"], case["truth"], tolerance, still=still,
+    return evaluate_mode(m, case["sim"], case["truth"], tolerance, still=still, calibration=curve,
                          one_view=case.get("one_view"), target_precision=target)
 
 
@@ -157,6 +165,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--target-precision", type=float, default=TARGET_PRECISION)
     p.add_argument("--ranges", action="store_true", help="print the ranges over the streams only (docs/results.md)")
+    p.add_argument("--calibrate-on", default=None, metavar="STREAM",
+                   help="fit each front end's and mode's calibration on this derived stream (a labelled drive: "
+                        "evaluate --save-calibration) and draw every other stream's line where that drive's "
+                        "answers reached the target precision (localize --calibration --target-precision); the "
+                        "stream itself is left out of the figures")
     a = p.parse_args(argv)
     return run_checked(__name__, lambda: _run(a))
 
@@ -172,6 +185,7 @@ def _run(a: argparse.Namespace) -> int:
         raise VprError(f"--modes: {e}") from None
     use_threads(2)
     modes = a.modes.split(",")
+    print("" if not a.calibrate_on else f"each line from a calibration on {a.calibrate_on} (left out below)")
     seen: dict[tuple[str, str, str], list[StreamFigures]] = {}   # (dataset, front, mode) -> each stream's
     sure: dict[tuple[str, str, str], list[tuple[np.ndarray, np.ndarray]]] = {}   # ... (probability, right) per stream
     leads: dict[tuple[str, str], list[np.ndarray]] = {}   # (dataset, front) -> each stream's leads
@@ -186,12 +200,21 @@ def _run(a: argparse.Namespace) -> int:
             fronts = [f for f in a.fronts.split(",") if f in fronts]
         for front in fronts:
             files = sorted((ds / front).glob("*.npz"))
+            if a.calibrate_on:
+                drive = ds / front / f"{a.calibrate_on}.npz"
+                if not drive.is_file():
+                    raise VprError(f"{drive}: no such stream to calibrate on (--calibrate-on)")
+                files = [f for f in files if f != drive]
             for mode in modes:
+                curve = None
+                if a.calibrate_on:   # the labelled drive: every answer's score and rightness, the answers given
+                    fit = score(mode, load(drive), a.tolerance, a.target_precision)
+                    curve = calibration.fit(fit.scores, fit.correct, a.tolerance, ~fit.lost)
                 for f in files:
                     case = load(f)
                     if "sim" not in case:   # the map, the noise drawn
                         continue
-                    r = score(mode, case, a.tolerance, a.target_precision)
+                    r = score(mode, case, a.tolerance, a.target_precision, curve)
                     nan = float("nan")
                     if r.probability and f.stem != "foreign":   # frames whose truth is not at one view
                         keep = np.ones(len(r.correct), bool) if r.one_view is None else ~r.one_view
