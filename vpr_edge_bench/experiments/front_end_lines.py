@@ -31,7 +31,8 @@ against what the front end sees).
 
 With ``--calibrate-on STREAM`` each front end's and mode's calibration is fitted on that stream, a labelled
 drive (``evaluate --save-calibration``: ``calibration.fit``), and every other stream is lost below the line
-where that drive's answers showed the target precision (``localize --calibration FILE --target-precision P``).
+where that drive's answers showed the target precision (``localize --calibration FILE --target-precision P``);
+the reliability table is left out (the probability does not depend on the line).
 """
 from __future__ import annotations
 
@@ -185,7 +186,8 @@ def _run(a: argparse.Namespace) -> int:
         raise VprError(f"--modes: {e}") from None
     use_threads(2)
     modes = a.modes.split(",")
-    print("" if not a.calibrate_on else f"each line from a calibration on {a.calibrate_on} (left out below)")
+    if a.calibrate_on:
+        print(f"each line from a calibration on {a.calibrate_on} (left out below)")
     seen: dict[tuple[str, str, str], list[StreamFigures]] = {}   # (dataset, front, mode) -> each stream's
     sure: dict[tuple[str, str, str], list[tuple[np.ndarray, np.ndarray]]] = {}   # ... (probability, right) per stream
     leads: dict[tuple[str, str], list[np.ndarray]] = {}   # (dataset, front) -> each stream's leads
@@ -237,7 +239,8 @@ def _run(a: argparse.Namespace) -> int:
                     seen.setdefault((ds.name, front, mode), []).append(fig)
     print_ranges(seen)
     print_targets(seen, a.target_precision)
-    print_reliability(sure, leads)
+    if not a.calibrate_on:   # the probability is the same whatever the line: printed once, without a drive
+        print_reliability(sure, leads)
     return 0
 
 
