@@ -271,6 +271,8 @@ def test_evaluate_draws_a_calibrations_line_at_the_target_precision(tmp_path: Pa
     cal = tmp_path / "cal.json"
     saved = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream", "--save-calibration", cal)
     assert saved.returncode == 0, saved.stderr
+    # it says each mode's line at the target: 40 frames do not show 0.98 (Wilson's bound: 40 of 40 show 0.937)
+    assert "each mode's line" in saved.stdout and "stream: none: these frames do not show 0.98" in saved.stdout
     line = load(cal, "stream").line(0.9)
     proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream", "--calibration", cal,
                "--target-precision", "0.9", "--answers", tmp_path / "a.csv", "--json", tmp_path / "r.json")

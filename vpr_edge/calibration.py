@@ -124,6 +124,14 @@ class Curve:
         return np.interp(np.asarray(scores, np.float64), self.scores, self.confidence)
 
 
+def line_text(curve: Curve, target: float) -> str:
+    """What ``curve``'s line at ``target`` is, in words: the score, or why there is none."""
+    at = curve.line(target)
+    if math.isinf(at):
+        return f"none: these frames do not show {target:g} (every answer would be lost)"
+    return f"score {at:.6g}"
+
+
 def logistic(scores: np.ndarray, correct: np.ndarray, ridge: float = 1e-3,
              iterations: int = 100) -> tuple[float, float]:
     """Platt scaling over answers (Q,): (a, b) maximising the likelihood of ``correct`` under p(score) =

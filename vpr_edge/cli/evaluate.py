@@ -188,10 +188,13 @@ def evaluate_cmd(
         if calibration_out:
             from vpr_edge import calibration
 
-            calibration.write(calibration_out, {n: calibration.fit(r.scores, r.correct, tolerance, ~r.lost,
-                                                                   calibration_fit.value)
-                                                for n, r in result.reports.items()}, source.name,
-                              calibration_fit.value)
+            curves = {n: calibration.fit(r.scores, r.correct, tolerance, ~r.lost, calibration_fit.value)
+                      for n, r in result.reports.items()}
+            calibration.write(calibration_out, curves, source.name, calibration_fit.value)
+            target = TARGET_PRECISION if target_precision is None else target_precision
+            typer.echo(f"\n{calibration_out}: with --target-precision {target:g}, each mode's line (the lowest "
+                       "score whose answers at least as high these frames show right that often)")
+            typer.echo("\n".join(f"  {n}: " + calibration.line_text(c, target) for n, c in curves.items()))
         if plot_out:
             report.plot(plot_out, result.reports, title)
         if matrix_out:
