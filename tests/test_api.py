@@ -81,6 +81,9 @@ def test_a_labelled_drives_line_sets_the_target_precision_of_any_mode(api_map: P
         loc = Localizer(api_map, calibration=tmp_path / "cal.json", target_precision=target)
         assert loc.threshold == curve.line(target) and np.isfinite(loc.threshold)
     assert Localizer(api_map, calibration=tmp_path / "cal.json").threshold == 1.0   # stream's own line
+    with pytest.raises(InputError, match="cal.json, the labelled drive, does not show") as short:   # before the map
+        Localizer(api_map.with_name("missing.npz"), calibration=tmp_path / "cal.json", target_precision=0.999)
+    assert short.value.inputs == ("target_precision",)
     with pytest.raises(InputError, match="not the probability"):
         Localizer(api_map, target_precision=0.9)
 

@@ -98,7 +98,8 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     # calibrations of mode stream: one of schema 1 (no line), one whose line falls as its thresholds rise
     curve = {"scores": [0.0, 2.0], "confidence": [0.2, 0.9], "n": 24, "tolerance": 1}
     for name, schema, extra in (("cal_v1", 1, {}), ("cal_badline", 2, {"line": {"scores": [1.0, 2.0],
-                                                                               "precision": [0.9, 0.8]}})):
+                                                                               "precision": [0.9, 0.8]}}),
+                                ("cal_short", 2, {"line": {"scores": [1.0, 2.0], "precision": [0.8, 0.9]}})):
         (w / f"{name}.json").write_text(__import__("json").dumps(
             {"kind": "calibration", "schema": schema, "source": "test", "method": "logistic",
              "modes": {"stream": curve | extra}}))
@@ -265,6 +266,8 @@ CASES = [
     Case("ev-target-precision-negative", EV + " --target-precision -0.5", ("--target-precision -0.5", "between 0 and 1")),
     Case("loc-target-precision-calibration-without-line", LOC + " --calibration {w}/cal_v1.json --target-precision 0.99",
          ("--target-precision 0.99", "not the probability", "--calibration")),
+    Case("loc-target-precision-beyond-the-drive", LOC + " --calibration {w}/cal_short.json --target-precision 0.98",
+         ("--target-precision 0.98", "cal_short.json", "does not show that precision")),
     Case("loc-calibration-line-falls", LOC + " --calibration {w}/cal_badline.json", ("cal_badline.json", "line",
                                                                                      "rising")),
     Case("ev-answers-is-the-gt", EV + " --answers {w}/gt.csv", ("gt.csv", "--answers", "an input")),

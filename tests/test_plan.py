@@ -89,6 +89,7 @@ def test_errors_outside_the_map_name_the_library_inputs_and_the_cli_flags() -> N
     assert get_matcher("stream").lost_line(None, 0.99, live=True, line=lambda p: 1.2 + p) == 2.19
     assert get_matcher("stream-prob").lost_line(None, 0.9, live=True, line=lambda p: 0.5) == 0.5
     assert get_matcher("stream").lost_line(1.3, 0.99, live=True, line=lambda p: 0.5) == 1.3   # given wins
+    assert get_matcher("stream").lost_line(None, 0.99, line=lambda p: float("inf")) == float("inf")   # all lost
     with pytest.raises(ValueError) as refused:   # a ValueError still, as callers of parse_params catch
         get_matcher("seqslam").parse_params(["ds=x"])
     assert str(refused.value) == "params 'ds=x': 'x' is not an int"

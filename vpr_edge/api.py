@@ -12,6 +12,7 @@
 """
 from __future__ import annotations
 
+import math
 import os
 import threading
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -22,7 +23,7 @@ import numpy as np
 # frame does not pay for it (15 ms, a whole-route frame's cost again)
 import numpy.ma  # noqa: F401
 
-from vpr_edge.errors import VprError, printable
+from vpr_edge.errors import InputError, VprError, printable
 from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.frames.images import MIN_SIDE, Frame
@@ -116,6 +117,10 @@ class Localizer:
             self._calibration = load(calibration, self.matcher.name)
         line = self._calibration.line if self._calibration is not None and self._calibration.has_line else None
         self.threshold = self.matcher.lost_line(min_confidence, target_precision, live=True, line=line)
+        if self.threshold is not None and math.isinf(self.threshold):   # the drive does not show the target
+            raise InputError("{opt.target_precision} {v}: {path}, the labelled drive, does not show that precision "
+                             "for mode {name} (every answer would be lost): label a longer drive, or ask for less",
+                             v=target_precision, path=calibration, name=self.matcher.name)
         ort_threads = 0 if threads is None else use_threads(threads)
         self.query = MapQuery(map_path, model, ort_threads, precision)   # the map and its front end, once
         self.map.check_scores(self.matcher.scores, map_path)
