@@ -19,7 +19,7 @@ reads the best line) that the drive shows at 95% confidence (Wilson's lower boun
 0.955, 150 show 0.982). ``Curve.line(P)`` is the lowest score whose answers at least as high were right P of
 the time so counted: ``localize --calibration FILE --target-precision P`` draws the lost line there, for any
 mode, so a target precision means on a new front end what it meant on the labelled drive of the route, and a
-drive too short to show it gives no line (every answer lost) rather than the lowest score.
+drive too short to show it gives no line (``localize`` refuses the target) rather than the lowest score.
 """
 from __future__ import annotations
 
