@@ -115,7 +115,7 @@ class Localizer:
             from vpr_edge.calibration import load
 
             self._calibration = load(calibration, self.matcher.name)
-        line = self._calibration.line if self._calibration is not None and self._calibration.has_line else None
+        line = None if self._calibration is None else self._calibration.target_line()
         self.threshold = self.matcher.lost_line(min_confidence, target_precision, live=True, line=line)
         if self.threshold is not None and math.isinf(self.threshold):   # the drive does not show the target
             raise InputError("{opt.target_precision} {v}: {path}, the labelled drive, does not show that precision "

@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -108,6 +109,10 @@ class Curve:
     def has_line(self) -> bool:
         """Whether the calibration holds the drive's line (schema 2)."""
         return len(self.line_scores) > 0
+
+    def target_line(self) -> Callable[[float], float] | None:
+        """``line`` where the calibration holds one, else None (a target precision then sets no line)."""
+        return self.line if self.has_line else None
 
     def line(self, target: float) -> float:
         """The lowest score whose answers at least as high the drive shows right at least ``target`` of the

@@ -91,8 +91,9 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     references' ``positions``, the error in metres too; with a ``calibration`` (score -> probability right,
     ``vpr_edge.calibration.Curve``, fitted on other data), its expected calibration error over the answers
     given, and with a ``target_precision`` the lost line its drive's answers reached it at (``Curve.line``,
-    as ``Localizer`` draws it); without one, for a matcher whose score is a probability (``Matcher.probability``), that
-    probability's over every frame (it is the answer's, lost or not). ``still`` (Q,): each
+    as ``Localizer`` draws it); without one, for a matcher whose score is a probability
+    (``Matcher.probability``), that probability's over every frame (it is the answer's, lost or not).
+    ``still`` (Q,): each
     frame's motion cue (``Matcher.cue`` of the query encodings; None: a bare similarity matrix). ``drive`` (R,):
     each reference's drive in a map of several (answers within ``tolerance`` count only in the truth's drive).
     ``one_view`` (Q,) bool: the frames whose truth lies where the map shows one view (``truth.one_view``): the
@@ -103,7 +104,7 @@ def evaluate_mode(matcher: Matcher, sim: np.ndarray, truth: np.ndarray, toleranc
     t0 = time.perf_counter()
     result = matcher.run(sim, k=max(RECALL_KS), still=still, search=search)
     ms = 1e3 * (time.perf_counter() - t0) / len(sim)
-    line = calibration.line if calibration is not None and calibration.has_line else None
+    line = None if calibration is None else calibration.target_line()
     threshold = matcher.lost_line(min_confidence, target_precision, line=line)
     target = TARGET_PRECISION if target_precision is None else target_precision
     report = replace(score_result(result, truth, tolerance, threshold, ms, positions, drive, one_view, target),
