@@ -65,6 +65,25 @@ def test_map_contents(small_map: Path, model_path: Path) -> None:
     assert pm.encoder.name == "ifv" and pm.svm is None
 
 
+def test_localize_says_the_line_a_calibration_gives(tmp_path: Path, small_map: Path, small_queries: Path) -> None:
+    """localize --calibration --target-precision says the line in force (its score and where it comes from) before
+    the stream, and answers every frame scoring at least that."""
+    from vpr_edge.calibration import fit, write
+
+    rng = np.random.default_rng(2)
+    s = rng.uniform(-1, 3, 400)
+    curve = fit(s, rng.random(400) < (s + 1) / 4, 1)
+    write(tmp_path / "cal.json", {"stream": curve}, "test")
+    proc = run("localize", "-m", small_map, "-s", small_queries, "--calibration", tmp_path / "cal.json",
+               "--target-precision", "0.8")
+    assert proc.returncode == 0, proc.stderr
+    line = curve.line(0.8)
+    said = f"lost below score {line:.6g}: where {tmp_path / 'cal.json'}'s labelled drive shows precision 0.8"
+    assert said in proc.stderr
+    rows = list(csv.DictReader(proc.stdout.splitlines()))
+    assert [r["lost"] == "1" for r in rows] == [float(r["score"]) < line for r in rows]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["stream", "stream --min-confidence 0", "stream --window 3", "dtw", "single",
                                   "dtw --variant distance --open-ends", "stream --param lock=5 --param turn=0.5"])
