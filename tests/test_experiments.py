@@ -545,6 +545,44 @@ def test_front_end_line_targets_count_as_a_plain_loop() -> None:
     assert beyond > 0 and elig > 0
 
 
+def test_front_end_best_line_against_every_line_tried() -> None:
+    """--oracle's line for one front end: the figures of a stream lost below a score, against plain counts; the
+    line chosen meets at least as many of the acting targets (precision, detour, foreign imagery) as any other
+    score, and at least as many not-silent streams as any other line meeting as many."""
+    from vpr_edge_bench.experiments.front_end_lines import StreamAnswers, best_line, line_figures, targets
+
+    rng = np.random.default_rng(8)
+    streams = []
+    for name in ("aligned", "speed2", "detour", "foreign"):
+        n = 60
+        scores = rng.uniform(0, 2, n)
+        mapped = np.ones(n, bool) if name != "detour" else np.arange(n) < 40
+        if name == "foreign":
+            mapped = np.zeros(n, bool)
+        right = mapped & (rng.random(n) < scores / 2)
+        view = np.arange(n) < 5
+        streams.append(StreamAnswers(name, scores, right, mapped, view, float(right.mean() + 0.1), 0.4))
+    fig = line_figures(streams[2], 1.0)
+    given = streams[2].scores >= 1.0
+    assert fig.answered_right == pytest.approx((streams[2].right & given).sum() / given.sum())
+    assert fig.mapped_right == pytest.approx((streams[2].right & given & streams[2].mapped).sum() / 40)
+    assert fig.unmapped_lost == pytest.approx((~given[40:]).mean())
+    assert line_figures(streams[3], 1.0).unmapped_lost == pytest.approx((streams[3].scores < 1.0).mean())
+
+    def ranks(line: float) -> tuple[int, int]:
+        figs = [line_figures(a, line) for a in streams]
+        got = targets([f for f in figs if f.stream != "foreign"], [figs[3].unmapped_lost], 0.98)
+        met = {k: int(v.split("/")[0]) for k, v in got.items()}
+        return (met["... over distinct frames"] + met["detour unmapped lost >= 0.95"] + met["foreign lost >= 0.99"],
+                met["not silent where eligible"] + met["... followed, not eligible"])
+
+    line, counts = best_line(streams, 0.98)
+    every = np.concatenate([a.scores for a in streams])
+    tried = [ranks(x) for x in np.r_[np.quantile(every, np.linspace(0, 1, 200)), np.inf]]
+    assert ranks(line) == max(tried)
+    foreign = [line_figures(streams[3], line).unmapped_lost]
+    assert counts == targets([line_figures(a, line) for a in streams[:3]], foreign, 0.98)
+
 def test_front_end_line_reliability_and_lead_as_plain_loops() -> None:
     """The reliability table's bins (the last closed) and each frame's lead, against plain loops."""
     from vpr_edge_bench.experiments.front_end_lines import EDGES, lead, reliability

@@ -29,6 +29,10 @@ view (foreign imagery: its own column), per front end and pooled; beside it each
 of how far ahead of the truth the frame's best match within ``LEAD_REACH`` of it lies (the truth's convention
 against what the front end sees).
 
+With ``--oracle``, last, per dataset and mode the targets met when each front end's line is the one score
+that meets the most of them (``best_line``: chosen with the truth, so not a line a vehicle can draw; what the
+mode's ranking allows, apart from where its line sits).
+
 With ``--calibrate-on STREAM`` each front end's and mode's calibration is fitted on that stream, a labelled
 drive (``evaluate --save-calibration``: ``calibration.fit``), and every other stream is lost below the line
 where that drive's answers showed the target precision (``localize --calibration FILE --target-precision P``);
@@ -46,6 +50,7 @@ import numpy as np
 from vpr_edge import calibration
 from vpr_edge.calibration import Curve
 from vpr_edge.errors import VprError
+from vpr_edge.evaluation import metrics
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.constants import TARGET_PRECISION
@@ -109,6 +114,61 @@ def targets(streams: Sequence[StreamFigures], foreign: Sequence[float] | None, t
     return out
 
 
+@dataclasses.dataclass(frozen=True)
+class StreamAnswers:
+    """One mode's answers on one stream, for lines drawn afresh (``line_figures``): each frame's ``scores``,
+    whether it was ``right`` and ``mapped``, whether its truth lies where the map shows one view, the best
+    answers' R@1 and the best line's recall at the target (the mode's ranking; NaN on foreign imagery)."""
+
+    stream: str
+    scores: np.ndarray
+    right: np.ndarray
+    mapped: np.ndarray
+    one_view: np.ndarray
+    best_r1: float = float("nan")
+    best_line: float = float("nan")
+
+
+def line_figures(answers: StreamAnswers, line: float) -> StreamFigures:
+    """The figures of ``answers`` lost below the score ``line`` (no line gap: NaN)."""
+    given = answers.scores >= line
+    nan = float("nan")
+    if answers.stream == "foreign":
+        return StreamFigures(nan, nan, nan, nan, nan, nan, float((~given).mean()), answers.stream)
+    answered_right, mapped_right = metrics.answered_shares(answers.right, ~given, answers.mapped)
+    keep = ~answers.one_view
+    distinct = metrics.answered_shares(answers.right[keep], ~given[keep], answers.mapped[keep])[0] \
+        if answers.one_view.any() else nan
+    unmapped = float((~given[~answers.mapped]).mean()) if answers.stream == "detour" and (~answers.mapped).any() \
+        else nan
+    return StreamFigures(answers.best_r1, answered_right, distinct, mapped_right, answers.best_line, nan, unmapped,
+                         answers.stream)
+
+
+def best_line(streams: Sequence[StreamAnswers], target: float, candidates: int = 200) -> tuple[float, dict[str, str]]:
+    """The one line on the score that meets the most targets of ``streams`` (one front end's, foreign imagery
+    among them), chosen with their truth (what the mode's ranking allows; ``targets``): among ``candidates``
+    quantiles of the scores (and no answer at all), those meeting the most of the targets a vehicle acts on
+    (precision where eligible, over the distinct frames where a stream has one-view frames, the detour and
+    foreign imagery lost), of those the ones not silent on the most streams, of those the lowest.
+    -> (the line, its ``targets`` counts)."""
+    every = np.concatenate([a.scores for a in streams])
+    lines = np.unique(np.r_[np.quantile(every, np.linspace(0, 1, candidates)), np.inf])
+    safe = ("... over distinct frames", "detour unmapped lost", "foreign lost")
+    best: tuple[tuple[int, int], float, dict[str, str]] | None = None
+    for line in lines:
+        figs = [line_figures(a, line) for a in streams]
+        foreign = [f.unmapped_lost for f in figs if f.stream == "foreign"]
+        counts = targets([f for f in figs if f.stream != "foreign"], foreign or None, target)
+        met = {k: int(v.split("/")[0]) for k, v in counts.items()}
+        rank = (sum(v for k, v in met.items() if k.startswith(safe)),
+                sum(v for k, v in met.items() if "silent" in k or k.startswith("... followed")))
+        if best is None or rank > best[0]:
+            best = (rank, float(line), counts)
+    assert best is not None
+    return best[1], best[2]
+
+
 def reliability(probability: np.ndarray, right: np.ndarray, edges: Sequence[float] = EDGES) -> list[tuple[float, int]]:
     """Per bin [edges[i], edges[i+1]) of ``probability`` (Q,) (the last bin closed): (the share of ``right``
     (Q,) bool among the answers in it, NaN where none; how many)."""
@@ -166,6 +226,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--target-precision", type=float, default=TARGET_PRECISION)
     p.add_argument("--ranges", action="store_true", help="print the ranges over the streams only (docs/results.md)")
+    p.add_argument("--oracle", action="store_true",
+                   help="also the one line per dataset, front end and mode that meets the most targets at once, "
+                        "chosen with the truth: what the mode's ranking allows")
     p.add_argument("--calibrate-on", default=None, metavar="STREAM",
                    help="fit each front end's and mode's calibration on this derived stream (a labelled drive: "
                         "evaluate --save-calibration) and draw every other stream's line where that drive's "
@@ -191,6 +254,7 @@ def _run(a: argparse.Namespace) -> int:
     seen: dict[tuple[str, str, str], list[StreamFigures]] = {}   # (dataset, front, mode) -> each stream's
     sure: dict[tuple[str, str, str], list[tuple[np.ndarray, np.ndarray]]] = {}   # ... (probability, right) per stream
     leads: dict[tuple[str, str], list[np.ndarray]] = {}   # (dataset, front) -> each stream's leads
+    answers: dict[tuple[str, str, str], list[StreamAnswers]] = {}   # ... each stream's answers (--oracle)
     print(f"tolerance {a.tolerance}, target precision {a.target_precision}")
     row = (lambda text: None) if a.ranges else (lambda text: print(text, flush=True))   # the per-stream rows
     row("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
@@ -223,6 +287,11 @@ def _run(a: argparse.Namespace) -> int:
                         sure.setdefault((ds.name, front, mode), []).append((r.probabilities[keep], r.correct[keep]))
                     if mode == modes[0] and f.stem != "foreign":
                         leads.setdefault((ds.name, front), []).append(lead(case["sim"], case["truth"]))
+                    if a.oracle and r.scores is not None:
+                        view = np.zeros(len(r.correct), bool) if r.one_view is None else r.one_view
+                        answers.setdefault((ds.name, front, mode), []).append(StreamAnswers(
+                            f.stem, r.scores, r.correct, (case["truth"] >= 0).any(axis=1), view,
+                            r.recall[1] if f.stem != "foreign" else nan, r.best_line_recall))
                     if f.stem == "foreign":
                         fig = StreamFigures(nan, nan, nan, nan, nan, nan, r.lost_unmapped, f.stem)
                         row(f"| {ds.name} | {front} | {mode} | foreign | - | - | - | - | - | - | "
@@ -241,7 +310,29 @@ def _run(a: argparse.Namespace) -> int:
     print_targets(seen, a.target_precision)
     if not a.calibrate_on:   # the probability is the same whatever the line: printed once, without a drive
         print_reliability(sure, leads)
+    if a.oracle:
+        print_oracle(answers, a.target_precision)
     return 0
+
+
+def print_oracle(answers: dict[tuple[str, str, str], list[StreamAnswers]], target: float) -> None:
+    """Per dataset and mode, the streams of every front end that meet each target with each front end's
+    ``best_line`` (chosen with the truth)."""
+    pooled: dict[tuple[str, str], list[StreamFigures]] = {}
+    foreign: dict[tuple[str, str], list[float]] = {}
+    for (ds, front, mode), streams in answers.items():
+        line, _ = best_line(streams, target)
+        figs = [line_figures(s, line) for s in streams]
+        pooled.setdefault((ds, mode), []).extend(f for f in figs if f.stream != "foreign")
+        foreign.setdefault((ds, mode), []).extend(f.unmapped_lost for f in figs if f.stream == "foreign")
+    rows = {key: targets(figs, foreign[key] or None, target) for key, figs in pooled.items()}
+    names = [n for n in next(iter(rows.values())) if not n.startswith("line gap")]
+    print("\none line per dataset, front end and mode, chosen with the truth (the most targets met at once): "
+          "streams that meet each target")
+    print("\n| dataset | mode | " + " | ".join(names) + " |")
+    print("|---|---|" + "---|" * len(names))
+    for (ds, mode), row in rows.items():
+        print(f"| {ds} | `{mode}` | " + " | ".join(row.get(n, "-") for n in names) + " |")
 
 
 def unmapped(lost: float, first_exit: float | None) -> str:
