@@ -511,7 +511,7 @@ def test_front_end_line_targets_count_as_a_plain_loop() -> None:
     """front-end-lines' count of the streams that meet each target of the line, against the targets counted one
     stream at a time: eligible where the best line reaches at least half the best R@1, a NaN gap not counted, a
     stream without one-view frames judged on every frame."""
-    from vpr_edge_bench.experiments.front_end_lines import StreamFigures, targets
+    from vpr_edge_bench.line_targets import StreamFigures, targets
 
     nan = float("nan")
     rng = np.random.default_rng(3)
@@ -549,7 +549,7 @@ def test_front_end_best_line_against_every_line_tried() -> None:
     """--oracle's line for one front end: the figures of a stream lost below a score, against plain counts; the
     line chosen meets at least as many of the acting targets (precision, detour, foreign imagery) as any other
     score, and at least as many not-silent streams as any other line meeting as many."""
-    from vpr_edge_bench.experiments.front_end_lines import StreamAnswers, best_line, line_figures, targets
+    from vpr_edge_bench.line_targets import StreamAnswers, best_line, line_figures, targets
 
     rng = np.random.default_rng(8)
     streams = []
@@ -585,7 +585,7 @@ def test_front_end_best_line_against_every_line_tried() -> None:
 
 def test_front_end_line_reliability_and_lead_as_plain_loops() -> None:
     """The reliability table's bins (the last closed) and each frame's lead, against plain loops."""
-    from vpr_edge_bench.experiments.front_end_lines import EDGES, lead, reliability
+    from vpr_edge_bench.line_targets import EDGES, lead, reliability
 
     rng = np.random.default_rng(5)
     p = np.concatenate([rng.uniform(0, 1, 300), [0.5, 0.8, 0.98, 1.0]])
