@@ -184,11 +184,13 @@ def _run(a: argparse.Namespace) -> int:
 
 def print_oracle(answers: dict[tuple[str, str, str], list[StreamAnswers]], target: float) -> None:
     """Per dataset and mode, the streams of every front end that meet each target with each front end's
-    ``best_line`` (chosen with the truth)."""
+    ``best_line`` (chosen with the truth), then those lines."""
     pooled: dict[tuple[str, str], list[StreamFigures]] = {}
     foreign: dict[tuple[str, str], list[float]] = {}
+    lines: dict[tuple[str, str], dict[str, float]] = {}   # (dataset, mode) -> front end -> its line
     for (ds, front, mode), streams in answers.items():
         line, _ = best_line(streams, target)
+        lines.setdefault((ds, mode), {})[front] = line
         figs = [line_figures(s, line) for s in streams]
         pooled.setdefault((ds, mode), []).extend(f for f in figs if f.stream != "foreign")
         foreign.setdefault((ds, mode), []).extend(f.unmapped_lost for f in figs if f.stream == "foreign")
@@ -200,6 +202,11 @@ def print_oracle(answers: dict[tuple[str, str, str], list[StreamAnswers]], targe
     print("|---|---|" + "---|" * len(names))
     for (ds, mode), row in rows.items():
         print(f"| {ds} | `{mode}` | " + " | ".join(row.get(n, "-") for n in names) + " |")
+    fronts = sorted({f for per in lines.values() for f in per})
+    print("\nthose lines (scores; inf: no answer)\n\n| dataset | mode | " + " | ".join(fronts) + " |")
+    print("|---|---|" + "---|" * len(fronts))
+    for (ds, mode), per in lines.items():
+        print(f"| {ds} | `{mode}` | " + " | ".join(f"{per[f]:.3f}" if f in per else "-" for f in fronts) + " |")
 
 
 def unmapped(lost: float, first_exit: float | None) -> str:
