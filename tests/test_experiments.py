@@ -122,6 +122,17 @@ def test_experiments_refuse_bad_input_in_one_line(tmp_path: Path, name: str, arg
     assert proc.stdout == "" and list(tmp_path.iterdir()) == []
 
 
+def test_front_end_lines_checks_every_labelled_drive_first(tmp_path: Path) -> None:
+    """--calibrate-on names a stream every cached front end must hold: one line naming the missing file,
+    exit 2, before any output."""
+    for front in ("hog", "ifv"):
+        (tmp_path / "corridor" / front).mkdir(parents=True)
+    np.savez(tmp_path / "corridor" / "hog" / "aligned.npz", sim=np.zeros((2, 2)))
+    proc = bench_run("front-end-lines", "--cache", str(tmp_path), "--calibrate-on", "aligned", timeout=120)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and proc.stdout == "", proc.stderr
+    assert "ifv/aligned.npz: no such stream to calibrate on (--calibrate-on)" in lines[0]
+
 @pytest.mark.slow
 def test_thesis_grid_writes_tables_and_curves(tmp_path: Path, small_refs: Path, small_queries: Path) -> None:
     import json

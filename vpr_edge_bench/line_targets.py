@@ -50,10 +50,10 @@ def targets(streams: Sequence[StreamFigures], foreign: Sequence[float] | None, t
     def count(met: Sequence[bool]) -> str:
         return f"{sum(met)}/{len(met)}"
 
-    gaps = [f.line_gap for f in streams if not np.isnan(f.line_gap)]
     def allows(f: StreamFigures) -> bool:
         return f.best_line > 0 and f.best_line >= 0.5 * f.best_r1
 
+    gaps = [f.line_gap for f in streams if not np.isnan(f.line_gap)]
     eligible = [f for f in streams if allows(f)]
     beyond = [f for f in streams if not allows(f) and f.best_r1 >= FOLLOWED]
     distinct = [f.answered_right if np.isnan(f.distinct_answered_right) else f.distinct_answered_right

@@ -114,6 +114,15 @@ def _run(a: argparse.Namespace) -> int:
             matcher_of(mode)
     except ValueError as e:
         raise VprError(f"--modes: {e}") from None
+    datasets = sorted(d for d in a.cache.iterdir() if d.is_dir() and d.name != "models")
+    fronts_of = {ds: [f for f in sorted(g.name for g in ds.iterdir() if g.is_dir())
+                      if not a.fronts or f in a.fronts.split(",")] for ds in datasets}
+    if a.calibrate_on:   # every front end's labelled drive, before the work
+        for ds, fronts in fronts_of.items():
+            for front in fronts:
+                if not (ds / front / f"{a.calibrate_on}.npz").is_file():
+                    raise VprError(f"{ds / front / a.calibrate_on}.npz: no such stream to calibrate on "
+                                   "(--calibrate-on)")
     use_threads(2)
     modes = a.modes.split(",")
     if a.calibrate_on:
@@ -127,16 +136,11 @@ def _run(a: argparse.Namespace) -> int:
     row("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
         "best line @P | line gap | unmapped lost (first) |")
     row("|---|---|---|---|---|---|---|---|---|---|---|")
-    for ds in sorted(d for d in a.cache.iterdir() if d.is_dir() and d.name != "models"):
-        fronts = sorted(f.name for f in ds.iterdir() if f.is_dir())
-        if a.fronts:
-            fronts = [f for f in a.fronts.split(",") if f in fronts]
+    for ds, fronts in fronts_of.items():
         for front in fronts:
             files = sorted((ds / front).glob("*.npz"))
             if a.calibrate_on:
                 drive = ds / front / f"{a.calibrate_on}.npz"
-                if not drive.is_file():
-                    raise VprError(f"{drive}: no such stream to calibrate on (--calibrate-on)")
                 files = [f for f in files if f != drive]
             for mode in modes:
                 curve = None
@@ -185,16 +189,13 @@ def _run(a: argparse.Namespace) -> int:
 def print_oracle(answers: dict[tuple[str, str, str], list[StreamAnswers]], target: float) -> None:
     """Per dataset and mode, the streams of every front end that meet each target with each front end's
     ``best_line`` (chosen with the truth), then those lines."""
-    pooled: dict[tuple[str, str], list[StreamFigures]] = {}
-    foreign: dict[tuple[str, str], list[float]] = {}
+    seen: dict[tuple[str, str, str], list[StreamFigures]] = {}   # each stream's figures at its front end's line
     lines: dict[tuple[str, str], dict[str, float]] = {}   # (dataset, mode) -> front end -> its line
     for (ds, front, mode), streams in answers.items():
         line, _ = best_line(streams, target)
         lines.setdefault((ds, mode), {})[front] = line
-        figs = [line_figures(s, line) for s in streams]
-        pooled.setdefault((ds, mode), []).extend(f for f in figs if f.stream != "foreign")
-        foreign.setdefault((ds, mode), []).extend(f.unmapped_lost for f in figs if f.stream == "foreign")
-    rows = {key: targets(figs, foreign[key] or None, target) for key, figs in pooled.items()}
+        seen[(ds, front, mode)] = [line_figures(s, line) for s in streams]
+    rows = pooled_targets(seen, target)
     names = [n for n in next(iter(rows.values())) if not n.startswith("line gap")]
     print("\none line per dataset, front end and mode, chosen with the truth (the most targets met at once): "
           "streams that meet each target")
@@ -216,14 +217,21 @@ def unmapped(lost: float, first_exit: float | None) -> str:
     return f"{lost:.3f}" + ("" if first_exit is None else f" ({first_exit:.0f})")
 
 
-def print_targets(seen: dict[tuple[str, str, str], list[StreamFigures]], target: float) -> None:
-    """Per dataset and mode, the streams of every front end that meet each target of the line (``targets``)."""
+def pooled_targets(seen: dict[tuple[str, str, str], list[StreamFigures]],
+                   target: float) -> dict[tuple[str, str], dict[str, str]]:
+    """Per dataset and mode, ``targets`` over the streams of every front end (``seen``: (dataset, front end,
+    mode) -> each stream's figures, foreign imagery among them)."""
     streams: dict[tuple[str, str], list[StreamFigures]] = {}   # (dataset, mode) -> every front end's streams
     foreign: dict[tuple[str, str], list[float]] = {}          # (dataset, mode) -> each front end's foreign lost
     for (ds, _, mode), figs in seen.items():
         streams.setdefault((ds, mode), []).extend(f for f in figs if f.stream != "foreign")
         foreign.setdefault((ds, mode), []).extend(f.unmapped_lost for f in figs if f.stream == "foreign")
-    rows = {key: targets(figs, foreign[key] or None, target) for key, figs in streams.items()}
+    return {key: targets(figs, foreign[key] or None, target) for key, figs in streams.items()}
+
+
+def print_targets(seen: dict[tuple[str, str, str], list[StreamFigures]], target: float) -> None:
+    """Per dataset and mode, the streams of every front end that meet each target of the line (``targets``)."""
+    rows = pooled_targets(seen, target)
     if not rows:
         return
     names = list(next(iter(rows.values())))
