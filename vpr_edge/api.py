@@ -90,7 +90,8 @@ class Localizer:
     line of a matcher whose score is the probability that its answer is right (``stream-prob``; for another
     mode, VprError: it sets no line there) or, with a ``calibration`` (``evaluate --save-calibration`` on a
     labelled drive), of any mode: the lowest score whose answers at least as high were right that often on
-    the drive (``calibration.Curve.line``). ``precision``: the model's form (``features.choice``: auto runs
+    the drive (``calibration.Curve.line``; ``threshold`` is the line drawn, ``drive_line`` whether it is the
+    drive's). ``precision``: the model's form (``features.choice``: auto runs
     its int8 form where the CPU has int8 dot products; fp32; int8). ``threads`` > 0 sets
     onnxruntime's threads and, process-wide, NumPy's BLAS pool to that count (0: one per core for both;
     None: onnxruntime's default, BLAS untouched). ``coarse``: a local-search matcher's whole-route frames use
@@ -117,6 +118,8 @@ class Localizer:
             self._calibration = load(calibration, self.matcher.name)
         line = None if self._calibration is None else self._calibration.target_line()
         self.threshold = self.matcher.lost_line(min_confidence, target_precision, live=True, line=line)
+        # whether that line is the labelled drive's (``Matcher.lost_line``: a given min_confidence comes first)
+        self.drive_line = line is not None and target_precision is not None and min_confidence is None
         if self.threshold is not None and math.isinf(self.threshold):   # the drive does not show the target
             raise InputError("{opt.target_precision} {v}: {path}, the labelled drive, does not show that precision "
                              "for mode {name} (every answer would be lost): label a longer drive, or ask for less",

@@ -127,7 +127,7 @@ def localize_cmd(
                               min_confidence=min_confidence, threads=threads, calibration=calibration,
                               precision=precision.value, target_precision=target_precision)
         localizer.query.check_source(stream)   # descriptors for a map of descriptors, images for one of images
-        if calibration is not None and target_precision is not None and min_confidence is None:   # the line in force
+        if localizer.drive_line:   # the line in force, from the labelled drive
             typer.echo(f"vpr-edge: lost below score {localizer.threshold:.6g}: where {calibration}'s labelled drive "
                        f"shows precision {target_precision:g}", err=True)
         if precision.value == "auto" and "form" in localizer.front_description:   # what auto chose, said once
