@@ -41,14 +41,15 @@ class StreamFigures:
     first_exit: float | None = None
 
 
-def targets(streams: Sequence[StreamFigures], foreign: Sequence[float] | None, target: float) -> dict[str, str]:
+def targets(streams: Sequence[StreamFigures], foreign: Sequence[float] | None,
+            target: float) -> dict[str, tuple[int, int]]:
     """Per target of the line, how many of one dataset's ``streams`` (one mode, every front end) meet it, as
-    "met/of": line gap (of the streams where it is defined), target precision where eligible (over every frame;
+    (met, of) (``count_text`` writes it): line gap (of the streams where it is defined), target precision where eligible (over every frame;
     over the distinct frames, where a stream has one-view frames), not silent where eligible and where followed
     (best R@1 >= ``FOLLOWED``) but not eligible, the detour's unmapped frames lost, and with ``foreign`` (each
     front end's share of foreign imagery lost; None: not measured) foreign imagery."""
-    def count(met: Sequence[bool]) -> str:
-        return f"{sum(met)}/{len(met)}"
+    def count(met: Sequence[bool]) -> tuple[int, int]:
+        return int(sum(met)), len(met)
 
     def allows(f: StreamFigures) -> bool:
         return f.best_line > 0 and f.best_line >= 0.5 * f.best_r1
@@ -101,7 +102,13 @@ def line_figures(answers: StreamAnswers, line: float) -> StreamFigures:
                          answers.stream)
 
 
-def best_line(streams: Sequence[StreamAnswers], target: float, candidates: int = 200) -> tuple[float, dict[str, str]]:
+def count_text(counts: dict[str, tuple[int, int]]) -> dict[str, str]:
+    """``targets``' counts as "met/of"."""
+    return {k: f"{met}/{of}" for k, (met, of) in counts.items()}
+
+
+def best_line(streams: Sequence[StreamAnswers], target: float,
+              candidates: int = 200) -> tuple[float, dict[str, tuple[int, int]]]:
     """The one line on the score that meets the most targets of ``streams`` (one front end's, foreign imagery
     among them), chosen with their truth (what the mode's ranking allows; ``targets``): among ``candidates``
     quantiles of the scores (and no answer at all), those meeting the most of the targets a vehicle acts on
@@ -111,12 +118,12 @@ def best_line(streams: Sequence[StreamAnswers], target: float, candidates: int =
     every = np.concatenate([a.scores for a in streams])
     lines = np.unique(np.r_[np.quantile(every, np.linspace(0, 1, candidates)), np.inf])
     safe = ("... over distinct frames", "detour unmapped lost", "foreign lost")
-    best: tuple[tuple[int, int], float, dict[str, str]] | None = None
+    best: tuple[tuple[int, int], float, dict[str, tuple[int, int]]] | None = None
     for line in lines:
         figs = [line_figures(a, line) for a in streams]
         foreign = [f.unmapped_lost for f in figs if f.stream == "foreign"]
         counts = targets([f for f in figs if f.stream != "foreign"], foreign or None, target)
-        met = {k: int(v.split("/")[0]) for k, v in counts.items()}
+        met = {k: v[0] for k, v in counts.items()}
         rank = (sum(v for k, v in met.items() if k.startswith(safe)),
                 sum(v for k, v in met.items() if "silent" in k or k.startswith("... followed")))
         if best is None or rank > best[0]:

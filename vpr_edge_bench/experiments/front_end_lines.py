@@ -55,7 +55,7 @@ from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.threads import use_threads
 from vpr_edge_bench.line_targets import (EDGES, LEAD_REACH, StreamAnswers, StreamFigures, best_line,
-                                         lead, line_figures, reliability, targets)
+                                         count_text, lead, line_figures, reliability, targets)
 from vpr_edge_bench.runner import parser, run_checked
 
 
@@ -219,14 +219,14 @@ def unmapped(lost: float, first_exit: float | None) -> str:
 
 def pooled_targets(seen: dict[tuple[str, str, str], list[StreamFigures]],
                    target: float) -> dict[tuple[str, str], dict[str, str]]:
-    """Per dataset and mode, ``targets`` over the streams of every front end (``seen``: (dataset, front end,
+    """Per dataset and mode, ``targets`` ("met/of") over the streams of every front end (``seen``: (dataset, front end,
     mode) -> each stream's figures, foreign imagery among them)."""
     streams: dict[tuple[str, str], list[StreamFigures]] = {}   # (dataset, mode) -> every front end's streams
     foreign: dict[tuple[str, str], list[float]] = {}          # (dataset, mode) -> each front end's foreign lost
     for (ds, _, mode), figs in seen.items():
         streams.setdefault((ds, mode), []).extend(f for f in figs if f.stream != "foreign")
         foreign.setdefault((ds, mode), []).extend(f.unmapped_lost for f in figs if f.stream == "foreign")
-    return {key: targets(figs, foreign[key] or None, target) for key, figs in streams.items()}
+    return {key: count_text(targets(figs, foreign[key] or None, target)) for key, figs in streams.items()}
 
 
 def print_targets(seen: dict[tuple[str, str, str], list[StreamFigures]], target: float) -> None:
