@@ -516,6 +516,12 @@ def test_front_end_cache_then_lines(every_stream: Path, tmp_path: Path) -> None:
     assert "each line from a calibration on aligned" in fitted
     cells = [line.split("|")[4].strip() for line in fitted.splitlines() if line.startswith("| corridor | ifv |")]
     assert {c for c in cells if c in (*KINDS, "foreign")} == {*KINDS, "foreign"} - {"aligned"}
+    # a drive on the other half of the map too short to calibrate on: one line, before the work
+    short = subprocess.run([sys.executable, "-m", "vpr_edge_bench", "front-end-lines", "--cache", str(cache),
+                            "--modes", "stream", "--calibrate-on", "aligned", "--half", "second"],
+                           capture_output=True, text=True)
+    assert short.returncode == 2 and "aligned.npz: fewer than 20 frames on the first half" in short.stderr
+    assert "Traceback" not in short.stderr and "| corridor |" not in short.stdout
 
 
 def test_front_end_line_targets_count_as_a_plain_loop() -> None:
@@ -530,8 +536,9 @@ def test_front_end_line_targets_count_as_a_plain_loop() -> None:
                for i in range(40)]
     streams[5] = StreamFigures(0.8, nan, nan, 0.0, 0.1, nan, nan)   # a silent stream: no answers, no gap
     streams[6] = StreamFigures(0.8, 0.97, nan, 0.5, 0.6, 0.01, nan)  # eligible, no one-view frames, below 0.98
+    streams[7] = StreamFigures(0.6, nan, nan, 0.0, 0.4, nan, nan)   # eligible and silent: no answer at all
     got = targets(streams, [1.0, 0.99, 0.5, 0.995], 0.98)
-    gap_met = gap_all = elig = met = met_d = loud = det = det_met = beyond = loud_beyond = 0
+    gap_met = gap_all = elig = met = met_d = none = loud = det = det_met = beyond = loud_beyond = 0
     for f in streams:
         if f.line_gap == f.line_gap:
             gap_all += 1
@@ -542,6 +549,7 @@ def test_front_end_line_targets_count_as_a_plain_loop() -> None:
             nan_d = f.distinct_answered_right != f.distinct_answered_right
             d = f.answered_right if nan_d else f.distinct_answered_right
             met_d += d >= 0.98
+            none += f.answered_right != f.answered_right
             loud += f.mapped_right >= 0.5 * f.best_r1
         elif f.best_r1 >= 0.5:   # followed, the target precision out of reach at half the best R@1
             beyond += 1
@@ -550,11 +558,12 @@ def test_front_end_line_targets_count_as_a_plain_loop() -> None:
             det += 1
             det_met += f.unmapped_lost >= 0.95
     assert got == {"line gap <= 0.05": (gap_met, gap_all), "precision >= target where eligible": (met, elig),
-                   "... over distinct frames": (met_d, elig), "not silent where eligible": (loud, elig),
+                   "... over distinct frames": (met_d, elig), "... none answered": (none, elig),
+                   "not silent where eligible": (loud, elig),
                    "... followed, not eligible": (loud_beyond, beyond),
                    "detour unmapped lost >= 0.95": (det_met, det), "foreign lost >= 0.99": (3, 4)}
     assert count_text(got)["foreign lost >= 0.99"] == "3/4"
-    assert beyond > 0 and elig > 0
+    assert beyond > 0 and elig > 0 and none > 0
 
 
 def test_front_end_best_line_against_every_line_tried() -> None:
@@ -579,6 +588,10 @@ def test_front_end_best_line_against_every_line_tried() -> None:
     assert fig.answered_right == pytest.approx((streams[2].right & given).sum() / given.sum())
     assert fig.mapped_right == pytest.approx((streams[2].right & given & streams[2].mapped).sum() / 40)
     assert fig.unmapped_lost == pytest.approx((~given[40:]).mean())
+    s, r = streams[2].scores, streams[2].right   # the line gap: the best threshold at the delivered precision
+    best = max([(r & (s >= x)).sum() / 40 for x in np.unique(s) if (r & (s >= x)).sum() / (s >= x).sum()
+                >= fig.answered_right - 1e-12], default=0.0)
+    assert fig.line_gap == pytest.approx(best - fig.mapped_right)
     assert line_figures(streams[3], 1.0).unmapped_lost == pytest.approx((streams[3].scores < 1.0).mean())
 
     def ranks(line: float) -> tuple[int, int]:
@@ -620,3 +633,42 @@ def test_front_end_line_reliability_and_lead_as_plain_loops() -> None:
         near = [(sim[q, r], r) for r in range(max(0, t - 3), min(20, t + 4))]
         want.append(max(near)[1] - t)
     assert lead(sim, truth, 3).tolist() == want
+
+
+def test_route_halves_cut_a_stream_as_plain_loops() -> None:
+    """A cached stream against one half of its map: the truth inside shifted and first in its row, the frames
+    from the first to the last of the half with the stream's unmapped frames next to them, the columns cut, the
+    front end alone's R@1 counted again; foreign imagery whole; too few frames: None."""
+    from vpr_edge_bench.route_halves import cut_stream, cut_truth, half_bounds, other_half
+
+    assert half_bounds(9, "first") == (0, 4) and half_bounds(9, "second") == (4, 9)
+    assert other_half("first") == "second" and other_half("second") == "first"
+    with pytest.raises(ValueError, match="half must be one of first, second"):
+        half_bounds(9, "middle")
+    truth = np.array([[1, 2, -1], [5, 3, 4], [-1, -1, -1], [6, 7, 8]])
+    got = cut_truth(truth, 3, 7)
+    for row, cut in zip(truth, got):
+        inside = [t - 3 for t in row if 3 <= t < 7]
+        assert list(cut) == inside + [-1] * (len(row) - len(inside))
+    rng = np.random.default_rng(4)
+    t = np.r_[np.arange(0, 30), np.full(10, -1), np.arange(30, 60)]   # a detour leaving the map at place 30
+    case = {"sim": rng.random((70, 60)).astype(np.float32), "truth": t[:, None], "cue": rng.random(70),
+            "one_view": rng.random(70) < 0.2, "route": rng.random(60) < 0.5, "reach": np.int64(3),
+            "tolerance": np.int64(2)}
+    for half, rows in (("first", np.arange(0, 40)), ("second", np.arange(30, 70))):
+        lo, hi = half_bounds(60, half)
+        cut = cut_stream(case, lo, hi)
+        assert cut is not None
+        np.testing.assert_array_equal(cut["sim"], case["sim"][rows, lo:hi])
+        np.testing.assert_array_equal(cut["truth"][:, 0], np.where(t[rows] >= 0, t[rows] - lo, -1))
+        np.testing.assert_array_equal(cut["cue"], case["cue"][rows])
+        np.testing.assert_array_equal(cut["one_view"], case["one_view"][rows])
+        np.testing.assert_array_equal(cut["route"], case["route"][lo:hi])
+        mapped = np.flatnonzero(cut["truth"][:, 0] >= 0)
+        best = cut["sim"][mapped].argmax(axis=1)
+        assert float(cut["single_r1_tol"]) == pytest.approx(np.mean(np.abs(best - cut["truth"][mapped, 0]) <= 2))
+        assert float(cut["single_r1"]) == pytest.approx(np.mean(best == cut["truth"][mapped, 0]))
+    foreign = dict(case, truth=np.full((70, 1), -1))
+    whole = cut_stream(foreign, 30, 60)
+    assert whole is not None and whole["sim"].shape == (70, 30)
+    assert cut_stream(case, 0, 10) is None   # 10 frames of the half: fewer than 20

@@ -44,10 +44,11 @@ class StreamFigures:
 def targets(streams: Sequence[StreamFigures], foreign: Sequence[float] | None,
             target: float) -> dict[str, tuple[int, int]]:
     """Per target of the line, how many of one dataset's ``streams`` (one mode, every front end) meet it, as
-    (met, of) (``count_text`` writes it): line gap (of the streams where it is defined), target precision where eligible (over every frame;
-    over the distinct frames, where a stream has one-view frames), not silent where eligible and where followed
-    (best R@1 >= ``FOLLOWED``) but not eligible, the detour's unmapped frames lost, and with ``foreign`` (each
-    front end's share of foreign imagery lost; None: not measured) foreign imagery."""
+    (met, of) (``count_text`` writes it): line gap (of the streams where it is defined), target precision where
+    eligible (over every frame; over the distinct frames, where a stream has one-view frames; a stream with no
+    answer does not meet it, and the eligible streams with none are counted apart), not silent where eligible
+    and where followed (best R@1 >= ``FOLLOWED``) but not eligible, the detour's unmapped frames lost, and with
+    ``foreign`` (each front end's share of foreign imagery lost; None: not measured) foreign imagery."""
     def count(met: Sequence[bool]) -> tuple[int, int]:
         return int(sum(met)), len(met)
 
@@ -63,6 +64,7 @@ def targets(streams: Sequence[StreamFigures], foreign: Sequence[float] | None,
     out = {"line gap <= %.2f" % GAP: count([g <= GAP for g in gaps]),
            "precision >= target where eligible": count([f.answered_right >= target for f in eligible]),
            "... over distinct frames": count([d >= target for d in distinct]),
+           "... none answered": count([bool(np.isnan(f.answered_right)) for f in eligible]),
            "not silent where eligible": count([f.mapped_right >= 0.5 * f.best_r1 for f in eligible]),
            "... followed, not eligible": count([f.mapped_right >= 0.5 * f.best_r1 for f in beyond]),
            "detour unmapped lost >= %.2f" % UNMAPPED_LOST: count([d >= UNMAPPED_LOST for d in detours])}
@@ -87,7 +89,8 @@ class StreamAnswers:
 
 
 def line_figures(answers: StreamAnswers, line: float) -> StreamFigures:
-    """The figures of ``answers`` lost below the score ``line`` (no line gap: NaN)."""
+    """The figures of ``answers`` lost below the score ``line``, the line gap as ``evaluate`` counts it (the
+    best line on the scores at the precision delivered, minus the recall delivered)."""
     given = answers.scores >= line
     nan = float("nan")
     if answers.stream == "foreign":
@@ -98,7 +101,9 @@ def line_figures(answers: StreamAnswers, line: float) -> StreamFigures:
         if answers.one_view.any() else nan
     unmapped = float((~given[~answers.mapped]).mean()) if answers.stream == "detour" and (~answers.mapped).any() \
         else nan
-    return StreamFigures(answers.best_r1, answered_right, distinct, mapped_right, answers.best_line, nan, unmapped,
+    curve = metrics.pr_curve(answers.scores, answers.right, int(answers.mapped.sum()))
+    gap = metrics.line_gap(curve, answered_right, mapped_right)
+    return StreamFigures(answers.best_r1, answered_right, distinct, mapped_right, answers.best_line, gap, unmapped,
                          answers.stream)
 
 

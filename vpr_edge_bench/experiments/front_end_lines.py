@@ -37,6 +37,11 @@ With ``--calibrate-on STREAM`` each front end's and mode's calibration is fitted
 drive (``evaluate --save-calibration``: ``calibration.fit``), and every other stream is lost below the line
 where that drive's answers showed the target precision (``localize --calibration FILE --target-precision P``);
 the reliability table is left out (the probability does not depend on the line).
+
+With ``--half first|second|both`` every stream and foreign imagery is scored against that half of the map's
+references alone (``route_halves.cut_stream``: the frames whose truth lies there, a detour's unmapped run
+between them kept), and ``--calibrate-on``'s drive is cut to the other half: the labelled drive and the streams
+then share no place and no image (``both``: each half in turn). ``--counts`` prints the targets' counts only.
 """
 from __future__ import annotations
 
@@ -56,6 +61,7 @@ from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.threads import use_threads
 from vpr_edge_bench.line_targets import (EDGES, LEAD_REACH, StreamAnswers, StreamFigures, best_line,
                                          count_text, lead, line_figures, reliability, targets)
+from vpr_edge_bench.route_halves import HALVES, MIN_FRAMES, cut_stream, half_bounds, other_half
 from vpr_edge_bench.runner import parser, run_checked
 
 
@@ -101,8 +107,30 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "evaluate --save-calibration) and draw every other stream's line where that drive's "
                         "answers reached the target precision (localize --calibration --target-precision); the "
                         "stream itself is left out of the figures")
+    p.add_argument("--half", choices=(*HALVES, "both"), default=None,
+                   help="score every stream against this half of the map's references only (both: each half in "
+                        "turn), and fit --calibrate-on's drive on the other half (no place nor image shared)")
+    p.add_argument("--counts", action="store_true",
+                   help="print the streams that meet each target only (no rows, ranges nor reliability)")
     a = p.parse_args(argv)
     return run_checked(__name__, lambda: _run(a))
+
+
+def cases(files: Sequence[Path], half: str | None) -> list[tuple[str, dict[str, np.ndarray]]]:
+    """Each cached stream's name and arrays (the map's file left out), cut to ``half`` of the map where given
+    (streams with too few frames there left out)."""
+    out = []
+    for f in files:
+        case = load(f)
+        if "sim" not in case:   # the map, the noise drawn
+            continue
+        if half is not None:
+            cut = cut_stream(case, *half_bounds(case["sim"].shape[1], half))
+            if cut is None:
+                continue
+            case = cut
+        out.append((f.stem, case))
+    return out
 
 
 def _run(a: argparse.Namespace) -> int:
@@ -117,22 +145,38 @@ def _run(a: argparse.Namespace) -> int:
     datasets = sorted(d for d in a.cache.iterdir() if d.is_dir() and d.name != "models")
     fronts_of = {ds: [f for f in sorted(g.name for g in ds.iterdir() if g.is_dir())
                       if not a.fronts or f in a.fronts.split(",")] for ds in datasets}
+    halves: list[str | None] = [None] if a.half is None else list(HALVES) if a.half == "both" else [a.half]
     if a.calibrate_on:   # every front end's labelled drive, before the work
         for ds, fronts in fronts_of.items():
             for front in fronts:
-                if not (ds / front / f"{a.calibrate_on}.npz").is_file():
-                    raise VprError(f"{ds / front / a.calibrate_on}.npz: no such stream to calibrate on "
-                                   "(--calibrate-on)")
+                drive = ds / front / f"{a.calibrate_on}.npz"
+                if not drive.is_file():
+                    raise VprError(f"{drive}: no such stream to calibrate on (--calibrate-on)")
+                for half in halves:
+                    if half and not cases([drive], other_half(half)):
+                        raise VprError(f"{drive}: fewer than {MIN_FRAMES} frames on the {other_half(half)} half "
+                                       "of the map to calibrate on (--half)")
     use_threads(2)
+    for half in halves:
+        _score_all(a, fronts_of, half)
+    return 0
+
+
+def _score_all(a: argparse.Namespace, fronts_of: dict[Path, list[str]], half: str | None) -> None:
+    """Every mode on every cached stream of ``fronts_of`` (dataset folder -> its front ends), against ``half``
+    of the map (None: all of it); prints what ``main``'s options ask."""
     modes = a.modes.split(",")
+    if half:
+        print(f"\nevery stream against the {half} half of the map's references")
     if a.calibrate_on:
-        print(f"each line from a calibration on {a.calibrate_on} (left out below)")
+        where = f" on the {other_half(half)} half of the map" if half else ""
+        print(f"each line from a calibration on {a.calibrate_on}{where} (left out below)")
     seen: dict[tuple[str, str, str], list[StreamFigures]] = {}   # (dataset, front, mode) -> each stream's
     sure: dict[tuple[str, str, str], list[tuple[np.ndarray, np.ndarray]]] = {}   # ... (probability, right) per stream
     leads: dict[tuple[str, str], list[np.ndarray]] = {}   # (dataset, front) -> each stream's leads
     answers: dict[tuple[str, str, str], list[StreamAnswers]] = {}   # ... each stream's answers (--oracle)
     print(f"tolerance {a.tolerance}, target precision {a.target_precision}")
-    row = (lambda text: None) if a.ranges else (lambda text: print(text, flush=True))   # the per-stream rows
+    row = (lambda text: None) if a.ranges or a.counts else (lambda text: print(text, flush=True))   # per stream
     row("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
         "best line @P | line gap | unmapped lost (first) |")
     row("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -145,45 +189,43 @@ def _run(a: argparse.Namespace) -> int:
             for mode in modes:
                 curve = None
                 if a.calibrate_on:   # the labelled drive: every answer's score and rightness, the answers given
-                    fit = score(mode, load(drive), a.tolerance, a.target_precision)
+                    labelled = cases([drive], half and other_half(half))[0][1]   # checked in _run
+                    fit = score(mode, labelled, a.tolerance, a.target_precision)
                     curve = calibration.fit(fit.scores, fit.correct, a.tolerance, ~fit.lost)
-                for f in files:
-                    case = load(f)
-                    if "sim" not in case:   # the map, the noise drawn
-                        continue
+                for stem, case in cases(files, half):
                     r = score(mode, case, a.tolerance, a.target_precision, curve)
                     nan = float("nan")
-                    if r.probability and f.stem != "foreign":   # frames whose truth is not at one view
+                    if r.probability and stem != "foreign":   # frames whose truth is not at one view
                         keep = np.ones(len(r.correct), bool) if r.one_view is None else ~r.one_view
                         sure.setdefault((ds.name, front, mode), []).append((r.probabilities[keep], r.correct[keep]))
-                    if mode == modes[0] and f.stem != "foreign":
+                    if mode == modes[0] and stem != "foreign":
                         leads.setdefault((ds.name, front), []).append(lead(case["sim"], case["truth"]))
                     if a.oracle and r.scores is not None:
                         view = np.zeros(len(r.correct), bool) if r.one_view is None else r.one_view
                         answers.setdefault((ds.name, front, mode), []).append(StreamAnswers(
-                            f.stem, r.scores, r.correct, (case["truth"] >= 0).any(axis=1), view,
-                            r.recall[1] if f.stem != "foreign" else nan, r.best_line_recall))
-                    if f.stem == "foreign":
-                        fig = StreamFigures(nan, nan, nan, nan, nan, nan, r.lost_unmapped, f.stem)
+                            stem, r.scores, r.correct, (case["truth"] >= 0).any(axis=1), view,
+                            r.recall[1] if stem != "foreign" else nan, r.best_line_recall))
+                    if stem == "foreign":
+                        fig = StreamFigures(nan, nan, nan, nan, nan, nan, r.lost_unmapped, stem)
                         row(f"| {ds.name} | {front} | {mode} | foreign | - | - | - | - | - | - | "
                             f"{r.lost_unmapped:.3f} |")
                     else:
                         fig = StreamFigures(r.recall[1], r.answered_right, r.distinct_answered_right, r.mapped_right,
                                             r.best_line_recall, r.line_gap,
-                                            r.lost_unmapped if f.stem == "detour" else nan, f.stem,
+                                            r.lost_unmapped if stem == "detour" else nan, stem,
                                             float(case.get("single_r1_tol", nan)),
                                             r.exit_frames[0] if r.exit_frames else None)
-                        row(f"| {ds.name} | {front} | {mode} | {f.stem} | {fig.single:.3f} | {r.recall[1]:.3f} | "
+                        row(f"| {ds.name} | {front} | {mode} | {stem} | {fig.single:.3f} | {r.recall[1]:.3f} | "
                             f"{r.answered_right:.3f} | {r.mapped_right:.3f} | {r.best_line_recall:.3f} | "
                             f"{r.line_gap:.3f} | {unmapped(r.lost_unmapped, fig.first_exit)} |")
                     seen.setdefault((ds.name, front, mode), []).append(fig)
-    print_ranges(seen)
+    if not a.counts:
+        print_ranges(seen)
     print_targets(seen, a.target_precision)
-    if not a.calibrate_on:   # the probability is the same whatever the line: printed once, without a drive
+    if not a.calibrate_on and not a.counts:   # the probability is the same whatever the line: once, without a drive
         print_reliability(sure, leads)
     if a.oracle:
         print_oracle(answers, a.target_precision)
-    return 0
 
 
 def print_oracle(answers: dict[tuple[str, str, str], list[StreamAnswers]], target: float) -> None:
@@ -196,7 +238,7 @@ def print_oracle(answers: dict[tuple[str, str, str], list[StreamAnswers]], targe
         lines.setdefault((ds, mode), {})[front] = line
         seen[(ds, front, mode)] = [line_figures(s, line) for s in streams]
     rows = pooled_targets(seen, target)
-    names = [n for n in next(iter(rows.values())) if not n.startswith("line gap")]
+    names = list(next(iter(rows.values())))
     print("\none line per dataset, front end and mode, chosen with the truth (the most targets met at once): "
           "streams that meet each target")
     print("\n| dataset | mode | " + " | ".join(names) + " |")

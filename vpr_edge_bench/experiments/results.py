@@ -90,6 +90,9 @@ def _e2e(dataset: str) -> "Section":
 _INDEX_BENCH = ("--refs", "100000", "--frames", "5000", "--dim", "512", "--storage", "int8", "--walk", "0.9",
                 "--noise", "1.0", "--cue", "--checkpoints", "5000")
 
+_FRONTS_CACHE = (("-m", "vpr_edge_bench", "front-end-cache", "--streams", "{corridor}", "{nordland-dev}", "--out",
+                  "{out}/fronts"),)   # the front ends' matrices (kept where made)
+
 SECTIONS = (
     Section("lost-line", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "evidence",
                                            "--values=-99,1,1.25,1.5,1.75,2")),
@@ -127,13 +130,19 @@ SECTIONS = (
     Section("front-end-lines", "front-end-lines", ("--cache", "{out}/fronts", "--modes",
                                                    "stream,stream-prob,stream-decoy,seqslam-online", "--ranges",
                                                    "--oracle"),
-            setup=(("-m", "vpr_edge_bench", "front-end-cache", "--streams", "{corridor}", "{nordland-dev}",
-                    "--out", "{out}/fronts"),)),
+            setup=_FRONTS_CACHE),
     Section("front-end-lines-calibrated", "front-end-lines", ("--cache", "{out}/fronts", "--modes",
                                                               "stream,stream-prob,stream-decoy", "--ranges",
                                                               "--calibrate-on", "aligned"),
-            setup=(("-m", "vpr_edge_bench", "front-end-cache", "--streams", "{corridor}", "{nordland-dev}",
-                    "--out", "{out}/fronts"),)),
+            setup=_FRONTS_CACHE),
+    Section("front-end-lines-halves", "front-end-lines", ("--cache", "{out}/fronts", "--modes",
+                                                          "stream,stream-prob,stream-decoy", "--counts", "--half",
+                                                          "both"),
+            setup=_FRONTS_CACHE),
+    Section("front-end-lines-halves-calibrated", "front-end-lines", ("--cache", "{out}/fronts", "--modes",
+                                                                     "stream,stream-prob,stream-decoy", "--counts",
+                                                                     "--half", "both", "--calibrate-on", "aligned"),
+            setup=_FRONTS_CACHE),
     Section("drives", "compare-drives", ("--streams", "{nordland-dev}", "{corridor}", "--drives", "4")),
     Section("drives-append", "compare-drives", ("--streams", "{nordland-dev}", "{corridor}", "--kinds",
                                                 "aligned,speed2,speed3,variable", "--append-seeds", "4")),
