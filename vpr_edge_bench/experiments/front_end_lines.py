@@ -55,7 +55,7 @@ import numpy as np
 from vpr_edge import calibration
 from vpr_edge.calibration import Curve
 from vpr_edge.errors import VprError
-from vpr_edge.evaluation.scoring import evaluate_mode
+from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.threads import use_threads
@@ -182,43 +182,23 @@ def _score_all(a: argparse.Namespace, fronts_of: dict[Path, list[str]], half: st
     row("|---|---|---|---|---|---|---|---|---|---|---|")
     for ds, fronts in fronts_of.items():
         for front in fronts:
-            files = sorted((ds / front).glob("*.npz"))
-            if a.calibrate_on:
-                drive = ds / front / f"{a.calibrate_on}.npz"
-                files = [f for f in files if f != drive]
+            drive = ds / front / f"{a.calibrate_on}.npz" if a.calibrate_on else None
+            files = [f for f in sorted((ds / front).glob("*.npz")) if f != drive]
             for mode in modes:
-                curve = None
-                if a.calibrate_on:   # the labelled drive: every answer's score and rightness, the answers given
-                    labelled = cases([drive], half and other_half(half))[0][1]   # checked in _run
-                    fit = score(mode, labelled, a.tolerance, a.target_precision)
-                    curve = calibration.fit(fit.scores, fit.correct, a.tolerance, ~fit.lost)
+                curve = None if drive is None else drive_curve(mode, drive, half, a.tolerance, a.target_precision)
                 for stem, case in cases(files, half):
                     r = score(mode, case, a.tolerance, a.target_precision, curve)
-                    nan = float("nan")
+                    key = (ds.name, front, mode)
                     if r.probability and stem != "foreign":   # frames whose truth is not at one view
                         keep = np.ones(len(r.correct), bool) if r.one_view is None else ~r.one_view
-                        sure.setdefault((ds.name, front, mode), []).append((r.probabilities[keep], r.correct[keep]))
+                        sure.setdefault(key, []).append((r.probabilities[keep], r.correct[keep]))
                     if mode == modes[0] and stem != "foreign":
                         leads.setdefault((ds.name, front), []).append(lead(case["sim"], case["truth"]))
                     if a.oracle and r.scores is not None:
-                        view = np.zeros(len(r.correct), bool) if r.one_view is None else r.one_view
-                        answers.setdefault((ds.name, front, mode), []).append(StreamAnswers(
-                            stem, r.scores, r.correct, (case["truth"] >= 0).any(axis=1), view,
-                            r.recall[1] if stem != "foreign" else nan, r.best_line_recall))
-                    if stem == "foreign":
-                        fig = StreamFigures(nan, nan, nan, nan, nan, nan, r.lost_unmapped, stem)
-                        row(f"| {ds.name} | {front} | {mode} | foreign | - | - | - | - | - | - | "
-                            f"{r.lost_unmapped:.3f} |")
-                    else:
-                        fig = StreamFigures(r.recall[1], r.answered_right, r.distinct_answered_right, r.mapped_right,
-                                            r.best_line_recall, r.line_gap,
-                                            r.lost_unmapped if stem == "detour" else nan, stem,
-                                            float(case.get("single_r1_tol", nan)),
-                                            r.exit_frames[0] if r.exit_frames else None)
-                        row(f"| {ds.name} | {front} | {mode} | {stem} | {fig.single:.3f} | {r.recall[1]:.3f} | "
-                            f"{r.answered_right:.3f} | {r.mapped_right:.3f} | {r.best_line_recall:.3f} | "
-                            f"{r.line_gap:.3f} | {unmapped(r.lost_unmapped, fig.first_exit)} |")
-                    seen.setdefault((ds.name, front, mode), []).append(fig)
+                        answers.setdefault(key, []).append(stream_answers(r, stem, case))
+                    fig = stream_figures(r, stem, case)
+                    row(figures_row(key, fig, r))
+                    seen.setdefault(key, []).append(fig)
     if not a.counts:
         print_ranges(seen)
     print_targets(seen, a.target_precision)
@@ -226,6 +206,42 @@ def _score_all(a: argparse.Namespace, fronts_of: dict[Path, list[str]], half: st
         print_reliability(sure, leads)
     if a.oracle:
         print_oracle(answers, a.target_precision)
+
+
+def drive_curve(mode: str, drive: Path, half: str | None, tolerance: int, target: float) -> Curve:
+    """``mode``'s calibration on the labelled ``drive`` (cut to the other half of the map than ``half``, where
+    given): every answer's score and rightness, the answers given (``evaluate --save-calibration``)."""
+    labelled = cases([drive], half and other_half(half))[0][1]   # checked in _run
+    fit = score(mode, labelled, tolerance, target)
+    return calibration.fit(fit.scores, fit.correct, tolerance, ~fit.lost)
+
+
+def stream_figures(r: ModeReport, stem: str, case: dict[str, np.ndarray]) -> StreamFigures:
+    """One mode's report on the cached stream ``stem`` as the figures the tables count (foreign imagery: its
+    share lost only; the detour: its unmapped frames lost too)."""
+    nan = float("nan")
+    if stem == "foreign":
+        return StreamFigures(nan, nan, nan, nan, nan, nan, r.lost_unmapped, stem)
+    return StreamFigures(r.recall[1], r.answered_right, r.distinct_answered_right, r.mapped_right,
+                         r.best_line_recall, r.line_gap, r.lost_unmapped if stem == "detour" else nan, stem,
+                         float(case.get("single_r1_tol", nan)), r.exit_frames[0] if r.exit_frames else None)
+
+
+def stream_answers(r: ModeReport, stem: str, case: dict[str, np.ndarray]) -> StreamAnswers:
+    """One mode's answers on the cached stream ``stem``, for lines drawn afresh (``--oracle``)."""
+    view = np.zeros(len(r.correct), bool) if r.one_view is None else r.one_view
+    return StreamAnswers(stem, r.scores, r.correct, (case["truth"] >= 0).any(axis=1), view,
+                         r.recall[1] if stem != "foreign" else float("nan"), r.best_line_recall)
+
+
+def figures_row(key: tuple[str, str, str], fig: StreamFigures, r: ModeReport) -> str:
+    """The per-stream table's row of ``fig`` (``r``'s figures) for (dataset, front end, mode) ``key``."""
+    ds, front, mode = key
+    if fig.stream == "foreign":
+        return f"| {ds} | {front} | {mode} | foreign | - | - | - | - | - | - | {r.lost_unmapped:.3f} |"
+    return (f"| {ds} | {front} | {mode} | {fig.stream} | {fig.single:.3f} | {r.recall[1]:.3f} | "
+            f"{r.answered_right:.3f} | {r.mapped_right:.3f} | {r.best_line_recall:.3f} | {r.line_gap:.3f} | "
+            f"{unmapped(r.lost_unmapped, fig.first_exit)} |")
 
 
 def print_oracle(answers: dict[tuple[str, str, str], list[StreamAnswers]], target: float) -> None:
