@@ -23,6 +23,7 @@ def half_bounds(references: int, half: str) -> tuple[int, int]:
 
 
 def other_half(half: str) -> str:
+    """The half that is not ``half``: where the labelled drive is fitted when the streams are scored on ``half``."""
     return HALVES[1 - HALVES.index(half)]
 
 
