@@ -292,3 +292,18 @@ def test_at_one_view_against_a_loop() -> None:
         assert m.at_one_view() == want
         seen.add(want)
     assert seen == {True, False}
+
+
+def test_per_reference_is_each_places_best_cell_and_speed() -> None:
+    """The best trajectory ending at each reference, against a plain loop over its speeds and grid cells."""
+    from vpr_edge.matchers.road import per_reference
+
+    rng = np.random.default_rng(5)
+    for grid in (1, 2, 3):
+        for n in (0, 1, 7):
+            state = rng.normal(size=(5, n * grid)).astype(np.float32)
+            want = np.array([max(state[v, r * grid + k] for v in range(5) for k in range(grid)) for r in range(n)],
+                            np.float32)
+            got = per_reference(state, grid)
+            assert got.dtype == np.float32 and got.shape == (n,)
+            np.testing.assert_array_equal(got, want)

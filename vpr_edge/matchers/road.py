@@ -121,6 +121,17 @@ from vpr_edge.matchers.verdict import DecoyGate
 from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, places
 
 
+def per_reference(state: np.ndarray, grid: int) -> np.ndarray:
+    """The best trajectory ending at each reference: ``state`` (speeds, n * grid), its columns ``grid`` cells
+    of each of n references in turn -> (n,), the highest over a reference's speeds and cells. Strided maxima,
+    not ``reshape(n, grid).max(axis=1)``, whose length-``grid`` reduction costs about 30x as much per place."""
+    cols = state.max(axis=0)
+    out = cols[0::grid].copy()
+    for k in range(1, grid):
+        np.maximum(out, cols[k::grid], out=out)
+    return out
+
+
 class RoadMatcher:
     """Online matcher over (position, speed) trajectories; see the module docstring."""
 
@@ -516,7 +527,7 @@ class RoadMatcher:
             if float(h.flat[flat]) > best:
                 best, ref = float(h.flat[flat]), lo + (flat % h.shape[1]) // g
                 col, stopped = lo * g + flat % h.shape[1], flat < h.shape[1]
-            per_ref.append(h.max(axis=0).reshape(hi - lo, g).max(axis=1))
+            per_ref.append(per_reference(h, g))
         self._stopped = stopped                    # the best trajectory has speed 0
         self._position = col / g
         self._best = best                          # the best trajectory's score (``best``)
@@ -580,9 +591,9 @@ class RoadMatcher:
     def ranking(self) -> np.ndarray:
         """Best trajectory score ending at each reference (R,) (0 where nothing is held)."""
         if self._kept is None:
-            return self._full.max(axis=0).reshape(self.n_refs, self.grid).max(axis=1)
+            return per_reference(self._full, self.grid)
         out = np.zeros(self.n_refs, np.float32)
-        out[self._cols[::self.grid] // self.grid] = self._vals.max(axis=0).reshape(-1, self.grid).max(axis=1)
+        out[self._cols[::self.grid] // self.grid] = per_reference(self._vals, self.grid)
         return out
 
     def reset(self) -> None:
