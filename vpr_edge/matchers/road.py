@@ -256,7 +256,11 @@ class RoadMatcher:
         out = z - run
         if not self._stopped:   # frames of a stopped vehicle repeat one place: they say nothing of hubs
             seen = self._seen[lo:lo + len(s)]
-            weight *= (1.0 - 1.0 / self.memory) ** np.where(seen < 0, 1, self._t - seen)
+            keep = 1.0 - 1.0 / self.memory
+            if len(seen) == self.n_refs and seen.min() == seen.max() == self._t - 1:   # a whole-route pass
+                weight *= keep                                   # after another: every age one frame
+            else:
+                weight *= keep ** np.where(seen < 0, 1, self._t - seen)
             weight += 1.0
             seen[:] = self._t
             run += (z - run) / weight
