@@ -63,3 +63,12 @@ DECOY_MEMORY, DECOY_LINE, DECOY_SPREAD, DECOY_WARM = 40.0, 0.5, 51, 2
 
 # --- the SVM baseline (``svm``) -----------------------------------------------------------------------------
 SVM_C = 1.0          # the linear SVMs' regularisation (scikit-learn's default)
+
+# --- the ``stream`` filter (``bayes``) ----------------------------------------------------------------------
+START_OFF = 0.5          # the prior probability of being off the map at a stream's first frame
+JOIN = 0.5               # the share of a junction's source places' mass that crosses into its targets each frame
+# the likelihood's scale (the mean z-score of the true place): its prior and the prior's weight in frames, and
+# the range it is kept in (a sanity bound, not a fit)
+SCALE_PRIOR, SCALE_PRIOR_FRAMES, SCALE_BOUNDS = 2.0, 10.0, (0.5, 8.0)
+HUB_DELAY = 8            # frames a frame's z-scores wait before they join the hub means (the passing place's view)
+CUE_FLOOR = 0.05        # the motion cue's weight of the speed it contradicts (the cue may be wrong)

@@ -22,7 +22,7 @@ class Param:
     meaning: str
 
 
-STREAM: dict[str, Param] = {
+STREAM_RULES: dict[str, Param] = {
     "vmax": Param(4.0, "fastest speed followed, in references per frame"),
     "grid": Param(2, "positions per reference (2: half-reference steps)"),
     "decay": Param(0.9, "each frame discounts a trajectory's past evidence by this factor (about 1/(1-decay) "
@@ -90,7 +90,31 @@ STREAM: dict[str, Param] = {
 # the stream matcher's lock rules; ``stream-prob`` replaces them by a model of "not this place" (``verdict``)
 LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "hub", "unique", "confirm", "stuck", "trust",
                                "hold")
-STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM.items() if k not in LOCK_RULES}
+STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM_RULES.items() if k not in LOCK_RULES}
+# the ``stream`` filter (``bayes``): the motion model, the likelihood, the confidence and the motion cue. Chosen
+# on nordland-dev, reported on Corridor (docs/decisions.md, "The stream filter's parameters")
+STREAM: dict[str, Param] = {
+    "vmax": Param(4, "fastest speed followed, in places per frame (speeds 0..vmax)"),
+    "speed_change": Param(0.1, "probability a frame's speed is one place a frame faster (and the same slower)"),
+    "leave": Param(0.01, "probability a frame leaves the map (a detour, a road the map does not hold)"),
+    "enter": Param(0.05, "probability a frame off the map comes back onto it, at any place"),
+    "jump": Param(0.001, "probability a frame's place jumps anywhere on the map (a re-localisation)"),
+    "temper": Param(0.3, "the share of a frame's evidence counted: neighbouring frames and places look alike, "
+                         "so a frame is worth less than an independent observation (1: all of it)"),
+    "hub_memory": Param(50.0, "frames in each place's running mean similarity, subtracted so that a place "
+                              "that looks like every frame is no evidence (0: off)"),
+    "scale_memory": Param(100.0, "frames in the running estimate of how far the true place stands out of a "
+                                 "frame's similarities (the likelihood's scale)"),
+    "tolerance": Param(2, "the confidence is the probability that the true place lies within this many places "
+                          "of the answer"),
+    "rival_window": Param(10, "places either side of the answer beyond which doubt counts as another stretch "
+                              "of the route (lost_why 'ambiguous'); at least the map's likeness reach"),
+    "still": Param(0.5, "motion cue: a frame whose cue is at least this (it differs from the last moving frame "
+                        "by at most half a typical moving step) may show a standing camera: the filter moves "
+                        "and believes it that much less (1 - cue); 0 = no cue"),
+    "still_memory": Param(MEMORY, "motion cue: moving frames whose median step (1 - cosine of encodings) is the "
+                                  "stream's typical moving step"),
+}
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),
 }

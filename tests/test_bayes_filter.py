@@ -1,0 +1,182 @@
+"""The ``stream`` filter (``matchers.bayes``) against a plain-loop forward algorithm, and on planted streams
+whose answers are known."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vpr_edge.matchers import get_matcher
+from vpr_edge.matchers.bayes import BayesFilter, FilterConfig, robust_z
+from vpr_edge.matchers.constants import (CUE_FLOOR, JOIN, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
+                                         START_OFF)
+from vpr_edge.matchers.params import STREAM
+from vpr_edge.matchers.route import RouteGraph
+
+
+def config(**overrides) -> FilterConfig:
+    return FilterConfig.of({k: p.default for k, p in STREAM.items()} | overrides)
+
+
+def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=None):
+    """The filter written as plain loops over (speed, place) and the off-map state (no hub means)."""
+    n_v, n_r = cfg.vmax + 1, rows.shape[1]
+    b = np.full((n_v, n_r), (1 - START_OFF) / (n_v * n_r))
+    off = START_OFF
+    scale_s = scale_w = 0.0
+    seq_of = np.array([np.searchsorted(graph.starts, p, side="right") - 1 for p in range(n_r)])
+    answers, confs = [], []
+    for t, row in enumerate(rows):
+        cue = None if cues is None else cues[t]
+        new = 1.0 if cue is None or cue < cfg.still else min(max(1 - cue, 0.0), 1.0)
+        z = robust_z(row)
+        mean = (scale_s + SCALE_PRIOR * SCALE_PRIOR_FRAMES) / (scale_w + SCALE_PRIOR_FRAMES)
+        beta = cfg.temper * min(max(mean, SCALE_BOUNDS[0]), SCALE_BOUNDS[1]) * new
+        # speeds
+        mixed = np.zeros_like(b)
+        for v in range(n_v):
+            for w, pr in ((v - 1, cfg.speed_change), (v + 1, cfg.speed_change), (v, 1 - 2 * cfg.speed_change)):
+                w = min(max(w, 0), n_v - 1)
+                for p in range(n_r):
+                    mixed[w, p] += pr * b[v, p]
+        # moves
+        moved = np.zeros_like(b)
+        ran = 0.0
+        for v in range(n_v):
+            for p in range(n_r):
+                q = p + v
+                if q >= n_r or seq_of[q] != seq_of[p]:
+                    ran += mixed[v, p]
+                else:
+                    moved[v, q] += mixed[v, p]
+        for sources, targets in graph.junctions:
+            for v in range(n_v):
+                share = sum(moved[v, s] for s in sources) * JOIN
+                for s in sources:
+                    moved[v, s] *= 1 - JOIN
+                for tg in targets:
+                    moved[v, tg] += share / len(targets)
+        on = moved.sum()
+        nb = moved * (1 - cfg.leave - cfg.jump) + (cfg.jump * on + cfg.enter * off) / (n_v * n_r)
+        noff = off * (1 - cfg.enter) + cfg.leave * on + ran
+        if cue is not None and cfg.still:
+            nb[0] *= max(1 - new, CUE_FLOOR)
+            nb[1:] *= max(new, CUE_FLOOR)
+            noff *= max(new, CUE_FLOOR) * (1 - 1 / n_v) + max(1 - new, CUE_FLOOR) / n_v
+        lr = np.exp(beta * z - beta * beta / 2)
+        for p in range(n_r):
+            nb[:, p] *= lr[p]
+        total = nb.sum() + noff
+        b, off = nb / total, noff / total
+        m = b.sum(axis=0)
+        mode = int(np.argmax(m))
+        conf = sum(m[lo:hi].sum() for lo, hi in graph.near(mode, cfg.tolerance))
+        keep = 1 - 1 / cfg.scale_memory
+        scale_s, scale_w = scale_s * keep + conf * z[mode], scale_w * keep + conf
+        answers.append(mode)
+        confs.append(conf)
+    return np.array(answers), np.array(confs), b, off
+
+
+@pytest.mark.parametrize("graph_of", [
+    lambda r: RouteGraph.line(r),
+    lambda r: RouteGraph(r, np.array([0, 9])),
+    lambda r: RouteGraph(r, np.array([0, 8]), ((np.array([5]), np.array([12])),)),
+])
+def test_filter_equals_a_plain_loop_forward_algorithm(graph_of):
+    rng = np.random.default_rng(3)
+    rows = rng.random((25, 17))
+    rows[np.arange(10), np.arange(10)] += 1.5   # a trajectory to follow
+    cues = [None if i % 5 == 0 else float(c) for i, c in enumerate(rng.random(25))]
+    cfg = config(hub_memory=0.0, vmax=3)
+    graph = graph_of(17)
+    f = BayesFilter(17, cfg, graph)
+    got = [f.update(row, None, cue) for row, cue in zip(rows, cues)]
+    answers, confs, b, off = naive_forward(rows, cfg, graph, cues)
+    np.testing.assert_array_equal([a for a, _ in got], answers)
+    np.testing.assert_allclose([c for _, c in got], confs, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(f.b, b, rtol=1e-9, atol=1e-15)
+    assert f.off == pytest.approx(off, rel=1e-9)
+
+
+def planted(n_frames: int, n_refs: int, places: np.ndarray, strength: float, rng, low=0.0, high=1.0,
+            every: int = 1) -> np.ndarray:
+    """Rows of noise in [low, high) where frame i's true place (``places[i]``, -1: off the map) and its
+    neighbours stand out by ``strength`` of the band every ``every`` frames."""
+    rows = rng.random((n_frames, n_refs))
+    for i, p in enumerate(places):
+        if p >= 0 and i % every == 0:
+            for d, w in ((-1, 0.5), (0, 1.0), (1, 0.5)):
+                if 0 <= p + d < n_refs:
+                    rows[i, p + d] += strength * w
+    return low + (high - low) * rows / rows.max()
+
+
+def test_a_planted_route_is_followed_and_confident():
+    rng = np.random.default_rng(0)
+    places = np.arange(0, 200, 2)   # speed 2
+    rows = planted(len(places), 220, places, 2.0, rng)
+    r = get_matcher("stream").run(rows)
+    late = slice(15, None)
+    assert (r.refs[late] == places[late]).mean() > 0.95
+    assert (r.scores[late] >= 0.98).mean() > 0.9
+    assert np.abs(r.refs[late] - places[late]).mean() < 0.2   # no lead, no lag
+
+
+def test_the_band_of_the_cosines_does_not_matter():
+    rng = np.random.default_rng(1)
+    places = np.arange(120)
+    wide = planted(120, 150, places, 0.6, np.random.default_rng(1))
+    narrow = 0.9 + 0.1 * wide   # every cosine in 0.9-1.0
+    a, b = get_matcher("stream").run(wide), get_matcher("stream").run(narrow)
+    np.testing.assert_array_equal(a.refs, b.refs)
+    np.testing.assert_allclose(a.scores, b.scores, atol=1e-6)
+
+
+def test_right_one_frame_in_four_is_calibrated_not_confident():
+    """A front end that shows the place one frame in four: the best answers double the single frame's, but
+    the scale (the mean z-score of the true place) is low, so no answer reaches the line: silent, not wrong."""
+    rng = np.random.default_rng(2)
+    places = np.arange(300)
+    rows = planted(300, 320, places, 0.8, rng, every=4)
+    r = get_matcher("stream").run(rows)
+    right = np.abs(r.refs - places) <= 2
+    single = np.abs(rows.argmax(axis=1) - places) <= 2
+    assert right.mean() > 1.5 * single.mean()   # the sequence adds
+    answered = r.scores >= 0.9
+    assert not answered.any() or right[answered].mean() >= 0.88
+
+
+def test_imagery_of_somewhere_else_is_lost_as_off_the_map():
+    rng = np.random.default_rng(4)
+    rows = rng.random((150, 200))
+    r = get_matcher("stream").run(rows)
+    assert (r.scores < 0.98).mean() >= 0.99
+    assert (r.why[20:] == "off-map").mean() > 0.6
+
+
+def test_a_detour_is_lost_within_a_few_frames_and_found_again():
+    rng = np.random.default_rng(5)
+    places = np.r_[np.arange(0, 60), np.full(30, -1), np.arange(90, 150)]
+    rows = planted(len(places), 160, places, 1.0, rng)
+    r = get_matcher("stream").run(rows)
+    off = slice(60, 90)
+    assert (r.scores[off] < 0.98)[3:].all()
+    assert (r.scores[60:63] < 0.98).any()
+    back = slice(100, None)
+    assert (r.refs[back] == places[back]).mean() > 0.95 and (r.scores[back] >= 0.98).mean() > 0.8
+
+
+def test_a_standing_camera_keeps_its_place():
+    rng = np.random.default_rng(6)
+    places = np.r_[np.arange(40), np.full(20, 39), np.arange(40, 80)]
+    rows = planted(len(places), 100, places, 1.0, rng)
+    cues = np.r_[np.zeros(40), np.ones(20), np.zeros(40)]
+    r = get_matcher("stream").run(rows, still=cues)
+    assert (r.refs[40:60] == 39).all()
+    assert (r.refs[70:] == places[70:]).mean() > 0.95
+
+
+@pytest.mark.parametrize("bad", [{"leave": 0.7}, {"temper": 0.0}, {"vmax": -1}, {"still": 2.0}])
+def test_bad_parameters_are_refused(bad):
+    with pytest.raises(ValueError):
+        config(**bad)
