@@ -1,4 +1,4 @@
-"""The ``stream`` filter (``matchers.bayes``) against a plain-loop forward algorithm, and on planted streams
+"""The ``stream-filter`` matcher (``matchers.bayes``) against a plain-loop forward algorithm, and on planted streams
 whose answers are known."""
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.bayes import BayesFilter, FilterConfig, robust_z
 from vpr_edge.matchers.constants import (CUE_FLOOR, JOIN, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
                                          START_OFF)
-from vpr_edge.matchers.params import STREAM
+from vpr_edge.matchers.params import STREAM_FILTER
 from vpr_edge.matchers.route import RouteGraph
 
 
 def config(**overrides) -> FilterConfig:
-    return FilterConfig.of({k: p.default for k, p in STREAM.items()} | overrides)
+    return FilterConfig.of({k: p.default for k, p in STREAM_FILTER.items()} | overrides)
 
 
 def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=None):
@@ -115,7 +115,7 @@ def test_a_planted_route_is_followed_and_confident():
     rng = np.random.default_rng(0)
     places = np.arange(0, 200, 2)   # speed 2
     rows = planted(len(places), 220, places, 2.0, rng)
-    r = get_matcher("stream").run(rows)
+    r = get_matcher("stream-filter").run(rows)
     late = slice(15, None)
     assert (r.refs[late] == places[late]).mean() > 0.95
     assert (r.scores[late] >= 0.98).mean() > 0.9
@@ -127,7 +127,7 @@ def test_the_band_of_the_cosines_does_not_matter():
     places = np.arange(120)
     wide = planted(120, 150, places, 0.6, np.random.default_rng(1))
     narrow = 0.9 + 0.1 * wide   # every cosine in 0.9-1.0
-    a, b = get_matcher("stream").run(wide), get_matcher("stream").run(narrow)
+    a, b = get_matcher("stream-filter").run(wide), get_matcher("stream-filter").run(narrow)
     np.testing.assert_array_equal(a.refs, b.refs)
     np.testing.assert_allclose(a.scores, b.scores, atol=1e-6)
 
@@ -138,7 +138,7 @@ def test_right_one_frame_in_four_is_calibrated_not_confident():
     rng = np.random.default_rng(2)
     places = np.arange(300)
     rows = planted(300, 320, places, 0.8, rng, every=4)
-    r = get_matcher("stream").run(rows)
+    r = get_matcher("stream-filter").run(rows)
     right = np.abs(r.refs - places) <= 2
     single = np.abs(rows.argmax(axis=1) - places) <= 2
     assert right.mean() > 1.5 * single.mean()   # the sequence adds
@@ -149,7 +149,7 @@ def test_right_one_frame_in_four_is_calibrated_not_confident():
 def test_imagery_of_somewhere_else_is_lost_as_off_the_map():
     rng = np.random.default_rng(4)
     rows = rng.random((150, 200))
-    r = get_matcher("stream").run(rows)
+    r = get_matcher("stream-filter").run(rows)
     assert (r.scores < 0.98).mean() >= 0.99
     assert (r.why[20:] == "off-map").mean() > 0.6
 
@@ -158,7 +158,7 @@ def test_a_detour_is_lost_within_a_few_frames_and_found_again():
     rng = np.random.default_rng(5)
     places = np.r_[np.arange(0, 60), np.full(30, -1), np.arange(90, 150)]
     rows = planted(len(places), 160, places, 1.0, rng)
-    r = get_matcher("stream").run(rows)
+    r = get_matcher("stream-filter").run(rows)
     off = slice(60, 90)
     assert (r.scores[off] < 0.98)[3:].all()
     assert (r.scores[60:63] < 0.98).any()
@@ -171,7 +171,7 @@ def test_a_standing_camera_keeps_its_place():
     places = np.r_[np.arange(40), np.full(20, 39), np.arange(40, 80)]
     rows = planted(len(places), 100, places, 1.0, rng)
     cues = np.r_[np.zeros(40), np.ones(20), np.zeros(40)]
-    r = get_matcher("stream").run(rows, still=cues)
+    r = get_matcher("stream-filter").run(rows, still=cues)
     assert (r.refs[40:60] == 39).all()
     assert (r.refs[70:] == places[70:]).mean() > 0.95
 

@@ -75,7 +75,7 @@ def evaluate_cmd(
                                   "counts +-3 at 1."),
     window: Optional[int] = typer.Option(None, min=0, help="stream: local search window, as localize's "
                                          "(default %d; 0 = every reference every frame)."
-                                         % MATCHERS["stream-rules"].params["window"]),
+                                         % MATCHERS["stream"].params["window"]),
     min_confidence: Optional[float] = typer.Option(None, help="Lost threshold for modes with a lost state "
                                                    "(default: each mode's own)."),
     target_precision: Optional[float] = typer.Option(

@@ -54,7 +54,7 @@ def localize_cmd(
                                           "discounts the past by this factor (about 1/(1-decay) frames kept)."),
     window: Optional[int] = typer.Option(None, min=0, help="stream: local search, references either side of a "
                                          "firm lock read per frame, on routes over 4x this (default %d; 0 = "
-                                         "every reference every frame)." % MATCHERS["stream-rules"].params["window"]),
+                                         "every reference every frame)." % MATCHERS["stream"].params["window"]),
     min_confidence: Optional[float] = typer.Option(
         None, help="Frames scoring below this are reported lost (reference and position fields empty). "
                    "Default: the mode's own (stream: %.1f; other modes: never lost)."

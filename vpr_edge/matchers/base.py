@@ -223,7 +223,7 @@ class Matcher:
         if live and target is not None and not self.probability and line is None:
             raise InputError("{opt.target_precision} {v}: mode {name}'s score is not the probability that its "
                              "answer is right, so no target precision sets its line ({opt.min_confidence} does, "
-                             "or a {opt.calibration} from a labelled drive; stream's score is one)",
+                             "or a {opt.calibration} from a labelled drive; stream-prob's score is one)",
                              v=target, name=self.name)
         if given is not None:
             return float(given)
@@ -354,9 +354,9 @@ def check_target_precision(target: float | None) -> float | None:
 
 WEAK_VIEW, NO_TRAJECTORY, AMBIGUOUS, LOCKED = "weak-view", "no-trajectory", "ambiguous", "locked"
 OFF_MAP, SETTLING = "off-map", "settling"
-# why a frame is lost (``lost_why``): the ``stream`` filter's off-map, ambiguous, settling; ``stream-rules``'s
-# weak-view, no-trajectory, ambiguous
-LOST_WHY: tuple[str, ...] = (OFF_MAP, AMBIGUOUS, SETTLING, WEAK_VIEW, NO_TRAJECTORY)
+# why a frame is lost (``lost_why``): ``stream``'s weak-view, no-trajectory, ambiguous; ``stream-filter``'s
+# off-map, ambiguous, settling
+LOST_WHY: tuple[str, ...] = (WEAK_VIEW, NO_TRAJECTORY, AMBIGUOUS, OFF_MAP, SETTLING)
 
 
 def lost_why(why: str | None, lost: bool) -> str | None:

@@ -1,4 +1,4 @@
-"""The ``stream`` matcher: a Bayes filter over (place along the route, speed), plus one off-map state.
+"""The ``stream-filter`` matcher: a Bayes filter over (place along the route, speed), plus one off-map state.
 
 The hidden state of a frame is where the camera is on the map and how fast it moves along it, in places a
 frame (0..``vmax``), or that it is somewhere the map does not hold (*off-map*). Each frame:
@@ -12,20 +12,22 @@ frame (0..``vmax``), or that it is somewhere the map does not hold (*off-map*). 
 2. **Correct** (the likelihood of the frame's similarity row). The row is read on its own scale: robust
    z-scores ``z = (s - median) / spread`` (spread from the inter-quartile range), less each place's running
    mean over this stream's moving frames (``hub_memory``: a place that looks like every frame is no
-   evidence). The likelihood ratio of "the camera is at place p" against "somewhere else" is
+   evidence; a frame joins those means ``HUB_DELAY`` frames late). The likelihood ratio of "the camera is
+   at place p" against "off the map" is
 
-       LR(p) = exp(beta * z_p) / mean_q exp(beta * z_q)
+       LR(p) = exp(beta * z_p - beta^2 / 2)
 
-   with the row's bulk as a standard normal null (most of a row is "not this place") and the true place's
-   z-score normal about ``beta``: exp(beta * z - beta^2 / 2). The off-map state's likelihood is 1: a row
-   says "on the map" where a place stands out of it, and "here" where that place is where the motion model
-   predicted it. ``beta`` is the stream's own: the
-   running mean of the z-score at the answered place, weighted by the answer's confidence (a prior of
-   ``SCALE_PRIOR`` for ``SCALE_PRIOR_FRAMES`` frames), times ``temper`` (< 1: neighbouring frames and places
-   see alike, so a frame is worth less than an independent observation). A front end whose cosines lie in
-   0.9-1.0 and one whose cosines spread over 0-1 are read alike.
-3. A frame of a **standing camera** (the motion cue, ``motion.MotionCue``: its view again) changes nothing:
-   the camera did not move and the view says nothing new.
+   with the row's bulk a standard normal null (most of a row is "not this place") and the true place's
+   z-score normal about ``beta``; the off-map state's likelihood is 1. A row says "on the map" where a
+   place stands out of it, and "here" where that place lies where the motion model predicted it. ``beta``
+   is the stream's own: the running mean of the z-score at the answered place, weighted by the answer's
+   confidence (a prior of ``SCALE_PRIOR`` for ``SCALE_PRIOR_FRAMES`` frames), times ``temper`` (< 1:
+   neighbouring frames and places see alike, so a frame is worth less than an independent observation).
+   A front end whose cosines lie in 0.9-1.0 and one whose cosines spread over 0-1 are read alike.
+3. The **motion cue** (``motion.MotionCue``) observes the speed: a frame whose cue reaches ``still`` (its
+   view is nearly the last moving frame's) weighs speed 0 by the cue and the moving speeds by 1 - cue
+   (never below ``CUE_FLOOR``), and counts 1 - cue of its view's evidence (a view seen again says
+   nothing new). Where the map's own drive stood (``route``) the frame is read as motion.
 
 The answer is the place of the posterior's mode (summed over speeds), its **confidence** the posterior mass
 within ``tolerance`` places of it along the route: the probability that the answer is within ``tolerance``
@@ -33,13 +35,14 @@ of the true place. A frame is lost below the line (``--target-precision``); ``wh
 missing mass: ``off-map`` (the off-map state), ``ambiguous`` (another stretch of the route) or ``settling``
 (spread thinly: not converged yet).
 
-State: (``vmax`` + 1, R) float64 and a scalar, whatever the stream's length; a frame costs O(vmax² R).
+State: (``vmax`` + 1, R) float64, the hub means and ``HUB_DELAY`` z-score rows, whatever the stream's
+length; a frame costs O(vmax² R). Every frame reads every place (no local search, no index).
 """
 from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -54,7 +57,7 @@ REASONS: tuple[str, ...] = (OFF_MAP, AMBIGUOUS, SETTLING)   # why a frame of the
 
 @dataclass(frozen=True)
 class FilterConfig:
-    """The filter's parameters (``params.STREAM``: their defaults and meanings). ``still_memory`` and
+    """The filter's parameters (``params.STREAM_FILTER``: their defaults and meanings). ``still_memory`` and
     ``seek_frames`` are read where the motion cue and the index query are made."""
 
     vmax: int
@@ -167,7 +170,7 @@ class Transitions:
 
 
 class BayesFilter:
-    """The online ``stream`` matcher (module docstring) over ``n_refs`` places of ``graph``'s route."""
+    """The online ``stream-filter`` matcher (module docstring) over ``n_refs`` places of ``graph``'s route."""
 
     searches_locally = False
 
@@ -309,11 +312,11 @@ class BayesFilter:
 
 def bayes_filter(n_refs: int, *, route: np.ndarray | None = None, graph: RouteGraph | None = None,
                  reach: int = 0, **params) -> BayesFilter:
-    """The registry's ``stream`` (``params.STREAM``); ``route``, ``graph`` and ``reach`` are the map's
+    """The registry's ``stream-filter`` (``params.STREAM_FILTER``); ``route``, ``graph`` and ``reach`` are the map's
     (``Matcher.on_route``): a rival lies beyond ``reach`` as well as beyond ``rival_window``."""
     config = FilterConfig.of(params)
     if reach > config.rival_window:
-        config = FilterConfig.of({f.name: getattr(config, f.name) for f in fields(config)} | {"rival_window": reach})
+        config = replace(config, rival_window=reach)
     return BayesFilter(n_refs, config, graph, route)
 
 

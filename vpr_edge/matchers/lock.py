@@ -79,7 +79,7 @@ def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_l
 
 
 class LockVerdict:
-    """The lock's rules over a stream (module docstring); parameters as ``matchers.params.STREAM_RULES`` names them
+    """The lock's rules over a stream (module docstring); parameters as ``matchers.params.STREAM`` names them
     (``lock``, ``evidence``, ``evidence_decay``, ``hub``, ``unique``, ``confirm``, ``stuck``, ``trust``,
     ``hold``). ``rival_window``:
     places either side of the answer that a rival trajectory must lie beyond."""

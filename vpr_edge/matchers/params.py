@@ -22,7 +22,7 @@ class Param:
     meaning: str
 
 
-STREAM_RULES: dict[str, Param] = {
+STREAM: dict[str, Param] = {
     "vmax": Param(4.0, "fastest speed followed, in references per frame"),
     "grid": Param(2, "positions per reference (2: half-reference steps)"),
     "decay": Param(0.9, "each frame discounts a trajectory's past evidence by this factor (about 1/(1-decay) "
@@ -90,10 +90,10 @@ STREAM_RULES: dict[str, Param] = {
 # the stream matcher's lock rules; ``stream-prob`` replaces them by a model of "not this place" (``verdict``)
 LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "hub", "unique", "confirm", "stuck", "trust",
                                "hold")
-STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM_RULES.items() if k not in LOCK_RULES}
-# the ``stream`` filter (``bayes``): the motion model, the likelihood, the confidence and the motion cue. Chosen
+STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM.items() if k not in LOCK_RULES}
+# the ``stream-filter`` matcher (``bayes``): the motion model, the likelihood, the confidence and the motion cue. Chosen
 # on nordland-dev, reported on Corridor (docs/decisions.md, "The stream filter's parameters")
-STREAM: dict[str, Param] = {
+STREAM_FILTER: dict[str, Param] = {
     "vmax": Param(4, "fastest speed followed, in places per frame (speeds 0..vmax)"),
     "speed_change": Param(0.1, "probability a frame's speed is one place a frame faster (and the same slower)"),
     "leave": Param(0.01, "probability a frame leaves the map (a detour, a road the map does not hold)"),

@@ -39,7 +39,7 @@ _UNUSED = {"lock": 0.0, "evidence": 0.0, "evidence_decay": 0.0, "hub": 0.0, "uni
 
 def probability_matcher(n_refs: int, **params) -> RoadMatcher:
     """``road.RoadMatcher`` whose score is the probability that its answer is right (``ProbabilityVerdict``).
-    Parameters: ``matchers.params.STREAM_RULES`` less the lock's rules (``params.LOCK_RULES``)."""
+    Parameters: ``matchers.params.STREAM`` less the lock's rules (``params.LOCK_RULES``)."""
     return RoadMatcher(n_refs, **_UNUSED, **params, verdict=ProbabilityVerdict)
 
 

@@ -18,13 +18,13 @@ from vpr_edge.matchers.constants import TARGET_PRECISION
 
 
 MATCHERS: dict[str, Matcher] = {m.name: m for m in (
-    Matcher("stream", "a Bayes filter over (place, speed) and off the map: any speed 0-4 places/frame, stops, "
-            "detours; its confidence is the probability the answer is right, lost below the target precision "
-            "(online, default)", start=bayes_filter, definitions=P.STREAM, min_confidence=TARGET_PRECISION,
+    Matcher("stream", "trajectories over (position, speed) with contrast-normalised similarities: any speed "
+            "0-4 places/frame, lock-on anywhere, lost state (online, default)", start=RoadMatcher,
+            definitions=P.STREAM, min_confidence=1.0, reads_route=True),
+    Matcher("stream-filter", "a Bayes filter over (place, speed) and off the map: any speed 0-4 places/frame, "
+            "stops, detours; its confidence is the probability the answer is right, lost below the target "
+            "precision (online)", start=bayes_filter, definitions=P.STREAM_FILTER, min_confidence=TARGET_PRECISION,
             reads_route=True, probability=True),
-    Matcher("stream-rules", "trajectory scores over (position, speed) with rules for the lost state: the "
-            "earlier default (online)", start=RoadMatcher, definitions=P.STREAM_RULES, min_confidence=1.0,
-            reads_route=True),
     Matcher("stream-prob", "the stream matcher with the probability that each answer is right, from a "
             "model of 'not this place' read on the map and the stream (no labels); lost below the target "
             "precision (online)", start=probability_matcher, definitions=P.STREAM_PROB, min_confidence=TARGET_PRECISION,

@@ -145,7 +145,7 @@ class RoadMatcher:
                  trust: float, decoy: bool = False,
                  route: np.ndarray | None = None, graph: RouteGraph | None = None, reach: int = 0,
                  verdict: VerdictFactory | None = None) -> None:
-        """Parameters: ``matchers.params.STREAM_RULES`` (their defaults and meanings; the registry's ``stream-rules``;
+        """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
         ``still_memory`` is the motion cue's, read where the cue is computed; ``seek_frames`` is what the index
         is asked, read where it is asked, ``index.ivf.SequenceQuery``). ``route``: (n_refs,) bool, the
         references where the map's drive stood (``motion.route_stands``; None: not known). ``graph``: the
@@ -155,7 +155,7 @@ class RoadMatcher:
         order on whole-route frames, and score 0 while the stream does not stand above it (``DecoyGate``;
         module docstring). ``verdict``: what judges each frame, made from the route graph and the rival window
         (``reading.Verdict``; None: the lock's rules with the parameters above, ``lock.LockVerdict``)."""
-        given = {k: v for k, v in locals().items() if k in P.STREAM_RULES}   # the parameters, for the decoy
+        given = {k: v for k, v in locals().items() if k in P.STREAM}   # the parameters, for the decoy
         if n_refs < 1:
             raise ValueError("need at least one reference")
         if not 0.0 < decay < 1.0:

@@ -30,7 +30,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError
 from vpr_edge.matchers import get_matcher
-from vpr_edge.matchers.params import STREAM_RULES
+from vpr_edge.matchers.params import STREAM
 from vpr_edge_bench.folder import streams_folders
 from vpr_edge_bench.runner import parser, run_checked
 from vpr_edge_bench.streams import KINDS
@@ -76,25 +76,25 @@ def _locks(text: str, vary: str = "lock") -> list[float]:
 
 def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, inputs checked first: --locks, --param, each folder's map and streams."""
-    numeric = [k for k, p in STREAM_RULES.items() if isinstance(p.default, (int, float)) and not isinstance(p.default, bool)]
+    numeric = [k for k, p in STREAM.items() if isinstance(p.default, (int, float)) and not isinstance(p.default, bool)]
     if a.vary not in numeric:
         raise VprError(f"--vary {a.vary!r}: not a numeric stream parameter ({', '.join(numeric)})")
     locks = _locks(a.locks, a.vary)
-    kind = type(STREAM_RULES[a.vary].default)   # an int parameter (e.g. still_memory) takes whole values
+    kind = type(STREAM[a.vary].default)   # an int parameter (e.g. still_memory) takes whole values
     if kind is int and any(x != int(x) for x in locks):
         raise VprError(f"--values: {a.vary} takes whole numbers")
-    default = float(STREAM_RULES[a.vary].default if a.against is None else a.against)
+    default = float(STREAM[a.vary].default if a.against is None else a.against)
     if not np.isfinite(default) or (kind is int and default != int(default)):
         raise VprError(f"--against {a.against:g}: want a {'whole ' if kind is int else ''}number")
     try:
-        fixed = get_matcher("stream-rules").parse_params(a.param)
+        fixed = get_matcher("stream").parse_params(a.param)
         for x in [*locks, default]:   # one at a time: the items of one call set one key
-            get_matcher("stream-rules").parse_params([f"{a.vary}={kind(x)}"])
+            get_matcher("stream").parse_params([f"{a.vary}={kind(x)}"])
     except ValueError as e:
         raise VprError(str(e)) from None
     folders = streams_folders(a.streams)
     locks = sorted(set(locks) | {default})
-    modes = {f"{a.vary}={x:g}": get_matcher("stream-rules").with_params(**fixed | {a.vary: kind(x)}) for x in locks}
+    modes = {f"{a.vary}={x:g}": get_matcher("stream").with_params(**fixed | {a.vary: kind(x)}) for x in locks}
     print(f"stream matcher{''.join(f' {k}={v}' for k, v in fixed.items())}, tolerance {a.tolerance}; "
           "worst stream in brackets\n")
     print(f"| dataset | `{a.vary}` | detour unmapped lost | exit frames | re-lock frames | min answered right "
