@@ -3,6 +3,8 @@ similarity matrix with each mode's answers (``--plot-matrix``) and the route wit
 (``--plot-route``)."""
 from __future__ import annotations
 
+from vpr_edge.matchers.base import LOST_WHY
+
 import json
 import os
 from collections.abc import Sequence
@@ -53,11 +55,12 @@ def table(reports: dict[str, ModeReport]) -> str:
     lines += [f"{name:<{width}} {cell(r.best_line_recall):>8s} {cell(r.line_gap):>8s}" for name, r in reports.items()]
     why = {name: r.lost_why for name, r in reports.items() if r.lost_why}
     if why:
-        kinds = list(next(iter(why.values())))
+        kinds = [k for k in LOST_WHY if any(k in w for w in why.values())]
         lines += ["", "lost frames by why (unmapped / mapped places): weak-view = the answer does not stand out of "
-                      "what the frame sees, no-trajectory = none has built up, ambiguous = a rival along the route",
+                      "what the frame sees, no-trajectory = none has built up, ambiguous = a rival along the route, "
+                      "off-map = the filter holds the camera off the map, settling = its belief is still spread",
                   f"{'mode':<{width}} " + " ".join(f"{k:>11s}" for k in kinds)]
-        lines += [f"{name:<{width}} " + " ".join(f"{str(w[k]['unmapped']) + ' / ' + str(w[k]['mapped']):>11s}"
+        lines += [f"{name:<{width}} " + " ".join(f"{str(w[k]['unmapped']) + ' / ' + str(w[k]['mapped']) if k in w else '-':>11s}"
                                                 for k in kinds) for name, w in why.items()]
     metres = {name: r.metres for name, r in reports.items() if r.metres is not None}
     if metres:

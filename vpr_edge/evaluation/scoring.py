@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 
 from vpr_edge.calibration import Curve
-from vpr_edge.matchers import LOST_WHY, Matcher, Result, is_lost, lost_why
+from vpr_edge.matchers import Matcher, Result, is_lost, lost_why
+from vpr_edge.matchers.base import reasons_of
 from vpr_edge.matchers.base import StreamRows
 from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.evaluation import metrics
@@ -139,7 +140,7 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
     answered_right, mapped_right = metrics.answered_shares(correct[:, 0], lost, mapped)
     why = None if result.why is None else np.array([lost_why(w, bool(x)) for w, x in zip(result.why, lost)], object)
     reasons = {} if why is None else {r: {"unmapped": int(((why == r) & ~mapped).sum()),
-                                          "mapped": int(((why == r) & mapped).sum())} for r in LOST_WHY}
+                                          "mapped": int(((why == r) & mapped).sum())} for r in reasons_of(result.why)}
     view = None if one_view is None else np.asarray(one_view, bool)
     distinct = (-1, float("nan"), float("nan"))
     if view is not None:

@@ -356,7 +356,15 @@ WEAK_VIEW, NO_TRAJECTORY, AMBIGUOUS, LOCKED = "weak-view", "no-trajectory", "amb
 OFF_MAP, SETTLING = "off-map", "settling"
 # why a frame is lost (``lost_why``): ``stream``'s weak-view, no-trajectory, ambiguous; ``stream-filter``'s
 # off-map, ambiguous, settling
+RULE_REASONS: tuple[str, ...] = (WEAK_VIEW, NO_TRAJECTORY, AMBIGUOUS)
+FILTER_REASONS: tuple[str, ...] = (OFF_MAP, AMBIGUOUS, SETTLING)
 LOST_WHY: tuple[str, ...] = (WEAK_VIEW, NO_TRAJECTORY, AMBIGUOUS, OFF_MAP, SETTLING)
+
+
+def reasons_of(seen: Iterable[str | None]) -> tuple[str, ...]:
+    """The reasons a matcher gives, from those its frames gave (``seen``): the filter's where any is one of
+    its own (off-map, settling), else the rules'."""
+    return FILTER_REASONS if {OFF_MAP, SETTLING} & set(seen) else RULE_REASONS
 
 
 def lost_why(why: str | None, lost: bool) -> str | None:
