@@ -3,8 +3,6 @@ similarity matrix with each mode's answers (``--plot-matrix``) and the route wit
 (``--plot-route``)."""
 from __future__ import annotations
 
-from vpr_edge.matchers.base import LOST_WHY
-
 import json
 import os
 from collections.abc import Sequence
@@ -13,6 +11,7 @@ import numpy as np
 
 from vpr_edge.errors import InputError
 from vpr_edge.evaluation.scoring import ModeReport
+from vpr_edge.matchers.base import LOST_WHY
 from vpr_edge.files import atomic_output
 from vpr_edge.positions import Positions
 

@@ -52,7 +52,6 @@ from vpr_edge.matchers.constants import (CUE_FLOOR, HUB_DELAY, JOIN, MIN_SPREAD,
 from vpr_edge.matchers.motion import stands
 from vpr_edge.matchers.route import RouteGraph, places
 
-REASONS: tuple[str, ...] = (OFF_MAP, AMBIGUOUS, SETTLING)   # why a frame of the filter is lost
 
 
 @dataclass(frozen=True)
@@ -209,7 +208,7 @@ class BayesFilter:
         return self._conf
 
     def why(self) -> str:
-        """What holds the probability the last answer is not right (``REASONS``)."""
+        """What holds the probability the last answer is not right (``base.FILTER_REASONS``)."""
         return self._why
 
     def ranking(self) -> np.ndarray:
