@@ -112,3 +112,12 @@ def test_build_map_chooses_by_camera_and_localize_by_precision(tmp_path: Path, s
     # --pca-dim 0: descriptors as they are (the thesis's codebook)
     proc = run("build-map", small_refs, "-o", tmp_path / "full.npz", "--components", "4", "--pca-dim", "0")
     assert proc.returncode == 0 and load_map(tmp_path / "full.npz").stored.shape[1] == 2 * 4 * 112
+
+
+@pytest.mark.parametrize("name", sorted(MODEL_FILES.values()))
+def test_bundled_int8_forms_keep_sums_in_16_bits(name: str) -> None:
+    """The bundled int8 forms are U8S8 with 7-bit weights: x86 without VNNI then computes the same integers
+    as VNNI and ARM (U8U8's x86 kernels without VNNI do not; docs/decisions.md, "fp32 by default")."""
+    sibling = choice.int8_sibling(bundled_model(name))
+    assert sibling is not None
+    assert FeatureExtractor(sibling).info["quantization"]["scheme"].startswith("static QOperator, U8S8 reduce_range")

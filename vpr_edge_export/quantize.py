@@ -3,13 +3,13 @@
     python -m vpr_edge_export.quantize --model vpr_edge/models/efficientnet_lite0_stage5_320x240.onnx \\
         --calibration corridor/ref --out lite0_int8.onnx
 
-onnxruntime's static QDQ quantisation: weights and activations uint8 (U8U8), weights per channel,
-activation ranges by MinMax over the calibration images, preprocessed exactly as the runtime does.
-U8U8 keeps the bundled tap's features closest to fp32's (x86 kernels without VNNI saturate the usual U8S8
-products); U8S8 with reduce_range in the QOperator format (``--weights int8 --format qoperator``) is the
-scheme that can run faster than fp32, at some accuracy; dynamic quantisation is not offered (slower and
-less accurate here). The figures: docs/results.md, "The default". The
-model's ``vpr_edge`` metadata is copied and marked (``quantization``: scheme, calibration images, source
+onnxruntime's static quantisation, weights per channel, activation ranges by MinMax over the calibration
+images, preprocessed exactly as the runtime does. The default, and the bundled int8 forms, is U8S8 with
+reduce_range in the QOperator format: 7-bit weights keep every int8 product sum inside 16 bits, so x86 with
+or without VNNI and ARM compute the same integers and give the same answers. U8U8 (``--weights uint8``) does
+not: onnxruntime's x86 kernels without VNNI give feature maps far from the VNNI ones (decisions.md, "fp32 by
+default, int8 beside it"). Dynamic quantisation is not offered (slower and less accurate here). The
+figures: docs/results.md, "The default". The model's ``vpr_edge`` metadata is copied and marked (``quantization``: scheme, calibration images, source
 SHA-256), so maps record which model they were built with and refuse the other one; a codebook fitted with
 the source model is accepted. Written atomically. Needs the ``export`` extra (onnx).
 """
@@ -51,11 +51,11 @@ def calibration_files(folder: Path, count: int) -> list[Path]:
 FORMATS = {"qdq": "QDQ", "qoperator": "QOperator"}
 
 
-def quantize(model: Path, calibration: Path, out: Path, count: int = 32, weights: str = "uint8",
-             fmt: str = "qdq") -> dict:
+def quantize(model: Path, calibration: Path, out: Path, count: int = 32, weights: str = "int8",
+             fmt: str = "qoperator") -> dict:
     """Write the int8 model of ``model`` to ``out``, calibrated on ``count`` images of ``calibration``;
-    return its metadata. ``weights``: uint8 (U8U8, accurate) or int8 (U8S8 with reduce_range: the fast
-    kernels of CPUs with int8 dot products, less accurate on x86 without VNNI). ``fmt``: qdq (QuantizeLinear /
+    return its metadata. ``weights``: int8 (U8S8 with reduce_range: the same answers on every CPU) or uint8
+    (U8U8: far off on x86 without VNNI). ``fmt``: qdq (QuantizeLinear /
     DequantizeLinear pairs around float operators, fused by onnxruntime at load) or qoperator (QLinearConv
     and friends written into the graph)."""
     if fmt not in FORMATS:
@@ -94,12 +94,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--model", type=Path, required=True, help="fp32 model exported by vpr_edge_export.onnx_export")
     p.add_argument("--calibration", type=Path, required=True, help="folder of reference images")
     p.add_argument("--images", type=int, default=32, help="calibration images, spread over the folder")
-    p.add_argument("--weights", choices=("uint8", "int8"), default="uint8",
-                   help="uint8: U8U8, accurate (default); int8: U8S8 with reduce_range, for CPUs with int8 "
-                        "dot-product kernels (ARM dotprod, x86 VNNI)")
-    p.add_argument("--format", choices=tuple(FORMATS), default="qdq",
-                   help="qdq: Q/DQ pairs fused by onnxruntime (default); qoperator: QLinearConv etc. in the "
-                        "graph (with --weights int8 the fastest here, docs/results.md 'The default')")
+    p.add_argument("--weights", choices=("int8", "uint8"), default="int8",
+                   help="int8: U8S8 with reduce_range, the same answers on every CPU (default); uint8: U8U8, "
+                        "far off on x86 without VNNI")
+    p.add_argument("--format", choices=tuple(FORMATS), default="qoperator",
+                   help="qoperator: QLinearConv etc. in the graph (default, the fastest here); qdq: Q/DQ pairs "
+                        "fused by onnxruntime")
     p.add_argument("--out", type=Path, required=True)
     a = p.parse_args(argv)
     return one_line_errors("quantize", lambda: _run(a))
