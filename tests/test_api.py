@@ -220,20 +220,21 @@ def test_a_map_rewritten_in_place_stops_cleanly(tmp_path: Path, api_map: Path, s
 
 def test_confidence_is_the_modes_own_probability(tmp_path: Path) -> None:
     """Without a calibration, a mode that models the probability that its answer is right gives it as the
-    line's ``confidence``: stream-prob's answers given are at least 0.9 sure and score at least that (the
-    precision expected of the answers as sure); a lost frame and a mode without a model give none."""
+    line's ``confidence``: stream-filter's answers given are at least the target precision sure, their score
+    that probability; a lost frame and a mode without a model give none."""
     from helpers import driven_encodings
+    from vpr_edge.matchers.constants import TARGET_PRECISION
 
     refs, queries, truth = driven_encodings(400, 160, noise=1.0, seed=6)
     np.save(tmp_path / "refs.npy", refs)
     proc = subprocess.run([sys.executable, "-m", "vpr_edge", "build-map", str(tmp_path / "refs.npy"), "-o",
                            str(tmp_path / "m.npz")], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
-    prob = Localizer(tmp_path / "m.npz", mode="stream-prob", threads=1)
+    prob = Localizer(tmp_path / "m.npz", mode="stream-filter", threads=1)
     got = [prob.push_encoding(q) for q in queries]
     given = [m for m in got if not m.lost]
     assert len(given) > 30
-    assert all(0.9 <= m.confidence <= 1.0 and m.score >= m.confidence for m in given)
+    assert all(TARGET_PRECISION <= m.confidence <= 1.0 and m.score == m.confidence for m in given)
     assert all(m.confidence is None for m in got if m.lost)
     plain = Localizer(tmp_path / "m.npz", threads=1)
     assert all(plain.push_encoding(q).confidence is None for q in queries[:20])

@@ -82,11 +82,11 @@ def test_localize_says_the_line_a_calibration_gives(tmp_path: Path, small_map: P
     assert said in proc.stderr
     rows = list(csv.DictReader(proc.stdout.splitlines()))
     assert [r["lost"] == "1" for r in rows] == [float(r["score"]) < line for r in rows]
-    # a calibration without a line (schema 1) leaves stream-prob its own line, and says nothing of a drive
+    # a calibration without a line (schema 1) leaves stream-filter its own line, and says nothing of a drive
     doc = json.loads((tmp_path / "cal.json").read_text())
-    doc["schema"], doc["modes"] = 1, {"stream-prob": {k: v for k, v in doc["modes"]["stream"].items() if k != "line"}}
+    doc["schema"], doc["modes"] = 1, {"stream-filter": {k: v for k, v in doc["modes"]["stream"].items() if k != "line"}}
     (tmp_path / "v1.json").write_text(json.dumps(doc))
-    own = run("localize", "-m", small_map, "-s", small_queries, "--mode", "stream-prob", "--calibration",
+    own = run("localize", "-m", small_map, "-s", small_queries, "--mode", "stream-filter", "--calibration",
               tmp_path / "v1.json", "--target-precision", "0.8")
     assert own.returncode == 0 and "labelled drive" not in own.stderr, own.stderr
 

@@ -263,17 +263,3 @@ def test_descriptor_drives(tmp_path: Path) -> None:
     assert code == 0, err
     lines = [json.loads(x) for x in stdout.splitlines()]
     assert sum(x["drive"] == "north" and x["ref_index"] - 20 == x["frame_index"] for x in lines) >= 20
-
-
-def test_the_decoy_follows_a_map_of_shuffled_drives() -> None:
-    """With the decoy's gate (``decoy``; the decoy runs over the references reversed, as one line) a map of
-    drives given in shuffled order is answered as without it once the gate has opened: the same answers, the
-    same locked frames after the first 40."""
-    order = [2, 0, 3, 1]
-    sim, truth, drives = planted_drives(order, [150, 150, 150, 150], noise=0.5, seed=3)
-    graph = RouteGraph(drives.n_refs, drives.starts, tuple(drives.junctions()))
-    plain = replace(MATCHERS["stream"], graph=graph).run(sim, k=1)
-    gated = replace(MATCHERS["stream"].with_params(decoy=True), graph=graph).run(sim, k=1)
-    assert np.array_equal(plain.refs, gated.refs)
-    assert np.array_equal(plain.scores[40:] >= 1.0, gated.scores[40:] >= 1.0)
-    assert (np.abs(gated.refs[40:] - truth[40:]) <= 2).mean() > 0.95

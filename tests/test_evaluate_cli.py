@@ -288,31 +288,31 @@ def test_evaluate_draws_a_calibrations_line_at_the_target_precision(tmp_path: Pa
 
 
 def test_evaluate_target_precision_line_gap_and_answers(tmp_path: Path) -> None:
-    """``--target-precision`` is stream-prob's line; every mode gets the best line and the line gap; ``--answers``
+    """``--target-precision`` is stream-filter's line; every mode gets the best line and the line gap; ``--answers``
     writes each frame's answer per mode; a target outside (0, 1) is one line, exit 2, before any output."""
     import csv
 
     s, gt = planted_similarity(tmp_path)
-    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream,stream-prob", "--target-precision",
+    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream,stream-filter", "--target-precision",
                "0.9", "--answers", tmp_path / "a.csv", "--json", tmp_path / "r.json")
     assert proc.returncode == 0, proc.stderr
     assert "line gap" in proc.stdout
     doc = json.loads((tmp_path / "r.json").read_text())
-    prob = doc["modes"]["stream-prob"]
+    prob = doc["modes"]["stream-filter"]
     assert prob["settings"]["min_confidence"] == 0.9 and prob["target_precision"] == 0.9
     assert 0.0 <= prob["best_line_recall"] <= 1.0 and prob["line_gap"] is not None
     rows = list(csv.DictReader(open(tmp_path / "a.csv")))
-    assert len(rows) == 80 and {r["mode"] for r in rows} == {"stream", "stream-prob"}
+    assert len(rows) == 80 and {r["mode"] for r in rows} == {"stream", "stream-filter"}
     assert all(r["probability"] == "" for r in rows if r["mode"] == "stream")
-    assert all(0.0 <= float(r["probability"]) <= 1.0 for r in rows if r["mode"] == "stream-prob")
-    lost = [r for r in rows if r["mode"] == "stream-prob" and r["lost"] == "1"]
+    assert all(0.0 <= float(r["probability"]) <= 1.0 for r in rows if r["mode"] == "stream-filter")
+    lost = [r for r in rows if r["mode"] == "stream-filter" and r["lost"] == "1"]
     assert all(float(r["probability"]) < 0.9 and r["why"] for r in lost)
-    given = [r for r in rows if r["mode"] == "stream-prob" and r["lost"] == "0"]
-    # an answer given is at least the floor sure, scored by the precision expected of the answers as sure
-    assert given and all(float(r["score"]) >= float(r["probability"]) >= 0.9 for r in given)
+    given = [r for r in rows if r["mode"] == "stream-filter" and r["lost"] == "0"]
+    # an answer given is at least the line sure, its score that probability
+    assert given and all(float(r["score"]) == float(r["probability"]) >= 0.9 for r in given)
     # without --calibration, the probability's own reliability over every frame, against a plain loop
-    p = np.array([float(r["probability"]) for r in rows if r["mode"] == "stream-prob"])
-    right = np.array([r["right"] == "1" for r in rows if r["mode"] == "stream-prob"])
+    p = np.array([float(r["probability"]) for r in rows if r["mode"] == "stream-filter"])
+    right = np.array([r["right"] == "1" for r in rows if r["mode"] == "stream-filter"])
     ece = 0.0
     for b in range(10):
         members = [(q, ok) for q, ok in zip(p, right) if b / 10 <= q < (b + 1) / 10 or (b == 9 and q == 1.0)]

@@ -86,7 +86,7 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("results", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--quick"], "not a dataset folder with ref/"),
     ("results", ["--datasets", "{tmp}", "--out", "{tmp}/out", "--sections", "nope"], "no section 'nope'"),
     ("bench-matcher", ["--stop-noise", "-1"], "--stop-noise must be >= 0"),
-    ("bench-matcher", ["--param", "decoy=maybe"], "'maybe' is not a bool"),
+    ("bench-matcher", ["--param", "confirm=maybe"], "'maybe' is not an int"),
     ("bench-scale", ["--work", "{tmp}", "--places", "5"], "need --places >= 10"),
     ("calibration-check", ["--streams", "{tmp}", "{tmp}", "--fits", "logistic,nope"],
      "--fits 'logistic,nope': choose from logistic, isotonic"),
@@ -103,7 +103,7 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("front-end-cache", ["--streams", "{tmp}", "--out", "{tmp}/out"], "not a derived-streams folder (no ref"),
     ("front-end-cache", ["--streams", "{tmp}/a", "{tmp}/b/a", "--out", "{tmp}/out"], "names name the datasets"),
     ("front-end-lines", ["--cache", "{tmp}/none"], "none: not a folder"),
-    ("front-end-lines", ["--cache", "{tmp}", "--modes", "stream,stream:decoy=maybe"], "'maybe' is not a bool"),
+    ("front-end-lines", ["--cache", "{tmp}", "--modes", "stream,stream:confirm=maybe"], "'maybe' is not an int"),
     ("front-end-lines", ["--cache", "{tmp}", "--modes", "stream:nope=1"], "stream takes KEY=VALUE with KEY one of"),
     ("one-view-check", ["--streams", "{tmp}"], NOT_STREAMS),
     ("eval-streams", ["--streams", "{tmp}"], NOT_STREAMS),
@@ -505,10 +505,10 @@ def test_front_end_cache_then_lines(every_stream: Path, tmp_path: Path) -> None:
     again = tool("front-end-cache", "--streams", str(every_stream), str(other), "--out", str(cache), "--fronts",
                  "ifv,pixels", "--threads", "1")
     assert again.count("exists") == 2 * 2 * (len(KINDS) + 1)
-    lines = tool("front-end-lines", "--cache", str(cache), "--modes", "stream,stream-prob")
+    lines = tool("front-end-lines", "--cache", str(cache), "--modes", "stream,stream-filter")
     rows = [line.split("|")[1:-1] for line in lines.splitlines() if line.startswith("| corridor | ifv |")]
     per_stream = [r for r in rows if len(r) == 11 and r[3].strip() in (*KINDS, "foreign")]
-    assert {(r[2].strip(), r[3].strip()) for r in per_stream} == {(m, k) for m in ("stream", "stream-prob")
+    assert {(r[2].strip(), r[3].strip()) for r in per_stream} == {(m, k) for m in ("stream", "stream-filter")
                                                                    for k in (*KINDS, "foreign")}
     assert any(r[2].strip() == "`stream`" for r in rows)        # the ranges' table
     # each line from a labelled drive's calibration: that drive left out of the rows

@@ -122,14 +122,12 @@ def test_build_map_indexes_and_localize_uses_it(tmp_path: Path) -> None:
     assert code == 2 and err.count("\n") == 1 and "--index hnsw" in err and not (tmp_path / "x.npz").exists()
 
 
-@pytest.mark.parametrize("mode, search", [("stream", "index"), ("stream-prob", "index"), ("stream", "coarse"),
-                                          ("stream-decoy", "index")])
+@pytest.mark.parametrize("mode, search", [("stream", "index"), ("stream", "coarse")])
 def test_evaluate_answers_as_localize(tmp_path: Path, mode: str, search: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """``evaluate`` runs the per-frame search ``localize`` runs (``map.search``): on a map with an index its
     whole-route frames go through the index's candidates, on a long map (here: the length made short) through
     the coarse rows; every frame's answer and score are localize's, and evaluate asks the index or the coarse
-    search as often as localize does (a plain count of the calls). ``stream-decoy`` reads every reference
-    every frame: neither asks the index."""
+    search as often as localize does (a plain count of the calls)."""
     from vpr_edge.index.coarse import CoarseSearch
 
     refs, queries, truth = driven_encodings(3000, 300, noise=1.0, seed=5)
@@ -152,7 +150,7 @@ def test_evaluate_answers_as_localize(tmp_path: Path, mode: str, search: str, mo
     code, _, err = invoke("evaluate", "-m", path, "-q", tmp_path / "stream.npy", "--gt", tmp_path / "gt.csv",
                           "--modes", mode, "--answers", tmp_path / "answers.csv")
     assert code == 0, err
-    assert len(calls) == 2 * asked_by_localize and (asked_by_localize > 0) == (mode != "stream-decoy")
+    assert len(calls) == 2 * asked_by_localize and asked_by_localize > 0
     rows = (tmp_path / "answers.csv").read_text().splitlines()[1:]
     assert len(rows) == len(got) == len(queries)
     for line, row in zip(got, rows):

@@ -274,26 +274,6 @@ def test_lock_verdict_and_evidence_average_are_the_rules_in_order() -> None:
     assert want == loop and want[2] == want[1] and want[3] > want[2]
 
 
-def test_at_one_view_against_a_loop() -> None:
-    """``at_one_view``: the best state lies in a run of references that show one view (a reference flagged in
-    the route, or the one before a flagged reference), checked against the route after each frame."""
-    rng = np.random.default_rng(5)
-    route = np.zeros(30, bool)
-    route[[8, 9, 10, 20]] = True   # references 7-10 show one view, 19-20 another
-    m = RoadMatcher(30, **MATCHERS["stream"].params | {"route": route})
-    assert not m.at_one_view()   # before a frame
-    seen = set()
-    for t in range(60):
-        row = rng.normal(size=30)
-        row[(t // 2) % 30] += 4.0
-        m.update(row)
-        ref = int(m.position())
-        want = bool(route[ref] or (ref + 1 < 30 and route[ref + 1]))
-        assert m.at_one_view() == want
-        seen.add(want)
-    assert seen == {True, False}
-
-
 def test_per_reference_is_each_places_best_cell_and_speed() -> None:
     """The best trajectory ending at each reference, against a plain loop over its speeds and grid cells."""
     from vpr_edge.matchers.road import per_reference

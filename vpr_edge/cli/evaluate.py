@@ -79,7 +79,7 @@ def evaluate_cmd(
     min_confidence: Optional[float] = typer.Option(None, help="Lost threshold for modes with a lost state "
                                                    "(default: each mode's own)."),
     target_precision: Optional[float] = typer.Option(
-        None, help="The line of modes whose score is the probability that the answer is right (stream-prob; "
+        None, help="The line of modes whose score is the probability that the answer is right (stream-filter; "
                    "default %.2f), and of every mode --calibration holds (where its drive's answers reached it); "
                    "and the precision at which every mode's best line is read." % TARGET_PRECISION),
     answers_text: Optional[str] = typer.Option(None, "--answers", help="Write each frame's answer per mode "

@@ -60,7 +60,7 @@ def localize_cmd(
                    "Default: the mode's own (stream: %.1f; other modes: never lost)."
                    % MATCHERS["stream"].min_confidence),
     target_precision: Optional[float] = typer.Option(
-        None, help="Modes whose score is the probability that the answer is right (stream-prob): the line, "
+        None, help="Modes whose score is the probability that the answer is right (stream-filter): the line, "
                    "answers below it are lost (default %.2f). With --calibration, any mode: the line where the "
                    "labelled drive's answers at least as sure were right this often; else refused for another "
                    "mode (stream: its line is --min-confidence)." % TARGET_PRECISION),

@@ -223,7 +223,7 @@ class Matcher:
         if live and target is not None and not self.probability and line is None:
             raise InputError("{opt.target_precision} {v}: mode {name}'s score is not the probability that its "
                              "answer is right, so no target precision sets its line ({opt.min_confidence} does, "
-                             "or a {opt.calibration} from a labelled drive; stream-prob's score is one)",
+                             "or a {opt.calibration} from a labelled drive; stream-filter's score is one)",
                              v=target, name=self.name)
         if given is not None:
             return float(given)

@@ -6,7 +6,7 @@ A frame is locked when its answer stands out of what the frame sees (the evidenc
 or its trajectory is unambiguous enough to outweigh a weak view: uniqueness against the answer's own drive
 >= ``trust``)
 and of what this stream's recent frames saw there (the same average of the answer's view less its place's
-mean over the stream's recent moving frames, ``verdict.RecentViews``: >= ``hub``; a place that looks like
+mean over the stream's recent moving frames, ``RecentViews``: >= ``hub``; a place that looks like
 every frame, imagery of somewhere else the map's place happens to resemble most, does not), its trajectory
 has built up (H_best >= ``lock``) and held its place for ``confirm`` frames (``place_jumped``: a best place
 that jumps, back onto the map after a detour or onto a look-alike ahead, is answered from its ``confirm``-th
@@ -15,16 +15,106 @@ moves on for ``stuck`` frames, as the motion cue says, is a place every frame re
 is) and no rival along the answer's own drive is nearly as strong (uniqueness against it >= ``unique``); the
 first rule that fails names why it is lost (``lock_verdict``). So locked frames rank above lost ones, each by
 uniqueness. The answer is strong enough for a local search at H_best >= ``hold`` * ``lock``.
+
+The trajectory recursion (``road.RoadMatcher``) finds the answer and hands each frame to the verdict as a
+``FrameReading``; the verdict (``LockVerdict``) answers a ``Judgement``, so each is testable alone.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 from vpr_edge.matchers.base import AMBIGUOUS, LOCKED, NO_TRAJECTORY, WEAK_VIEW
-from vpr_edge.matchers.constants import OFF
-from vpr_edge.matchers.reading import FrameReading, Judgement, answer_view
+from vpr_edge.matchers.constants import HUB_MEMORY, HUB_PRIOR, OFF
 from vpr_edge.matchers.route import RouteGraph, inside, max_outside, merge
-from vpr_edge.matchers.verdict import RecentViews
+
+
+@dataclass(frozen=True)
+class FrameReading:
+    """One frame as the trajectories (``road.RoadMatcher``) left it, what the verdict judges. ``ref``: the
+    answer (the best trajectory's place); ``best``: that trajectory's score H; ``values`` (n,): the best
+    trajectory ending at each place of ``where`` (sorted place numbers, (n,); None: every place, in order);
+    ``part`` (n,): the frame's similarities to those places; ``probe``: its similarities that estimate its
+    ``mean`` and spread ``std`` (the probe sample while searching locally, else every reference);
+    ``standing``: the frame shows a standing camera (its view again); ``stopped``: no motion cue is given and
+    the best trajectory has speed 0 (the vehicle stands as the trajectories read it); ``cued``: a motion cue
+    is given (so a frame not ``standing`` shows a moving camera)."""
+
+    ref: int
+    best: float
+    values: np.ndarray
+    where: np.ndarray | None
+    part: np.ndarray
+    probe: np.ndarray
+    mean: float
+    std: float
+    standing: bool
+    stopped: bool = False
+    cued: bool = False
+
+    @property
+    def places(self) -> np.ndarray | slice:
+        """The places ``part`` covers, as an index: ``where``, or every place."""
+        return slice(None) if self.where is None else self.where
+
+    @property
+    def z(self) -> np.ndarray:
+        """``part`` in standard deviations above the frame's mean, (n,)."""
+        return (np.asarray(self.part, np.float64) - self.mean) / self.std
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """The verdict on one frame: its ``score`` (the matcher's; the lost line is drawn on it), whether the
+    answer is ``strong`` enough for a local search to follow it (the matcher adds that no trajectory beyond its
+    window is near as strong) and ``why`` (``base.LOST_WHY`` or "locked": the first reason the frame is not
+    answered)."""
+
+    score: float
+    strong: bool
+    why: str
+
+
+def answer_view(graph: RouteGraph, ref: int, where: np.ndarray | None, part: np.ndarray) -> np.ndarray:
+    """The frame's similarities (``part``, over the places ``where``; None: all) to the answer ``ref`` and its
+    neighbours along its drive (one either side where there is one), (1..3,)."""
+    first, last = graph.bounds(ref)
+    at = int(np.searchsorted(where, ref)) if where is not None else ref
+    lo = max(0, at - (1 if ref > first else 0))
+    return part[lo:at + (2 if ref < last else 1)]
+
+
+class RecentViews:
+    """Each place's mean z-score over the stream's recent frames that saw it (``memory`` frames, an
+    exponential memory per sighting), shrunk towards 0 by a prior of ``prior`` sightings against every sighting
+    of the place so far (a place seen by every frame is, after a few, corrected in full: shrinking by the
+    memory's weight alone would leave 1 / (memory + 1) of any z-score standing). ``corrected(z, places)``: the
+    frame's z-scores (n,) of ``places`` (n,) less those means, as they stood before the frame; ``add(z,
+    places)``: the frame joins the means; ``read(z, places, learn)``: both, the frame joining only where
+    ``learn``."""
+
+    def __init__(self, n_places: int, memory: float = HUB_MEMORY, prior: float = HUB_PRIOR) -> None:
+        self.keep, self.prior = 1.0 - 1.0 / memory, prior
+        self.mean, self.weight = np.zeros(n_places), np.zeros(n_places)
+        self.seen = np.zeros(n_places)   # sightings of each place so far (not forgotten)
+
+    def corrected(self, z: np.ndarray, places: np.ndarray | slice) -> np.ndarray:
+        n = self.seen[places]
+        return np.asarray(z, np.float64) - self.mean[places] * (n / (n + self.prior))
+
+    def add(self, z: np.ndarray, places: np.ndarray | slice) -> None:
+        w = self.weight[places] * self.keep + 1.0
+        self.weight[places] = w
+        self.mean[places] += (np.asarray(z, np.float64) - self.mean[places]) / w
+        self.seen[places] += 1.0
+
+    def read(self, z: np.ndarray, places: np.ndarray | slice, learn: bool) -> np.ndarray:
+        """``corrected(z, places)``, then the frame joins the means if ``learn``."""
+        views = self.corrected(z, places)
+        if learn:
+            self.add(z, places)
+        return views
 
 
 def evidence_average(previous: float | None, here: float, keep: float, standing: bool) -> float:

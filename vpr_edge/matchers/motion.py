@@ -169,14 +169,6 @@ def route_stands(blocks: Iterable[np.ndarray], threshold: float, memory: int = M
     return np.concatenate(out) if out else np.zeros(0, bool)
 
 
-def reversed_stands(route: np.ndarray) -> np.ndarray:
-    """Where the map's drive stood (R,) bool, True where a reference shows the view of the one before it (as
-    ``route_stands`` gives it) -> the same for the references in reverse order (there, the one before a
-    reference is the one after it)."""
-    route = np.asarray(route, bool)
-    return np.r_[False, route[::-1][:-1]] if len(route) else route.copy()
-
-
 def cue_at(still: np.ndarray | None, i: int) -> float | None:
     """Frame ``i``'s motion cue from a (Q,) array of them (``stillness``; NaN or no array: None)."""
     if still is None or not np.isfinite(still[i]):

@@ -82,15 +82,7 @@ STREAM: dict[str, Param] = {
                         "stop_decay for every frame"),
     "still_memory": Param(MEMORY, "motion cue: moving frames whose median step (1 - cosine of encodings) is the "
                                   "stream's typical moving step"),
-    "decoy": Param(False, "also run the trajectories over the map's references in reverse order, and answer only "
-                          "while the stream's best stands above that decoy's (imagery of somewhere else scores "
-                          "alike both ways); whole-route frames read every reference (no index search), and "
-                          "while the gate is closed every frame does"),
 }
-# the stream matcher's lock rules; ``stream-prob`` replaces them by a model of "not this place" (``verdict``)
-LOCK_RULES: tuple[str, ...] = ("lock", "evidence", "evidence_decay", "hub", "unique", "confirm", "stuck", "trust",
-                               "hold")
-STREAM_PROB: dict[str, Param] = {k: p for k, p in STREAM.items() if k not in LOCK_RULES}
 # the ``stream-filter`` matcher (``bayes``): the motion model, the likelihood, the confidence and the motion cue. Chosen
 # on nordland-dev, reported on Corridor (docs/decisions.md, "The stream filter's parameters")
 STREAM_FILTER: dict[str, Param] = {

@@ -12,7 +12,6 @@ from vpr_edge.matchers.dtw import dtw_match
 from vpr_edge.matchers.road import RoadMatcher
 from vpr_edge.matchers.seqslam import SeqSLAMOnline, seqslam_match
 from vpr_edge.matchers.single import BestMatch
-from vpr_edge.matchers.probability import probability_matcher
 from vpr_edge.matchers.stream_dtw import StreamingDTW
 from vpr_edge.matchers.constants import TARGET_PRECISION
 
@@ -25,15 +24,6 @@ MATCHERS: dict[str, Matcher] = {m.name: m for m in (
             "stops, detours; its confidence is the probability the answer is right, lost below the target "
             "precision (online)", start=bayes_filter, definitions=P.STREAM_FILTER, min_confidence=TARGET_PRECISION,
             reads_route=True, probability=True),
-    Matcher("stream-prob", "the stream matcher with the probability that each answer is right, from a "
-            "model of 'not this place' read on the map and the stream (no labels); lost below the target "
-            "precision (online)", start=probability_matcher, definitions=P.STREAM_PROB, min_confidence=TARGET_PRECISION,
-            reads_route=True, probability=True),
-    Matcher("stream-decoy", "stream-prob that also runs its trajectories over the map reversed and answers only "
-            "while the stream stands above that decoy: imagery of a place the map does not hold is lost; about "
-            "1.7x stream-prob's matching (online)", start=probability_matcher,
-            definitions=P.STREAM_PROB, params=P.defaults(P.STREAM_PROB, decoy=True),
-            min_confidence=TARGET_PRECISION, reads_route=True, probability=True),
     Matcher("single", "best single match per frame, no sequence information (online)", start=BestMatch),
     Matcher("stream-dtw", "decayed streaming DTW over 1 - cos (online; the first streaming matcher, kept "
             "as a baseline)", start=StreamingDTW, definitions=P.STREAM_DTW),

@@ -46,10 +46,9 @@ answered just before such a reference is read as motion, so the answer moves on 
 references as the frames of the mapping drive did (where it stands still, the answer would stay at the first
 of them while the rest of that stop, the same place, went by).
 
-The answer is the position of the best state. How sure it is, and why a frame is lost, is a *verdict*'s
-(``reading.Verdict``; each frame handed over as a ``reading.FrameReading``): ``stream-prob``'s is a model of
-"not this place" (``probability.ProbabilityVerdict``); the ``stream`` matcher's is the lock's rules
-(``lock.LockVerdict``), described here. Their score does two jobs, so it has two parts:
+The answer is the position of the best state. How sure it is, and why a frame is lost, is the *verdict*'s:
+the lock's rules (``lock.LockVerdict``; each frame handed over as a ``lock.FrameReading``), described here.
+Its score does two jobs, so it has two parts:
 
     score = [H_best >= lock and held >= confirm and not kept >= stuck
              and (E >= evidence or uniqueness >= trust) and uniqueness >= unique] + uniqueness,
@@ -95,14 +94,6 @@ firmly locked frames, and every frame that is not firmly locked, search the whol
 hypothesis elsewhere (a jump, a re-entry after a detour) is found. A frame then costs O(window) instead of
 O(R), plus the global frames. Each reference's running mean counts time, not updates: seen again after k
 frames outside the window, its old mean is weighted by (1 - 1/memory)^k.
-
-With ``decoy`` the same recursion also runs over the references in reverse order (a vehicle drives its route
-forwards) on every frame that reads the whole route, and a frame scores 0 (lost, "no-trajectory") while the
-recent mean of (best - decoy best) stays below a share of the decoy bests' spread (``verdict.DecoyGate``):
-imagery of a place the map does not hold scores alike both ways. While the gate is closed every frame reads
-the whole route; while it is open and a firm lock searches locally, the decoy and the gate wait (the local
-frames cost what they cost without it). Whole-route frames read whole rows: no search around an index's
-candidates.
 """
 from __future__ import annotations
 
@@ -110,14 +101,11 @@ import numpy as np
 
 from collections.abc import Callable
 
-from vpr_edge.matchers import params as P
 from vpr_edge.matchers.base import NO_TRAJECTORY
 from vpr_edge.matchers.constants import FIRM_RIVAL, LOCAL_ROUTE, MIN_SPREAD
-from vpr_edge.matchers.lock import LockVerdict
-from vpr_edge.matchers.motion import reversed_stands, stands
-from vpr_edge.matchers.reading import FrameReading, TrajectoryOnly, VerdictFactory
+from vpr_edge.matchers.lock import FrameReading, LockVerdict
+from vpr_edge.matchers.motion import stands
 from vpr_edge.matchers.search_policy import around_candidates, best_hypotheses, local_next
-from vpr_edge.matchers.verdict import DecoyGate
 from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, places
 
 
@@ -142,20 +130,16 @@ class RoadMatcher:
                  hold: float, seek: int, peaks: int, seek_frames: int, stop_gain: float, stop_decay: float, still: float,
                  still_memory: int,
                  evidence: float, evidence_decay: float, hub: float, unique: float, confirm: int, stuck: int,
-                 trust: float, decoy: bool = False,
-                 route: np.ndarray | None = None, graph: RouteGraph | None = None, reach: int = 0,
-                 verdict: VerdictFactory | None = None) -> None:
+                 trust: float, route: np.ndarray | None = None, graph: RouteGraph | None = None,
+                 reach: int = 0) -> None:
         """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
         ``still_memory`` is the motion cue's, read where the cue is computed; ``seek_frames`` is what the index
         is asked, read where it is asked, ``index.ivf.SequenceQuery``). ``route``: (n_refs,) bool, the
         references where the map's drive stood (``motion.route_stands``; None: not known). ``graph``: the
         map's drives and where they meet (``route.RouteGraph``; None: one drive). ``reach``: how far along
         the map references stay alike (``likeness.reach``; 0: not known): a rival trajectory must lie beyond
-        it as well as beyond ``rival_window``. ``decoy``: also run the recursion over the references in reverse
-        order on whole-route frames, and score 0 while the stream does not stand above it (``DecoyGate``;
-        module docstring). ``verdict``: what judges each frame, made from the route graph and the rival window
-        (``reading.Verdict``; None: the lock's rules with the parameters above, ``lock.LockVerdict``)."""
-        given = {k: v for k, v in locals().items() if k in P.STREAM}   # the parameters, for the decoy
+        it as well as beyond ``rival_window``. Each frame is judged by the lock's rules with the parameters
+        above (``lock.LockVerdict``)."""
         if n_refs < 1:
             raise ValueError("need at least one reference")
         if not 0.0 < decay < 1.0:
@@ -172,7 +156,6 @@ class RoadMatcher:
         self.rival_window = max(0, int(rival_window), int(reach))
         self.stop_gain, self.stop_decay, self.still = stop_gain, stop_decay, still
         self._why = NO_TRAJECTORY   # why the last frame is not answered, as its verdict said (``why``)
-        self._probability: float | None = None   # the probability its answer is right, as the verdict said
         if route is not None and np.shape(route) != (n_refs,):
             raise ValueError(f"route must flag each of the {n_refs} references, got shape {np.shape(route)}")
         self.route = None if route is None else np.asarray(route, bool)
@@ -185,9 +168,9 @@ class RoadMatcher:
         self.graph = RouteGraph.line(n_refs) if graph is None else graph
         if self.graph.n_refs != n_refs:
             raise ValueError(f"route graph of {self.graph.n_refs} references for {n_refs}")
-        self.verdict = verdict(self.graph, self.rival_window) if verdict is not None else LockVerdict(
-            self.graph, self.rival_window, lock=lock, evidence=evidence, evidence_decay=evidence_decay, hub=hub,
-            unique=unique, confirm=confirm, stuck=stuck, trust=trust, hold=hold)
+        self.verdict = LockVerdict(self.graph, self.rival_window, lock=lock, evidence=evidence,
+                                   evidence_decay=evidence_decay, hub=hub, unique=unique, confirm=confirm, stuck=stuck,
+                                   trust=trust, hold=hold)
         # trajectories across drives: state entries whose predecessor in map order is another drive's (cut),
         # and what the junctions carry from their sources' ends into their targets (fed)
         self._cut = self.graph.cuts(grid, self.n_speeds)
@@ -222,15 +205,6 @@ class RoadMatcher:
         self._weight = np.full(n_refs, float(memory))
         self._seen = np.full(n_refs, -1, np.int64)
         self._t = 0                       # frames counted for the means (not those of a stopped vehicle)
-        # the decoy: the same recursion over the references in reverse order on the whole-route frames (no
-        # search around an index's candidates), and the gate it feeds
-        self._decoy: RoadMatcher | None = None
-        self._gate: DecoyGate | None = None
-        if decoy:
-            self._decoy = RoadMatcher(n_refs, **(given | {"window": 0, "decoy": False}), reach=reach,
-                                      route=None if route is None else reversed_stands(route), verdict=TrajectoryOnly)
-            self._gate = DecoyGate()
-            self.around = None   # type: ignore[assignment]   # whole rows: ``step`` asks no index
 
     def best(self) -> float:
         """The last frame's best trajectory score H (0 before a frame)."""
@@ -244,8 +218,8 @@ class RoadMatcher:
         """References (int array) whose similarities the next ``update`` needs, in that order; None:
         all of them. While locked on a large route (``window`` > 0): the ``window`` references either side of
         the answer, then the probe sample."""
-        if self._win is None or (self._gate is not None and not self._gate.open):
-            return None   # the whole route; with a decoy, also while its gate is closed (the decoy reads it)
+        if self._win is None:
+            return None
         return np.concatenate([places(self._win), self._probe])
 
     def _normalise(self, s: np.ndarray, lo: int, mean: float, std: float) -> np.ndarray:
@@ -435,20 +409,6 @@ class RoadMatcher:
             v = tv[ok]
             np.maximum.at(new, (v, where), fed[v, row[ok]])
 
-    def at_one_view(self) -> bool:
-        """Whether the best state lies in a run of references that show one view (the map's drive stood there:
-        ``route``), where a trajectory fits as well backwards as forwards (False before a frame, or with no
-        route)."""
-        if self.route is None or self._position is None:
-            return False
-        ref = int(self._position)
-        return bool(self.route[ref] or (ref + 1 < self.n_refs and self.route[ref + 1]))
-
-    def _tells(self, standing: bool) -> bool:
-        """Whether this frame tells forwards from backwards, for the decoy's gate: the camera moves, and neither
-        the best trajectory nor the decoy's best lies where the map shows one view."""
-        return not standing and not self.at_one_view() and not (self._decoy is not None and self._decoy.at_one_view())
-
     def stands(self, still: float | None) -> bool:
         """Whether a frame with motion cue ``still`` shows a standing camera (its view again) where the map's
         drive moved on: such a frame leaves the state as it was (see the module docstring)."""
@@ -477,12 +437,6 @@ class RoadMatcher:
         ``still``: the frame's motion cue (cosine similarity to the last moving frame's encoding,
         ``base.MotionCue``; None: none)."""
         s = np.asarray(sim_row, np.float64)
-        decoy_read = self._decoy is not None and refs is None and s.shape == (self.n_refs,)
-        if decoy_read:   # a whole row: the decoy reads it (while a firm lock searches locally, it waits)
-            self._decoy.update(s[::-1], None, still)
-        elif self._gate is not None and not self._gate.open:
-            raise ValueError(f"with a decoy whose gate is closed every reference is read: a row of shape "
-                             f"({self.n_refs},)")
         wins = self._win if self._win is not None else [(0, self.n_refs)]
         where = None if self._win is None else places(wins)   # the places searched (None: all, in order)
         n_win = self.n_refs if where is None else len(where)
@@ -540,13 +494,10 @@ class RoadMatcher:
         # without a motion cue, a best trajectory at speed 0 is what says the vehicle stands; with one, the cue
         judged = self.verdict.judge(FrameReading(ref, best, values, where, part, probe, mean, std, standing,
                                                  stopped and still is None, self._cued(still)))
-        score, self._why, self._probability = judged.score, judged.why, judged.probability
+        score, self._why = judged.score, judged.why
         # a firm lock: a strong answer, and no trajectory beyond the window half as strong (seen in global frames)
         held = bool(self.window) and judged.strong and \
             max_outside(values, where, self.graph.near(ref, self.window)) < FIRM_RIVAL * best
-        if decoy_read and not self._gate.update(best, self._decoy.best(), self._tells(standing)):
-            score, self._why = 0.0, NO_TRAJECTORY   # no trajectory stands above the reversed map's
-            self._probability = None if self._probability is None else 0.0
         self._follow(ref, held)
         return ref, score
 
@@ -555,14 +506,12 @@ class RoadMatcher:
         the lock's rules: "weak-view" (its answer does not stand out of what the frame sees: E < ``evidence``
         and uniqueness < ``trust``), "no-trajectory" (none has built up: H < ``lock``, its place has held fewer
         than ``confirm`` frames, or it has kept one place while the camera moved ``stuck`` frames), "ambiguous"
-        (a rival along the drive nearly as strong: uniqueness < ``unique``); with a decoy, "no-trajectory" while
-        its gate is closed."""
+        (a rival along the drive nearly as strong: uniqueness < ``unique``)."""
         return self._why
 
-    def probability(self) -> float | None:
-        """The probability that the last frame's answer is right, where its verdict models one (None: the
-        lock's rules do not)."""
-        return self._probability
+    def probability(self) -> None:
+        """The lock's rules model no probability that the answer is right: None."""
+        return None
 
     def _follow(self, ref: int, held: bool) -> None:
         """Choose the next frame's search: the references within ``window`` of ``ref`` along the route
@@ -604,12 +553,8 @@ class RoadMatcher:
         """Forget the stream."""
         self._position = None
         self._best = 0.0
-        if self._decoy is not None:
-            self._decoy.reset()
-            self._gate = DecoyGate()
         self.verdict.reset()
         self._why = NO_TRAJECTORY
-        self._probability = None
         self._hold([], np.zeros(0, np.int64), np.zeros((self.n_speeds, 0), np.float32))
         self._mean[:] = 0.0
         self._stopped = False
