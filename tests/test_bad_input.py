@@ -8,6 +8,7 @@ process (a full disk behind stdout, timing of the early output check) run one.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import shutil
 import subprocess
@@ -360,6 +361,39 @@ def test_full_disk_behind_stdout(ws: Path) -> None:
     assert errors == ["vpr-edge: error: stdout: cannot write results (No space left on device)"], proc.stderr
 
 
+@pytest.mark.parametrize("suffix", [".csv", ".jsonl"])
+def test_full_disk_keeps_the_older_log_and_the_new_lines(ws: Path, tmp_path: Path, suffix: str) -> None:
+    """A disk that fills mid-stream: exit 2 in one line, the older log byte for byte, the lines in NAME.part."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)],
+                                           capture_output=True).returncode != 0:
+        pytest.skip("a small tmpfs needs root (mount)")
+    try:
+        out = disk / f"results{suffix}"
+        older = b"an older, complete log\n" * 600                          # 13.8 kB
+        out.write_bytes(older)
+        (disk / "filler").write_bytes(b"x" * (64 * 1024 - len(older) - 8 * 1024))
+        queries = tmp_path / "queries"                                       # a stream longer than the room
+        queries.mkdir()
+        frames = sorted((ws / "queries").iterdir()) * 4
+        for i, f in enumerate(frames):
+            shutil.copy(f, queries / f"{i:07d}{f.suffix}")
+        proc = subprocess.run([sys.executable, "-m", "vpr_edge", "localize", "-m", str(ws / "good.npz"), "-s",
+                               str(queries), "-o", str(out)], capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+        errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("vpr-edge: error:")]
+        assert len(errors) == 1 and "No space left on device" in errors[0], proc.stderr
+        assert f"kept in {out}.part (the run failed); {out} left as it was" in proc.stderr, proc.stderr
+        assert out.read_bytes() == older
+        text = Path(f"{out}.part").read_text()
+        assert text.endswith("\n") and len(text.splitlines()) > 10
+        if suffix == ".jsonl":
+            assert [json.loads(ln)["frame_index"] for ln in text.splitlines()] == list(range(len(text.splitlines())))
+    finally:
+        subprocess.run(["umount", str(disk)], check=True)
+
+
 def test_warnings_for_ignored_input(ws: Path, tmp_path: Path) -> None:
     frames = tmp_path / "frames"
     shutil.copytree(ws / "queries", frames)
@@ -435,8 +469,9 @@ def test_vpr_edge_model_wins_over_the_recorded_model(ws: Path, monkeypatch: pyte
                                            (OSError(5, "Input/output error", "/dev/video0"), 2)])
 def test_stream_failing_part_way_keeps_earlier_results(ws: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                        failure: BaseException, code: int) -> None:
-    """Ctrl-C or a camera that fails after some frames: the results are a log, the lines before it are kept
-    (replacing the earlier run's file only now), said in the summary, then the one line of what ended it."""
+    """Ctrl-C or a camera that fails after some frames: the results are a log, the lines before it are kept,
+    said in the summary, then the one line of what ended it. Ctrl-C, the user's stop, replaces the earlier
+    run's file only now; a failure keeps both, the earlier file and the new lines in NAME.part."""
     from vpr_edge.api import Localizer
 
     real = Localizer.answers
@@ -453,9 +488,12 @@ def test_stream_failing_part_way_keeps_earlier_results(ws: Path, tmp_path: Path,
     before = _snapshot(ws)
     res = CliRunner().invoke(app, ["localize", "-m", str(ws / "good.npz"), "-s", str(ws / "queries"), "-o", str(out)])
     assert res.exit_code == code and isinstance(res.exception, SystemExit), (res.exit_code, res.stderr)
-    assert "Traceback" not in res.stderr and f"3 lines kept in {out}" in res.stderr
     last = res.stderr.strip().splitlines()[-1]
     assert last == "vpr-edge: interrupted" if code == 130 else last.startswith("vpr-edge: error: /dev/video0:")
-    assert out.read_text().count("\n") == 4 and out.read_text().startswith("frame_index,")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["old_results.csv"]
+    log = out if code == 130 else Path(f"{out}.part")
+    assert "Traceback" not in res.stderr and f"3 lines kept in {log}" in res.stderr
+    assert log.read_text().count("\n") == 4 and log.read_text().startswith("frame_index,")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted({"old_results.csv", log.name})
+    if code != 130:
+        assert out.read_text() == "the earlier run\n" and f"(the run failed); {out} left as it was" in res.stderr
     assert _snapshot(ws) == before

@@ -128,6 +128,19 @@ def test_the_log_is_a_log(tmp_path: Path) -> None:
     assert [json.loads(x)["frame_index"] for x in out.read_text().splitlines()] == [5]
 
 
+def test_a_failed_run_keeps_both(tmp_path: Path) -> None:
+    """After a failure the older NAME stays byte for byte and the run's whole lines stay in NAME.part."""
+    out = tmp_path / "run.jsonl"
+    out.write_bytes(b"the last run\n")
+    log = ResultLog("jsonl", out)
+    for i in range(3):
+        log.write(_match(i))
+    os.write(log._fd, b'{"frame_index": 3, "na')        # the line a full disk cut short
+    log.close(complete=False, failed=True)
+    assert out.read_bytes() == b"the last run\n" and log.kept == str(part_path(out))
+    assert [json.loads(x)["frame_index"] for x in part_path(out).read_text().splitlines()] == [0, 1, 2]
+
+
 # --- real runs ------------------------------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
@@ -329,7 +342,7 @@ def test_two_builds_of_one_map_never_lose_one_silently(ws: Path, small_refs: Pat
 
 def test_a_stream_that_fails_half_way_keeps_its_lines(ws: Path, small_queries: Path, tmp_path: Path, capsys) -> None:
     """A source that fails after 5 frames (a camera unplugged): the error is raised, the 5 lines are kept in
-    the named file and the summary says so."""
+    NAME.part (a failure makes no NAME) and the summary says so."""
     from vpr_edge.api import Localizer
     from vpr_edge.cli.localize import run_stream
     from vpr_edge.frames.images import open_stream
@@ -346,9 +359,10 @@ def test_a_stream_that_fails_half_way_keeps_its_lines(ws: Path, small_queries: P
     log = ResultLog("csv", out)
     with pytest.raises(VprError, match="camera stopped"):
         run_stream(Localizer(ws / "map.npz"), Limited(failing()), [log], log, RunSummary(), 1, None, "camera0")
-    assert len(_rows(out)) == 5 and not part_path(out).exists()
+    assert len(_rows(part_path(out))) == 5 and not out.exists()
     err = capsys.readouterr().err
-    assert "stream ended: failed (the error below)" in err and f"5 lines kept in {out}" in err
+    assert "stream ended: failed (the error below)" in err
+    assert f"5 lines kept in {part_path(out)} (the run failed); {out} not made" in err
 
 
 def test_ctrl_c_inside_an_image_read_is_still_ctrl_c(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:

@@ -189,8 +189,9 @@ def run_stream(localizer: Localizer, frames: Limited, sinks: list[ResultSink], l
         failure = ctrl_c(e)
     wall = time.monotonic() - start
     complete = failure is None and not piped and frames.reason is None
+    failed = failure is not None and not isinstance(failure, (KeyboardInterrupt, Terminated))
     with held_signals():          # a second Ctrl-C acts once the log is in place
-        closing = _close_all(sinks, complete)
+        closing = _close_all(sinks, complete, failed)
     if failure is None and not piped and summary.frames == 0:
         if closing is not None:
             raise closing
@@ -202,20 +203,22 @@ def run_stream(localizer: Localizer, frames: Limited, sinks: list[ResultSink], l
         for line in summary.lines(wall, ended):
             _said(line)
         if log is not None and log.target is not None:
-            _said(f"{log.lines} lines kept in {log.kept}" if log.lines else f"no line written; {log.kept} left as "
-                  f"it was")
+            _said(f"no line written; {log.target} left as it was" if not log.lines else
+                  f"{log.lines} lines kept in {log.kept} (the run failed); {log.target} "
+                  f"{'left as it was' if log.had_older else 'not made'}" if log.failed
+                  else f"{log.lines} lines kept in {log.kept}")
     if failure is not None:
         raise failure
     if closing is not None:
         raise closing
 
 
-def _close_all(sinks: list[ResultSink], complete: bool) -> BaseException | None:
+def _close_all(sinks: list[ResultSink], complete: bool, failed: bool = False) -> BaseException | None:
     """Close every sink, even when one fails; the first failure, if any."""
     first = None
     for sink in sinks:
         try:
-            sink.close(complete)
+            sink.close(complete, failed)
         except Exception as e:   # noqa: BLE001 - said after the others are closed
             first = first or e
     return first

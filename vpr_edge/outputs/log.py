@@ -3,9 +3,10 @@
 A stream's results are a log, valid up to the last frame matched, not a map that is whole or nothing. Written
 to ``--out``: the lines go to ``NAME.part`` beside it as frames are matched (each line handed to the system at
 once, so that a killed process loses none; fsync'd with each line (``SYNC_INTERVAL_S``), so that a power cut
-loses at most the last frame), and ``NAME.part`` becomes ``NAME`` when the stream ends, however it ends (its own
-end, a limit, Ctrl-C, SIGTERM, a failure): a file of that name from an earlier run is replaced only then. A
-run that matched no frame replaces nothing. One writer per log (a lock on ``NAME.part``); a ``NAME.part`` left
+loses at most the last frame), and ``NAME.part`` becomes ``NAME`` when the stream ends on its own or by the
+user's stop (a limit, Ctrl-C, SIGTERM): a file of that name from an earlier run is replaced only then. A run
+that fails (a write error, a full disk, a frame that ends the stream) keeps both: ``NAME`` as it was and its
+own lines, whole, in ``NAME.part``. A run that matched no frame replaces nothing. One writer per log (a lock on ``NAME.part``); a ``NAME.part`` left
 by a run that died without a word (SIGKILL, power cut) is made ``NAME`` by the next run to that name, its
 last partial line cut, before the new run starts its own. Without ``--out`` the lines go to standard output,
 flushed one by one. The header (CSV) is written with the first line, so a stream that fails to start
@@ -162,6 +163,7 @@ class ResultLog:
         self._clock = clock
         self._synced = clock()
         self._closed = False
+        self.failed = False                  # closed after a failure: the lines stay in ``part``
         self._fd: int | None = None
         self._stream: IO[str] | None = None
         self._was: os.stat_result | None = None
@@ -178,9 +180,17 @@ class ResultLog:
             self.part, self._fd = claim(self.target)
 
     @property
+    def had_older(self) -> bool:
+        """A file of the log's name was there when the run began."""
+        return self._was is not None
+
+    @property
     def kept(self) -> str:
-        """Where the lines are once the stream has ended: the file's name, or ``stdout``."""
-        return str(self.target) if self.target is not None else self.where
+        """Where the lines are once the stream has ended: the file's name (``NAME.part`` after a failure), or
+        ``stdout``."""
+        if self.target is None:
+            return self.where
+        return str(self.part if self.failed else self.target)
 
     def write(self, match: Match, frame: Frame | None = None) -> None:
         """Write ``match``'s line (after the header, for the first) and hand it to the system."""
@@ -211,10 +221,11 @@ class ResultLog:
             assert self._stream is not None
             os.dup2(os.open(os.devnull, os.O_WRONLY), self._stream.fileno())
 
-    def close(self, complete: bool = True) -> None:
+    def close(self, complete: bool = True, failed: bool = False) -> None:
         """End the log: a file's log is synced, cut to whole lines and renamed to its name, whether the stream
-        ended (``complete``) or stopped early; with no line written the log is removed and nothing replaced.
-        Standard output is flushed and left open. Idempotent."""
+        ended (``complete``) or was stopped early; after a failure (``failed``) it stays ``NAME.part`` beside
+        an older ``NAME`` (best effort: the disk may be full); with no line written the log is removed and
+        nothing replaced. Standard output is flushed and left open. Idempotent."""
         if self._closed:
             return
         self._closed = True
@@ -227,6 +238,12 @@ class ResultLog:
         try:
             if self.lines == 0:
                 self.part.unlink(missing_ok=True)
+                return
+            if failed:
+                self.failed = True
+                with contextlib.suppress(OSError), contextlib.closing(_Fd(os.open(self.part, os.O_RDWR))) as rw:
+                    _trim_to_whole_lines(rw.fd)
+                    os.fsync(rw.fd)
                 return
             with writing(self.where):
                 with contextlib.closing(_Fd(os.open(self.part, os.O_RDWR))) as rw:

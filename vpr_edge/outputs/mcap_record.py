@@ -159,7 +159,7 @@ class McapSink:
             self._add(POSE, pose_in_frame(m, ns), ns, arrival)
         self._sequence += 1
 
-    def close(self, complete: bool) -> None:
+    def close(self, complete: bool, failed: bool = False) -> None:
         try:
             self.writer.finish()
         finally:

@@ -193,7 +193,7 @@ class RerunSink:
                 rec.log("status", rr.TextLog(f"frame {m.frame_index}: answering again", level="INFO"))
             self._state = state
 
-    def close(self, complete: bool) -> None:
+    def close(self, complete: bool, failed: bool = False) -> None:
         try:
             if not complete:
                 self.rec.log("status", self.rr.TextLog("the stream stopped early", level="WARN"))
