@@ -280,3 +280,22 @@ def test_calibration_line_against_a_plain_loop_and_through_its_file(tmp_path: Pa
     (tmp_path / "v1.json").write_text(json.dumps(doc))
     old = load(tmp_path / "v1.json", "stream")
     assert not old.has_line and old(1.5) == back(1.5)
+
+
+def test_reliability_lines_show_each_bin_and_the_ece() -> None:
+    """evaluate's reliability table: one row per bin any mode fills, '-' where a mode has none, the ECE."""
+    from dataclasses import replace
+
+    from vpr_edge.evaluation.report import reliability_lines
+    from vpr_edge.evaluation.scoring import score_result
+    from vpr_edge.matchers import Result
+
+    conf = np.array([0.95, 0.95, 0.95, 0.95, 0.15])
+    ece, bins = metrics.reliability(conf, np.array([True, True, True, False, False]))
+    refs = np.arange(5)
+    base = score_result(Result(refs=refs, scores=conf, ranked=refs[:, None]), pad([[0]] * 5))
+    lines = reliability_lines({"a": replace(base, ece=ece, reliability=tuple(bins)), "b": base}, 4)
+    assert lines[2].split() == ["confidence", "a"]                  # a mode without a table is left out
+    assert lines[3].split() == ["0.1-0.2", "0.15", "->", "0.00", "(1)"]
+    assert lines[4].split() == ["0.9-1.0", "0.95", "->", "0.75", "(4)"]
+    assert lines[5].split() == ["ECE", f"{ece:.3f}"] and abs(ece - (0.8 * 0.2 + 0.2 * 0.15)) < 1e-9

@@ -61,6 +61,7 @@ def table(reports: dict[str, ModeReport]) -> str:
                   f"{'mode':<{width}} " + " ".join(f"{k:>11s}" for k in kinds)]
         lines += [f"{name:<{width}} " + " ".join(f"{str(w[k]['unmapped']) + ' / ' + str(w[k]['mapped']) if k in w else '-':>11s}"
                                                 for k in kinds) for name, w in why.items()]
+    lines += reliability_lines(reports, width)
     metres = {name: r.metres for name, r in reports.items() if r.metres is not None}
     if metres:
         keys = list(next(iter(metres.values())))
@@ -69,6 +70,27 @@ def table(reports: dict[str, ModeReport]) -> str:
         lines += [f"{name:<{width}} " + " ".join(f"{cell(m[k], '{:.2f}'):>10s}" for k in keys)
                   for name, m in metres.items()]
     return "\n".join(lines)
+
+
+def reliability_lines(reports: dict[str, ModeReport], width: int) -> list[str]:
+    """The reliability table of each mode with one (a confidence that claims a probability): per bin of
+    confidence, its mean confidence, the share of those frames right and their count; the ECE under it."""
+    kept = {name: r for name, r in reports.items() if r.reliability}
+    if not kept:
+        return []
+    edges = sorted({(b["from"], b["to"]) for r in kept.values() for b in r.reliability})
+    col = max(max(len(n) for n in kept), 19)
+    lines = ["", "confidence against the share right: per bin of confidence, mean confidence -> share of those "
+                 "frames right (frames); a calibrated confidence reads the same on both sides",
+             f"{'confidence':<{width}} " + " ".join(f"{n:>{col}s}" for n in kept)]
+    for lo, hi in edges:
+        cells = []
+        for r in kept.values():
+            b = next((b for b in r.reliability if (b["from"], b["to"]) == (lo, hi)), None)
+            cells.append("-" if b is None else f"{b['confidence']:.2f} -> {b['right']:.2f} ({b['n']})")
+        lines.append(f"{f'{lo:.1f}-{hi:.1f}':<{width}} " + " ".join(f"{c:>{col}s}" for c in cells))
+    lines.append(f"{'ECE':<{width}} " + " ".join(f"{r.ece:>{col}.3f}" for r in kept.values()))
+    return lines
 
 
 def delays_text(frames: Sequence[float | None]) -> str:
