@@ -361,7 +361,7 @@ def test_full_disk_behind_stdout(ws: Path) -> None:
     assert errors == ["vpr-edge: error: stdout: cannot write results (No space left on device)"], proc.stderr
 
 
-@pytest.mark.parametrize("suffix", [".csv", ".jsonl"])
+@pytest.mark.parametrize("suffix", [".csv", ".jsonl", ".mcap"])
 def test_full_disk_keeps_the_older_log_and_the_new_lines(ws: Path, tmp_path: Path, suffix: str) -> None:
     """A disk that fills mid-stream: exit 2 in one line, the older log byte for byte, the lines in NAME.part."""
     disk = tmp_path / "disk"
@@ -384,8 +384,12 @@ def test_full_disk_keeps_the_older_log_and_the_new_lines(ws: Path, tmp_path: Pat
         assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
         errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("vpr-edge: error:")]
         assert len(errors) == 1 and "No space left on device" in errors[0], proc.stderr
-        assert f"kept in {out}.part (the run failed); {out} left as it was" in proc.stderr, proc.stderr
         assert out.read_bytes() == older
+        if suffix == ".mcap":
+            assert f"{out}.part: the recording of a run that failed; {out} left as it was" in proc.stderr
+            assert Path(f"{out}.part").stat().st_size > 0
+            return
+        assert f"kept in {out}.part (the run failed); {out} left as it was" in proc.stderr, proc.stderr
         text = Path(f"{out}.part").read_text()
         assert text.endswith("\n") and len(text.splitlines()) > 10
         if suffix == ".jsonl":

@@ -396,3 +396,105 @@ def test_ctrl_c_inside_an_image_read_is_still_ctrl_c(monkeypatch: pytest.MonkeyP
     with pytest.raises(SystemError):
         with user_errors():
             raise own
+
+
+def _killed_mid_stream(ws: Path, args: list[str], part: Path) -> int:
+    """Run localize on the long stream with ``args``; SIGKILL it half a second after ``part`` first grew past
+    what its start wrote (a second of answers at least); the kill's time, ns since the epoch."""
+    proc = subprocess.Popen([*CLI, "localize", "-m", str(ws / "map.npz"), "-s", str(ws / "long"), *args],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    end, start = time.time() + 120, None
+    while proc.poll() is None and time.time() < end:
+        size = part.stat().st_size if part.exists() else 0
+        start = start if start is not None or not size else size
+        if start is not None and size > start:
+            break
+        time.sleep(0.01)
+    time.sleep(0.5)
+    killed = time.time_ns()
+    proc.kill()
+    proc.wait(timeout=60)
+    assert proc.returncode == -signal.SIGKILL, "the stream ended before the kill: make it longer"
+    return killed
+
+
+@pytest.mark.slow
+def test_an_mcap_file_survives_a_sigkill(ws: Path, tmp_path: Path) -> None:
+    """Killed mid-stream: mcap's own reader reads NAME.part's answers, in order, up to a second before the
+    kill; the next run finalises it into NAME (with its summary) and says so."""
+    pytest.importorskip("mcap")
+    from mcap.reader import NonSeekingReader, make_reader
+
+    from vpr_edge.outputs.mcap_record import ANSWER, recover
+
+    out = tmp_path / "run.mcap"
+    killed = _killed_mid_stream(ws, ["-o", str(out)], part_path(out))
+    answers = []
+    with open(part_path(out), "rb") as f:
+        try:
+            for _, channel, message in NonSeekingReader(f).iter_messages(log_time_order=False):
+                if channel.topic == ANSWER:
+                    answers.append(message)
+        except Exception:   # noqa: BLE001 - the file ends where the kill cut it
+            pass
+    frames = [json.loads(m.data)["frame_index"] for m in answers]
+    assert frames == list(range(len(frames))) and len(frames) >= 2
+    assert answers[-1].publish_time >= killed - 1_500_000_000, (killed - answers[-1].publish_time) / 1e9
+    kept = tmp_path / "kept.mcap"
+    assert recover(part_path(out), kept).endswith(f"messages finalised as {kept}")
+    with open(kept, "rb") as f:
+        reader = make_reader(f)
+        assert reader.get_summary() is not None
+        again = [json.loads(m.data)["frame_index"] for _, c, m in reader.iter_messages() if c.topic == ANSWER]
+        assert again == frames and [m.name for m in reader.iter_metadata()] == ["vpr-edge"]
+    proc = _run("localize", "-m", ws / "map.npz", "-s", ws / "long", "-o", out, "--max-frames", "3")
+    assert proc.returncode == 0 and f"finalised as {out}" in proc.stderr, proc.stderr
+    assert not part_path(out).exists() and sorted(p.name for p in tmp_path.iterdir()) == ["kept.mcap", "run.mcap"]
+
+
+@pytest.mark.slow
+def test_a_rerun_recording_survives_a_sigkill(ws: Path, tmp_path: Path) -> None:
+    """Killed mid-stream: Rerun's own reader reads NAME.part's frames, in order, up to a second before the
+    kill; the next run makes it NAME and says so."""
+    pytest.importorskip("rerun")
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    out = tmp_path / "run.rrd"
+    killed = _killed_mid_stream(ws, ["--rerun", str(out)], part_path(out))
+    rows = []
+    for chunk in RrdReader(part_path(out)).stream():
+        if chunk.entity_path == "/answer":
+            batch = chunk.to_record_batch()
+            cols = {n: c.cast(pa.int64()) if pa.types.is_temporal(c.type) else c
+                    for n, c in zip(batch.schema.names, batch.columns)}
+            rows += pa.table(cols).to_pylist()
+    frames = sorted(r["frame"] for r in rows)
+    assert frames == list(range(len(frames))) and len(frames) >= 2
+    assert max(r["log_time"] for r in rows) >= killed - 1_500_000_000
+    proc = _run("localize", "-m", ws / "map.npz", "-s", ws / "long", "--rerun", out, "--max-frames", "3")
+    assert proc.returncode == 0 and f"made {out} as it is" in proc.stderr, proc.stderr
+    assert not part_path(out).exists() and out.exists()
+
+
+def test_a_map_beside_a_dead_writers_files_is_said(ws: Path, tmp_path: Path) -> None:
+    """A map opened beside the lock and temporary file of a build-map that died: one warning line (what, and
+    that the next build removes them); beside a lock a live writer holds, or nothing: no word."""
+    import fcntl
+    import shutil
+
+    out = tmp_path / "route.npz"
+    shutil.copy(ws / "map.npz", out)
+    quiet = _run("info", out)
+    assert quiet.returncode == 0 and "warning" not in quiet.stderr, quiet.stderr
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    (tmp_path / f".route.npz.{dead.stdout.strip()}.abcdefgh.tmp").write_bytes(b"half a map")
+    lock = tmp_path / ".route.npz.lock"
+    lock.write_text("12345\n")
+    said = _run("info", out)
+    lines = [ln for ln in said.stderr.splitlines() if ln.startswith("vpr-edge: warning:")]
+    assert said.returncode == 0 and len(lines) == 1, said.stderr
+    assert f"{out}: 2 file(s) beside it left by a build-map that died" in lines[0] and "next build-map" in lines[0]
+    with open(lock) as held:                                           # a live writer's lock: not a leftover
+        fcntl.flock(held.fileno(), fcntl.LOCK_EX)
+        assert "1 file(s) beside it" in _run("info", out).stderr

@@ -155,6 +155,32 @@ def remove_stale_temps(target: Path) -> list[Path]:
     return removed
 
 
+def dead_writers_files(target: Path) -> list[Path]:
+    """What writers of ``target`` that died left beside it, without removing it: their temporary files
+    (``remove_stale_temps``) and a one-writer lock file nobody holds (``writer_lock``)."""
+    import fcntl
+
+    left = []
+    stem = temp_stem(target)
+    for tmp in target.parent.glob(f".{glob_escape(stem)}.*{TEMP_SUFFIX}"):
+        pid = tmp.name[len(stem) + 2:].split(".", 1)[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            left.append(tmp)
+    lock = target.parent / f".{stem}.lock"
+    try:
+        fd = os.open(lock, os.O_RDONLY)
+    except OSError:
+        return left
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)   # taken: nobody writes it now
+        left.append(lock)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)   # releases it
+    return left
+
+
 def glob_escape(name: str) -> str:
     """``name`` with glob's special characters escaped."""
     return "".join(f"[{c}]" if c in "*?[" else c for c in name)

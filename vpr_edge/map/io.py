@@ -3,14 +3,15 @@ written atomically; older schemas are read and migrated on load, every file chec
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 
 from vpr_edge.encoders import encoder_from_arrays
-from vpr_edge.errors import VprError
+from vpr_edge.errors import VprError, warn
 from vpr_edge.features.registry import MAP_FRONT_ENDS
 from vpr_edge.features.resize import RESIZE
-from vpr_edge.files import read_npz, write_npz
+from vpr_edge.files import dead_writers_files, is_special, output_target, read_npz, write_npz
 from vpr_edge.index.encodings import DEFAULT_STORAGE, Encodings
 from vpr_edge.index.ivf import IvfIndex
 from vpr_edge.map.drives import Drives
@@ -92,6 +93,10 @@ def load_map(path: str | os.PathLike[str], mmap: bool = False) -> PlaceMap:
     once through, a block at a time, to refuse non-finite values."""
     arrays, meta = read_npz(path, "map", READS_SCHEMAS, mmap=mmap)
     _check_meta(path, meta)
+    left = [] if is_special(Path(path)) else dead_writers_files(output_target(Path(path)))
+    if left:
+        warn(f"{path}: {len(left)} file(s) beside it left by a build-map that died (e.g. {left[0].name}); the "
+             "map is whole, and its next build-map removes them")
     try:
         return _assemble(path, arrays, meta)
     except (TypeError, ValueError, KeyError, AttributeError, IndexError) as e:   # a field this code missed

@@ -21,18 +21,17 @@ import os
 import stat
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
 from vpr_edge.api import FIELDS, Match
-from vpr_edge.errors import InputError, VprError, warn
+from vpr_edge.errors import VprError, warn
 from vpr_edge.files import adopt_mode, is_special, output_target
 from vpr_edge.frames.frame import Frame
+from vpr_edge.outputs.part import Fd, claim, part_path, writing
 
 FORMATS = ("csv", "jsonl")
 SUFFIX_FORMATS = {".csv": "csv", ".jsonl": "jsonl", ".json": "jsonl"}   # --out's suffix -> format
-PART_SUFFIX = ".part"     # NAME.part: the log while its stream runs
 SYNC_INTERVAL_S = 0.0     # a file's lines are fsync'd at least this often, seconds (0: every line; and at the end)
 CSV_COLUMNS = FIELDS
 
@@ -64,22 +63,6 @@ def header(fmt: str) -> str:
     return ",".join(CSV_COLUMNS) + "\n" if fmt == "csv" else ""
 
 
-def part_path(target: Path) -> Path:
-    """Where the log of ``target`` is while its stream runs: ``NAME.part`` beside it."""
-    return target.with_name(target.name + PART_SUFFIX)
-
-
-@contextlib.contextmanager
-def writing(where: str) -> Iterator[None]:
-    """A failed write (disk full, device gone) becomes one line naming ``where``; a closed pipe passes."""
-    try:
-        yield
-    except BrokenPipeError:
-        raise
-    except OSError as e:
-        raise VprError(f"{where}: cannot write results ({e.strerror or e})") from None
-
-
 def _trim_to_whole_lines(fd: int) -> int:
     """Cut the file open at ``fd`` after its last newline (a line cut short by a full disk or a power cut);
     returns the size kept."""
@@ -100,51 +83,14 @@ def _trim_to_whole_lines(fd: int) -> int:
     return keep
 
 
-def claim(target: Path) -> tuple[Path, int]:
-    """Open ``target``'s log (``part_path``) for writing, holding its lock; returns it and its descriptor.
-    VprError (one line) when another process holds it. A log left by a run that died (the file is there,
-    nobody holds its lock) is made ``target`` first, its last partial line cut, and said."""
-    import fcntl
-
-    part = part_path(target)
-    for _ in range(5):
-        try:
-            fd = os.open(part, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o666)
-        except OSError as e:
-            raise VprError(f"{target}: cannot create its log {part.name} ({e.strerror or e})") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            raise InputError("{target}: another vpr-edge is writing it (its log {part} is held); give this run "
-                             "another {opt.out}", target=target, part=part.name) from None
-        try:
-            same = os.path.samestat(os.fstat(fd), os.stat(part))
-        except FileNotFoundError:
-            same = False
-        if not same:            # renamed or removed between our open and our lock: open the new one
-            os.close(fd)
-            continue
-        if os.fstat(fd).st_size == 0:
-            return part, fd
-        with contextlib.closing(_Fd(os.open(part, os.O_RDWR))) as rw:   # O_APPEND's descriptor cannot pread
-            kept = _trim_to_whole_lines(rw.fd)
-        if kept:
-            os.replace(part, target)
-            warn(f"{part}: the log of a run that ended without closing it (killed, power cut); kept as {target} "
-                 f"({kept} bytes of whole lines), replaced when this run ends")
-        else:
-            part.unlink()
-        os.close(fd)
-    raise VprError(f"{target}: its log {part.name} keeps changing under this run; is another writer at work?")
-
-
-class _Fd:
-    def __init__(self, fd: int) -> None:
-        self.fd = fd
-
-    def close(self) -> None:
-        os.close(self.fd)
+def recover(part: Path, target: Path) -> str | None:
+    """A dead run's log (``part.Recover``): cut to whole lines and made ``target``; None if nothing whole."""
+    with contextlib.closing(Fd(os.open(part, os.O_RDWR))) as rw:   # O_APPEND's descriptor cannot pread
+        kept = _trim_to_whole_lines(rw.fd)
+    if not kept:
+        return None
+    os.replace(part, target)
+    return f"kept as {target} ({kept} bytes of whole lines)"
 
 
 class ResultLog:
@@ -177,7 +123,7 @@ class ResultLog:
             self._was = self.target.stat() if self.target.is_file() else None
             if self._was is not None and not os.access(self.target, os.W_OK):
                 raise VprError(f"{out}: write-protected (mode {stat.S_IMODE(self._was.st_mode):04o}); not replaced")
-            self.part, self._fd = claim(self.target)
+            self.part, self._fd = claim(self.target, recover)
 
     @property
     def had_older(self) -> bool:
@@ -241,12 +187,12 @@ class ResultLog:
                 return
             if failed:
                 self.failed = True
-                with contextlib.suppress(OSError), contextlib.closing(_Fd(os.open(self.part, os.O_RDWR))) as rw:
+                with contextlib.suppress(OSError), contextlib.closing(Fd(os.open(self.part, os.O_RDWR))) as rw:
                     _trim_to_whole_lines(rw.fd)
                     os.fsync(rw.fd)
                 return
             with writing(self.where):
-                with contextlib.closing(_Fd(os.open(self.part, os.O_RDWR))) as rw:
+                with contextlib.closing(Fd(os.open(self.part, os.O_RDWR))) as rw:
                     _trim_to_whole_lines(rw.fd)
                     os.fsync(rw.fd)
                 adopt_mode(self.part, self._was)

@@ -11,22 +11,30 @@ drive's own recording. JSON messages with JSON-schema schemas, Foxglove's well-k
 A lost frame, and every frame of a map without positions, has an answer message only. Each message is logged
 at the frame's own time (``Match.stamp``: a bag's header stamps, a video's presentation time from its start, a
 timestamps file's times), so that it lines up with the drive's recording; a frame without a time is logged at
-the time its answer was made (arrival), as is the publish time of every message. The file is written to a
-temporary file beside it and renamed at ``close``."""
+the time its answer was made (arrival), as is the publish time of every message.
+
+The file is written as the stream goes (``part``): into ``NAME.part``, in chunks handed to the system at least
+once a second (``FLUSH_INTERVAL_S``), so that after a kill mcap's own reader reads every answer but the last
+second's (``mcap.reader.NonSeekingReader``, ``iter_messages(log_time_order=False)``: the file has no summary).
+``NAME.part`` becomes ``NAME`` when the stream ends or is stopped, with its summary; after a failure it stays,
+beside an older ``NAME``. The next run to ``NAME`` finalises a killed run's part into ``NAME`` (``recover``)."""
 from __future__ import annotations
 
 import contextlib
 import json
 import math
 import os
+import stat
 import time
+from pathlib import Path
 from typing import IO
 
 from vpr_edge.api import FIELDS, RESULTS_SCHEMA, Match
-from vpr_edge.errors import warn
-from vpr_edge.files import atomic_output
+from vpr_edge.errors import VprError, warn
+from vpr_edge.files import atomic_output, output_target
 from vpr_edge.frames.frame import Frame
 from vpr_edge.map import PlaceMap
+from vpr_edge.outputs.part import FLUSH_INTERVAL_S, claim, finish, writing
 
 ANSWER, LOCATION, POSE = "/vpr/answer", "/vpr/location", "/vpr/pose"
 FRAME_ID = "map"
@@ -105,6 +113,49 @@ def pose_in_frame(m: Match, ns: int) -> dict:
             "pose": {"position": {"x": m.x, "y": m.y, "z": 0.0}, "orientation": q}}
 
 
+def _read_whole(part: Path, what: str):
+    """``what`` (messages or metadata) of a killed run's MCAP file, up to where the kill cut it."""
+    from mcap.reader import NonSeekingReader
+
+    with open(part, "rb") as f:
+        reader = NonSeekingReader(f)
+        items = reader.iter_messages(log_time_order=False) if what == "messages" else reader.iter_metadata()
+        try:
+            yield from items
+        except Exception:   # noqa: BLE001 - the file ends where the kill cut it: what came before is kept
+            return
+
+
+def recover(part: Path, target: Path) -> str | None:
+    """A killed run's MCAP file (``part.Recover``): its messages up to the last whole chunk, with their
+    schemas, channels and metadata, written to ``target`` as a whole file; None (``target`` untouched) if it
+    holds no message."""
+    from mcap.writer import Writer
+
+    if next(_read_whole(part, "messages"), None) is None:
+        return None
+    count = 0
+    with atomic_output(target) as tmp, open(tmp, "wb") as out:
+        writer = Writer(out)
+        writer.start(profile="", library="vpr-edge")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in _read_whole(part, "messages"):
+            if schema is not None and schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(channel.topic, channel.message_encoding,
+                                                               schemas.get(channel.schema_id, 0),
+                                                               dict(channel.metadata))
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time,
+                               message.sequence)
+            count += 1
+        for meta in _read_whole(part, "metadata"):
+            writer.add_metadata(meta.name, dict(meta.metadata))
+        writer.finish()
+    return f"its {count} messages finalised as {target}"
+
+
 class McapSink:
     """A ``sink.ResultSink`` writing each answer to an MCAP file at ``path`` (see the module's topics);
     ``place_map`` says which place topic the map has; ``meta``: strings stored in the file's ``vpr-edge``
@@ -116,11 +167,17 @@ class McapSink:
         from vpr_edge import __version__
 
         self.map = place_map
+        self.target = output_target(Path(path))
+        self._was = self.target.stat() if self.target.is_file() else None
+        if self._was is not None and not os.access(self.target, os.W_OK):
+            raise VprError(f"{path}: write-protected (mode {stat.S_IMODE(self._was.st_mode):04o}); not replaced")
+        self.part, self._fd = claim(self.target, recover)
         self._stack = contextlib.ExitStack()
-        with contextlib.ExitStack() as undo:      # a failure here leaves no temporary file
+        self._stack.callback(os.close, self._fd)   # the lock, released last
+        with contextlib.ExitStack() as undo:      # a failure here leaves no part
             undo.push(self._stack)
-            self._file: IO[bytes] = self._stack.enter_context(open(self._stack.enter_context(atomic_output(path)),
-                                                                   "wb"))
+            undo.callback(self.part.unlink, missing_ok=True)
+            self._file: IO[bytes] = self._stack.enter_context(open(self._fd, "ab", closefd=False))
             self.writer = Writer(self._file)
             self.writer.start(profile="", library=f"vpr-edge {__version__}")
             self._channels = {ANSWER: self._channel(ANSWER, ANSWER_SCHEMA)}
@@ -130,8 +187,10 @@ class McapSink:
                 self._channels[topic] = self._channel(topic, schema)
             self.writer.add_metadata("vpr-edge", {"version": __version__, "results_schema": str(RESULTS_SCHEMA),
                                                   **(meta or {})})
+            self.writer.flush()
             undo.pop_all()
         self._sequence = 0
+        self._flushed = time.monotonic()
 
     def _channel(self, topic: str, schema: dict) -> int:
         sid = self.writer.register_schema(schema["title"], "jsonschema", json.dumps(schema).encode())
@@ -141,6 +200,10 @@ class McapSink:
         self.writer.add_message(self._channels[topic], log_ns, json.dumps(msg).encode(), publish_ns, self._sequence)
 
     def write(self, match: Match, frame: Frame | None) -> None:
+        with writing(str(self.part)):
+            self._write(match)
+
+    def _write(self, match: Match) -> None:
         m = match
         arrival = time.time_ns()
         ns = arrival
@@ -158,9 +221,28 @@ class McapSink:
         elif not m.lost and m.x is not None and POSE in self._channels:
             self._add(POSE, pose_in_frame(m, ns), ns, arrival)
         self._sequence += 1
+        now = time.monotonic()
+        if now - self._flushed >= FLUSH_INTERVAL_S:
+            self.writer.flush()
+            self._flushed = now
 
     def close(self, complete: bool, failed: bool = False) -> None:
+        """End the file with its summary and make it ``NAME``; after a failure (best effort: the disk may be
+        full) it stays ``NAME.part`` beside an older ``NAME``, and a warning says so."""
         try:
-            self.writer.finish()
+            try:
+                with writing(str(self.part)):
+                    self.writer.finish()
+                    self._file.flush()
+                    if not failed:
+                        finish(self.part, self.target, self._was)
+                        return
+            except VprError:
+                if not failed:
+                    raise
+            finally:
+                if self.part.exists():
+                    warn(f"{self.part}: the recording of a run that failed; {self.target} "
+                         f"{'left as it was' if self._was is not None else 'not made'}")
         finally:
-            self._stack.close()     # the file closed and renamed into place: what was written is valid
+            self._stack.close()

@@ -21,20 +21,29 @@ Entities (what a recording holds, read back with ``rerun.chunk.RrdReader``), per
 
 Timelines: ``frame`` (the frame's index in the stream) and, for frames with a time, ``time`` (the frame's own
 ``Match.stamp``: a Unix time as a timestamp, a video's presentation time as a duration); Rerun adds
-``log_time``, when the answer was logged."""
+``log_time``, when the answer was logged.
+
+The ``.rrd`` file is written as the stream goes (``part``): Rerun's file sink streams into ``NAME.part``,
+flushed at least once a second (``FLUSH_INTERVAL_S``), so that after a kill ``RrdReader(...).stream()`` reads
+every frame but the last second's. ``NAME.part`` becomes ``NAME`` when the stream ends or is stopped; after a
+failure it stays, beside an older ``NAME``; the next run to ``NAME`` makes a killed run's part ``NAME``."""
 from __future__ import annotations
 
 import contextlib
 import os
+import stat
+import time
 import uuid
 from pathlib import Path
 
 import numpy as np
 
 from vpr_edge.api import FIELDS, Match
-from vpr_edge.files import atomic_output
+from vpr_edge.errors import VprError, warn
+from vpr_edge.files import output_target
 from vpr_edge.frames.frame import Frame
 from vpr_edge.map import PlaceMap
+from vpr_edge.outputs.part import FLUSH_INTERVAL_S, claim, finish
 from vpr_edge.outputs.pictures import ReferencePictures, card, jpeg
 from vpr_edge.positions import EARTH_RADIUS_M
 
@@ -81,7 +90,7 @@ def _down(xy: np.ndarray) -> np.ndarray:
 
 class RerunSink:
     """A ``sink.ResultSink`` logging each answer to Rerun: to a Viewer (``view``: ``viewer.start_viewer``) and
-    / or to an ``.rrd`` file (``record``: written to a temporary file beside it, renamed at ``close``).
+    / or to an ``.rrd`` file (``record``: written as the module says).
     ``map_path``: where the map was opened from (a relative drive folder is looked for from there too);
     ``stream``: the stream's name for the title; ``lost_line``: the score below which a frame is lost, drawn
     beside the score (None: not drawn)."""
@@ -100,13 +109,23 @@ class RerunSink:
         self.route = route_xy(place_map)
         sinks = [rr.GrpcSink(viewer.start_viewer(port or viewer.PORT))] if view else []
         self._stack = contextlib.ExitStack()
-        with contextlib.ExitStack() as undo:     # a failure here leaves no temporary file
+        self.target = self.part = self._was = None
+        with contextlib.ExitStack() as undo:     # a failure here leaves no part
             undo.push(self._stack)
             if record is not None:
-                sinks.append(rr.FileSink(str(self._stack.enter_context(atomic_output(record)))))
+                self.target = output_target(Path(record))
+                self._was = self.target.stat() if self.target.is_file() else None
+                if self._was is not None and not os.access(self.target, os.W_OK):
+                    raise VprError(f"{record}: write-protected (mode {stat.S_IMODE(self._was.st_mode):04o}); "
+                                   "not replaced")
+                self.part, fd = claim(self.target, recover)
+                self._stack.callback(os.close, fd)      # the lock, released last
+                undo.callback(self.part.unlink, missing_ok=True)
+                sinks.append(rr.FileSink(str(self.part)))
             self.rec = rr.RecordingStream(APP_ID, recording_id=str(uuid.uuid4()))
             self.rec.set_sinks(*sinks, default_blueprint=self._blueprint(Path(map_path).name, stream))
             undo.pop_all()
+        self._flushed = time.monotonic()
         self._last: np.ndarray | None = None
         self._state: str | None = "start"     # the last status said: None answering, else why lost
         self._cards: dict[str, bytes] = {}
@@ -192,12 +211,30 @@ class RerunSink:
             elif self._state != "start":
                 rec.log("status", rr.TextLog(f"frame {m.frame_index}: answering again", level="INFO"))
             self._state = state
+        now = time.monotonic()
+        if now - self._flushed >= FLUSH_INTERVAL_S:
+            rec.flush()
+            self._flushed = now
 
     def close(self, complete: bool, failed: bool = False) -> None:
+        """End the recording and make it ``NAME``; after a failure it stays ``NAME.part`` beside an older
+        ``NAME``, and a warning says so."""
         try:
             if not complete:
                 self.rec.log("status", self.rr.TextLog("the stream stopped early", level="WARN"))
             self.rec.flush()
             self.rec.disconnect()
+            if self.part is not None and failed:
+                warn(f"{self.part}: the recording of a run that failed; {self.target} "
+                     f"{'left as it was' if self._was is not None else 'not made'}")
+            elif self.part is not None:
+                finish(self.part, self.target, self._was)
         finally:
-            self._stack.close()     # the recording renamed into place: what was written is valid
+            self._stack.close()
+
+
+def recover(part: Path, target: Path) -> str | None:
+    """A killed run's recording (``part.Recover``): made ``target`` as it is (Rerun reads a recording cut
+    short up to where it ends)."""
+    os.replace(part, target)
+    return f"made {target} as it is"
