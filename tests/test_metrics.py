@@ -299,3 +299,22 @@ def test_reliability_lines_show_each_bin_and_the_ece() -> None:
     assert lines[3].split() == ["0.1-0.2", "0.15", "->", "0.00", "(1)"]
     assert lines[4].split() == ["0.9-1.0", "0.95", "->", "0.75", "(4)"]
     assert lines[5].split() == ["ECE", f"{ece:.3f}"] and abs(ece - (0.8 * 0.2 + 0.2 * 0.15)) < 1e-9
+
+
+def test_exact_and_lead_against_a_loop() -> None:
+    """The truth's middle place, the share answered exactly there and the right answers' mean lead, against
+    plain loops on random answers and truths (one place, a window, a window cut at the route's start, none)."""
+    rng = np.random.default_rng(3)
+    sets = [[int(c)] for c in rng.integers(0, 40, 30)] + \
+        [list(range(max(0, c - 2), c + 3)) for c in rng.integers(0, 40, 30)] + [[]] * 5
+    truth = pad(sets)
+    refs = np.array([s[len(s) // 2] + int(rng.integers(-3, 4)) if s else 7 for s in sets])
+    lost = rng.random(len(sets)) < 0.2
+    right = metrics.correct_candidates(refs[:, None], truth, 1)[:, 0]
+    mids = [(min(s) + max(s)) / 2 if s else None for s in sets]
+    exact, lead = metrics.exact_and_lead(refs, truth, right, lost)
+    mapped = [m for m in mids if m is not None]
+    assert exact == sum(1 for r, m, x in zip(refs, mids, lost) if m is not None and not x and r == m) / len(mapped)
+    near = [r - m for r, m, x, ok in zip(refs, mids, lost, right) if m is not None and not x and ok]
+    assert abs(lead - sum(near) / len(near)) < 1e-12
+    assert metrics.truth_middle(pad([[0, 1, 2]]))[0] == 1.0 and np.isnan(metrics.truth_middle(pad([[]]))[0])

@@ -186,7 +186,7 @@ def test_evaluate_reports_metres_with_map_positions(positioned: Path, small_quer
     assert proc.returncode == 0, proc.stderr
     assert "error in metres" in proc.stdout
     doc = json.loads((tmp_path / "e.json").read_text())
-    assert doc["schema_version"] == 8
+    assert doc["schema_version"] == 9
     m = doc["modes"]["dtw"]["metres"]
     assert m["median_m"] == 0.0 and m["within_5m"] >= doc["modes"]["dtw"]["recall_at_1"]   # 2 m spacing
 

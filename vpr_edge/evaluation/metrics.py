@@ -122,6 +122,32 @@ def localisation_error(refs: np.ndarray, truth: np.ndarray, drive: np.ndarray | 
     return err
 
 
+def truth_middle(truth: np.ndarray) -> np.ndarray:
+    """Per query, the middle of the places its truth lists (Q,) float (a truth of one place: that place;
+    ±2 about a place: that place, but where a drive's end cuts the window); NaN for unmapped queries."""
+    valid = truth >= 0
+    lo = np.where(valid, truth, np.iinfo(np.int64).max).min(axis=1)
+    hi = np.where(valid, truth, -1).max(axis=1)
+    mid = (lo + hi) / 2.0
+    mid[~valid.any(axis=1)] = np.nan
+    return mid
+
+
+def exact_and_lead(refs: np.ndarray, truth: np.ndarray, right: np.ndarray, lost: np.ndarray) -> tuple[float, float]:
+    """Where answers fall against the truth's middle place (``truth_middle``): the share of mapped frames
+    answered exactly there (not lost), and the lead, the mean of answer - middle over the right answers
+    (frames; + ahead of the camera, - behind). ``right`` (Q,) bool: within tolerance; ``lost`` (Q,) bool."""
+    mid = truth_middle(truth)
+    mapped = ~np.isnan(mid)
+    if not mapped.any():
+        return float("nan"), float("nan")
+    given = mapped & ~lost
+    exact = float((given & (np.asarray(refs, np.float64) == mid)).sum() / mapped.sum())
+    near = given & right
+    lead = float((np.asarray(refs, np.float64)[near] - mid[near]).mean()) if near.any() else float("nan")
+    return exact, lead
+
+
 METRE_RADII: tuple[float, ...] = (5.0, 10.0, 25.0)
 
 

@@ -52,6 +52,10 @@ def table(reports: dict[str, ModeReport]) -> str:
                   "gap (the best line's recall at the precision delivered, ans.ok, minus the recall delivered, "
                   "map.ok)", f"{'mode':<{width}} {'best@P':>8s} {'gap':>8s}"]
     lines += [f"{name:<{width}} {cell(r.best_line_recall):>8s} {cell(r.line_gap):>8s}" for name, r in reports.items()]
+    lines += ["", "where the answers fall: exact = mapped frames answered at the truth's middle place; lead = the "
+                  "right answers' mean frames ahead of it (+) or behind (-)",
+              f"{'mode':<{width}} {'exact':>8s} {'lead':>8s}"]
+    lines += [f"{name:<{width}} {cell(r.exact):>8s} {cell(r.lead, '{:+.2f}'):>8s}" for name, r in reports.items()]
     why = {name: r.lost_why for name, r in reports.items() if r.lost_why}
     if why:
         kinds = [k for k in LOST_WHY if any(k in w for w in why.values())]
@@ -99,11 +103,11 @@ def delays_text(frames: Sequence[float | None]) -> str:
     return "/".join("never" if d is None or d != d else f"{d:.0f}" for d in frames) or "-"
 
 
-JSON_SCHEMA_VERSION = 8   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres;
+JSON_SCHEMA_VERSION = 9   # 2: lost shares, ms_per_frame, settings, tolerance; 3: lock/exit frames; 4: metres;
 #                          5: front_end (the model file run and its form), answered_right, mapped_right, ece
 #                          and reliability per mode; 6: one_view_frames, distinct_answered_right and
 #                          distinct_mapped_right per mode; 7: lost_why per mode; 8: target_precision,
-#                          best_line_recall and line_gap per mode
+#                          best_line_recall and line_gap per mode; 9: exact and lead per mode
 
 
 def write_json(path: str | os.PathLike[str], n_queries: int, n_refs: int, reports: dict[str, ModeReport],

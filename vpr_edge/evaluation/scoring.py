@@ -59,6 +59,8 @@ class ModeReport:
     best_line_recall: float = float("nan")  # the best line's recall (mapped right) at the target precision
     line_gap: float = float("nan")          # the best line's recall at the delivered precision - mapped_right
     probability: bool = False               # the scores lie on the precision scale (a target precision line)
+    exact: float = float("nan")            # share of mapped frames answered at the truth's middle place
+    lead: float = float("nan")             # mean answer - truth's middle over the right answers, frames
     probabilities: np.ndarray | None = field(default=None, repr=False, compare=False)   # (Q,) each answer's
     # probability of being right, where the matcher models one
 
@@ -78,7 +80,7 @@ class ModeReport:
             "one_view_frames": self.one_view_frames, "distinct_answered_right": num(self.distinct_answered_right),
             "distinct_mapped_right": num(self.distinct_mapped_right), "lost_why": self.lost_why,
             "target_precision": self.target_precision, "best_line_recall": num(self.best_line_recall),
-            "line_gap": num(self.line_gap),
+            "line_gap": num(self.line_gap), "exact": num(self.exact), "lead": num(self.lead),
             "settings": self.settings} | ({"metres": {k: num(v) for k, v in self.metres.items()}}
                                           if self.metres is not None else {})
 
@@ -138,6 +140,7 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
 
     lock, exits = metrics.transition_delays(mapped, correct[:, 0] & ~lost, lost)
     answered_right, mapped_right = metrics.answered_shares(correct[:, 0], lost, mapped)
+    exact, lead = metrics.exact_and_lead(result.refs, truth, correct[:, 0], lost)
     why = None if result.why is None else np.array([lost_why(w, bool(x)) for w, x in zip(result.why, lost)], object)
     reasons = {} if why is None else {r: {"unmapped": int(((why == r) & ~mapped).sum()),
                                           "mapped": int(((why == r) & mapped).sum())} for r in reasons_of(result.why)}
@@ -160,4 +163,4 @@ def score_result(result: Result, truth: np.ndarray, tolerance: int = 1, threshol
                       distinct_answered_right=distinct[1], distinct_mapped_right=distinct[2], why=why,
                       lost_why=reasons, target_precision=target_precision,
                       best_line_recall=metrics.recall_at_precision(curve, target_precision),
-                      line_gap=metrics.line_gap(curve, answered_right, mapped_right))
+                      line_gap=metrics.line_gap(curve, answered_right, mapped_right), exact=exact, lead=lead)
