@@ -19,7 +19,7 @@ JSON_KEYS = {"recall_at_1", "recall_at_5", "recall_at_10", "auc", "ap", "precisi
              "recall_at_full_precision", "median_error", "lost_unmapped", "lost_mapped", "ms_per_frame", "lock_frames",
              "exit_frames", "answered_right", "mapped_right", "ece", "reliability", "one_view_frames",
              "distinct_answered_right", "distinct_mapped_right", "lost_why", "settings", "target_precision",
-             "best_line_recall", "line_gap"}
+             "best_line_recall", "line_gap", "exact", "lead"}
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +55,7 @@ def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_qu
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(js.read_text())
     assert set(doc) == {"schema_version", "n_queries", "n_refs", "tolerance", "front_end", "modes"}
-    assert doc["n_queries"] == 24 and doc["n_refs"] == 24 and doc["tolerance"] == 1
+    assert doc["n_queries"] == 24 and doc["n_refs"] == 24 and doc["tolerance"] == 0
     assert set(doc["modes"]) == {"single", "stream", "dtw", "seqslam-online"}
     assert all(set(m) == JSON_KEYS for m in doc["modes"].values())
     assert doc["modes"]["dtw"]["recall_at_1"] > 0.9            # aligned sequences: fixed-end DTW is right
@@ -88,7 +88,7 @@ def test_evaluate_counts_the_frames_where_the_map_shows_one_view(tmp_path: Path,
         shutil.copy(files[8] if 9 <= i <= 13 else f, refs / f.name)
     assert run("build-map", refs, "-o", tmp_path / "m.npz", "--components", "4").returncode == 0
     proc = run("evaluate", "--map", tmp_path / "m.npz", "--queries", small_queries, "--gt", aligned_gt,
-               "--modes", "single,stream", "--json", tmp_path / "r.json")
+               "--modes", "single,stream", "--json", tmp_path / "r.json", "--tolerance", "1")
     assert proc.returncode == 0, proc.stderr
     doc = json.loads((tmp_path / "r.json").read_text())
     assert {m["one_view_frames"] for m in doc["modes"].values()} == {6}

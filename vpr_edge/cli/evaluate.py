@@ -70,9 +70,9 @@ def evaluate_cmd(
     modes: Optional[str] = typer.Option(None, help="Comma-separated matchers to run on the same "
                                         "similarity matrix: " + ", ".join(MATCHERS) + " (default: all that "
                                         "apply; svm with a map built with --svm)."),
-    tolerance: int = typer.Option(1, min=0, help="Frames of slack around each reference the ground truth lists "
-                                  "(thesis: 1): added to the truth's own, so a truth that lists the frame +-2 "
-                                  "counts +-3 at 1."),
+    tolerance: int = typer.Option(0, min=0, help="Frames of slack added around each reference the ground "
+                                  "truth lists (default 0: the truth's own; a truth listing one frame with "
+                                  "the thesis's slack: 1)."),
     window: Optional[int] = typer.Option(None, min=0, help="stream: local search window, as localize's "
                                          "(default %d; 0 = every reference every frame)."
                                          % MATCHERS["stream"].params["window"]),
