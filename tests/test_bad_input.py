@@ -24,8 +24,11 @@ from typer.testing import CliRunner
 
 from helpers import run, write_bag
 from vpr_edge.cli import app
+from vpr_edge.errors import InputError, VprError
 from vpr_edge.resources import bundled_model, sample_folder
 from vpr_edge.map import MAP_SCHEMA
+from vpr_edge.calibration import CALIBRATION_SCHEMA
+from vpr_edge.encoders.base import CODEBOOK_SCHEMA
 from vpr_edge.files import read_npz, write_npz
 from vpr_edge.evaluation.truth import write_ground_truth
 
@@ -53,6 +56,9 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     (w / "truncated.npz").write_bytes(good[: len(good) // 2])
     arrays, meta = read_npz(w / "good.npz", "map", MAP_SCHEMA)
     write_npz(w / "schema0.npz", arrays, meta | {"schema": 0})
+    write_npz(w / "schema_newer.npz", arrays, meta | {"schema": MAP_SCHEMA + 1})
+    cb_arrays, cb_meta = read_npz(w / "cb.npz", "codebook", CODEBOOK_SCHEMA)
+    write_npz(w / "cb_newer.npz", cb_arrays, cb_meta | {"schema": CODEBOOK_SCHEMA + 1})
     write_npz(w / "front_unknown.npz", arrays, meta | {"features": meta["features"] | {"name": "nosuch"}})
     write_npz(w / "resize_unknown.npz", arrays,
               meta | {"features": meta["features"] | {"params": {**meta["features"].get("params", {}), "resize": "x"}}})
@@ -71,6 +77,9 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
             target.write_bytes(b"\xff\xd8 not a jpeg")
         else:
             cv2.imwrite(str(target), np.zeros((1, 1, 3), np.uint8))
+    shutil.copytree(small_refs, w / "refs_mixed")   # 3 of the 24 frames from a camera of twice the resolution
+    for f in sorted((w / "refs_mixed").glob("*.jpg"))[5::8]:
+        cv2.imwrite(str(f), cv2.resize(cv2.imread(str(f)), (320, 240)))
     (w / "allbad").mkdir()
     for i in range(3):
         (w / "allbad" / f"{i:03d}.jpg").write_bytes(b"x")
@@ -100,7 +109,8 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     curve = {"scores": [0.0, 2.0], "confidence": [0.2, 0.9], "n": 24, "tolerance": 1}
     for name, schema, extra in (("cal_v1", 1, {}), ("cal_badline", 2, {"line": {"scores": [1.0, 2.0],
                                                                                "precision": [0.9, 0.8]}}),
-                                ("cal_short", 2, {"line": {"scores": [1.0, 2.0], "precision": [0.8, 0.9]}})):
+                                ("cal_short", 2, {"line": {"scores": [1.0, 2.0], "precision": [0.8, 0.9]}}),
+                                ("cal_newer", CALIBRATION_SCHEMA + 1, {})):
         (w / f"{name}.json").write_text(__import__("json").dumps(
             {"kind": "calibration", "schema": schema, "source": "test", "method": "logistic",
              "modes": {"stream": curve | extra}}))
@@ -133,6 +143,9 @@ CASES = [
     Case("bm-ref-corrupt", "build-map {w}/refs_corrupt -o {w}/old.npz --components 4",
          ("0000003.jpg", "cannot decode")),
     Case("bm-ref-1x1", "build-map {w}/refs_tiny -o {w}/old.npz --components 4", ("0000003.jpg", "1x1", "too small")),
+    Case("bm-refs-mixed-sizes-strict", "build-map {w}/refs_mixed -o {w}/old.npz --components 4 --strict",
+         ("refs_mixed: 3 of 24 frames are 320x240, the rest 160x120 (e.g. ", "refs_mixed/0000005.jpg)",
+          "--strict refuses frames of mixed sizes")),
     # build-map: outputs (checked before any extraction)
     Case("bm-out-proc", BM.replace("{w}/out.npz", "/proc/vpr-edge.npz"), ("/proc/vpr-edge.npz", "not writable")),
     Case("bm-out-no-folder", BM.replace("{w}/out.npz", "{w}/nodir/m.npz"), ("nodir", "does not exist")),
@@ -152,6 +165,9 @@ CASES = [
          ("good.npz", "not a vpr-edge codebook", "it is a vpr-edge map")),
     Case("bm-codebook-text", "build-map {w}/refs -o {w}/out.npz --codebook {w}/notes.txt",
          ("notes.txt", "not a vpr-edge codebook", "text file")),
+    Case("bm-codebook-newer", "build-map {w}/refs -o {w}/out.npz --codebook {w}/cb_newer.npz",
+         ("cb_newer.npz: made by a newer vpr-edge", f"(codebook schema {CODEBOOK_SCHEMA + 1}, this one reads up "
+          f"to {CODEBOOK_SCHEMA}): upgrade vpr-edge")),
     Case("bm-codebook-and-fit-options", "build-map {w}/refs -o {w}/out.npz --codebook {w}/cb.npz --components 8",
          ("--components", "cb.npz")),
     Case("bm-fit-iterations-and-codebook", "build-map {w}/refs -o {w}/out.npz --codebook {w}/cb.npz --fit-iterations 5",
@@ -216,7 +232,16 @@ CASES = [
          ("truncated.npz", "truncated or corrupt")),
     Case("loc-map-pickled", "localize -m {w}/pickled.npz -s {w}/queries", ("pickled.npz", "pickled")),
     Case("loc-map-codebook", "localize -m {w}/cb.npz -s {w}/queries", ("cb.npz", "it is a vpr-edge codebook")),
-    Case("loc-map-schema0", "localize -m {w}/schema0.npz -s {w}/queries", ("schema0.npz", "schema version 0")),
+    Case("loc-map-schema0", "localize -m {w}/schema0.npz -s {w}/queries", ("schema0.npz", "schema version 0",
+                                                                          "rebuild it")),
+    Case("loc-map-newer", "localize -m {w}/schema_newer.npz -s {w}/queries",
+         (f"schema_newer.npz: made by a newer vpr-edge (map schema {MAP_SCHEMA + 1}, this one reads up to "
+          f"{MAP_SCHEMA}): upgrade vpr-edge",)),
+    Case("info-map-newer", "info {w}/schema_newer.npz", ("schema_newer.npz: made by a newer vpr-edge",
+                                                        "upgrade vpr-edge")),
+    Case("loc-calibration-newer", LOC + " --calibration {w}/cal_newer.json",
+         (f"cal_newer.json: made by a newer vpr-edge (calibration schema {CALIBRATION_SCHEMA + 1}, this one "
+          f"reads up to {CALIBRATION_SCHEMA}): upgrade vpr-edge",)),
     Case("loc-stream-missing", "localize -m {w}/good.npz -s {w}/nope", ("nope", "no such folder")),
     Case("loc-stream-empty", "localize -m {w}/good.npz -s {w}/empty", ("empty", "no images")),
     Case("loc-stream-text", "localize -m {w}/good.npz -s {w}/notes.txt", ("notes.txt", "not a folder of images")),
@@ -411,6 +436,147 @@ def test_warnings_for_ignored_input(ws: Path, tmp_path: Path) -> None:
     assert any("1 file(s) that are not images ignored (e.g. README.txt)" in w for w in warnings), warnings
     assert any("0000010.png" in w and "2x2" in w and "frame skipped" in w for w in warnings), warnings
     assert len(res.stdout.splitlines()) == 24                  # 23 frames + header
+
+
+def _warnings(stderr: str, needle: str) -> list[str]:
+    return [ln for ln in stderr.splitlines() if ln.startswith("vpr-edge: warning:") and needle in ln]
+
+
+def test_mixed_frame_sizes_warned_or_refused(ws: Path, tmp_path: Path) -> None:
+    """A folder of 160x120 frames with three at 320x240 builds with one warning naming the sizes, their counts
+    and the first odd file; --strict refuses it in one line before writing anything."""
+    out = tmp_path / "mixed.npz"
+    res = CliRunner().invoke(app, ["build-map", str(ws / "refs_mixed"), "-o", str(out), "--codebook",
+                                   str(ws / "cb.npz")])
+    assert res.exit_code == 0 and out.is_file(), res.stderr
+    assert _warnings(res.stderr, "frames are") == [
+        f"vpr-edge: warning: {ws / 'refs_mixed'}: 3 of 24 frames are 320x240, the rest 160x120 (e.g. "
+        f"{ws / 'refs_mixed' / '0000005.jpg'}); they are resized to the model's input, which matches less well"]
+    strict = tmp_path / "strict.npz"
+    res = CliRunner().invoke(app, ["build-map", str(ws / "refs_mixed"), "-o", str(strict), "--codebook",
+                                   str(ws / "cb.npz"), "--strict"])
+    assert res.exit_code == 2 and not strict.exists() and sorted(tmp_path.iterdir()) == [out], res.stderr
+    assert res.stderr.splitlines()[-1].endswith("(e.g. " + str(ws / "refs_mixed" / "0000005.jpg") + "); --strict "
+                                                "refuses frames of mixed sizes")
+    res = CliRunner().invoke(app, ["build-map", str(ws / "refs"), "-o", str(strict), "--codebook", str(ws / "cb.npz"),
+                                   "--strict"])   # frames of one size: --strict builds as without
+    assert res.exit_code == 0 and strict.is_file() and not _warnings(res.stderr, "frames are"), res.stderr
+
+
+def test_mixed_frame_sizes_in_a_bag(ws: Path, tmp_path: Path) -> None:
+    """A bag's frames are sized once extracted: --strict refuses them before anything is written, naming the
+    odd frame by its place in the bag."""
+    pytest.importorskip("rosbags")
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for i, f in enumerate(sorted((ws / "refs").glob("*.jpg"))[:8]):
+        image = cv2.imread(str(f))
+        cv2.imwrite(str(frames / f.name), cv2.resize(image, (320, 240)) if i == 3 else image)
+    bag = write_bag(tmp_path / "mixed.bag", sorted(frames.glob("*.jpg")), "ros1")
+    out = tmp_path / "bag.npz"
+    res = CliRunner().invoke(app, ["build-map", str(bag), "--topic", "/camera/image", "-o", str(out), "--codebook",
+                                   str(ws / "cb.npz"), "--strict"])
+    assert res.exit_code == 2 and not out.exists(), res.stderr
+    assert res.stderr.splitlines()[-1] == (f"vpr-edge: error: {bag}: 1 of 8 frames are 320x240, the rest 160x120 "
+                                           "(e.g. mixed.bag#3); --strict refuses frames of mixed sizes")
+
+
+def test_frame_sizes_of_three_kinds(tmp_path: Path, small_refs: Path) -> None:
+    """Frames of three sizes: the odd ones listed by size, most first, beside the size most frames have."""
+    from vpr_edge.frames.images import check_frame_sizes
+
+    files = sorted(small_refs.glob("*.jpg"))[:8]
+    folder = tmp_path / "three"
+    folder.mkdir()
+    for i, f in enumerate(files):
+        size = (640, 480) if i == 6 else (320, 240) if i in (2, 4) else None
+        image = cv2.imread(str(f))
+        cv2.imwrite(str(folder / f.name), cv2.resize(image, size) if size else image)
+    listed = sorted(folder.iterdir())
+    with pytest.raises(InputError) as e:
+        check_frame_sizes(folder, listed, strict=True, names=[p.name for p in listed])
+    assert str(e.value) == (f"{folder}: 3 of 8 frames are of 2 other sizes, 320x240 (2), 640x480 (1), the rest "
+                            f"160x120 (e.g. {files[2].name}); strict refuses frames of mixed sizes")
+
+
+def test_image_sizes_from_headers(tmp_path: Path) -> None:
+    """Each image format listed is sized from its header as OpenCV decodes it, EXIF orientation included; a
+    file that is not an image has no size."""
+    from PIL import Image
+
+    from vpr_edge.frames.headers import image_size
+    from vpr_edge.frames.images import IMAGE_SUFFIXES, load_image
+
+    image = np.random.default_rng(0).integers(0, 255, (37, 53, 3), np.uint8)
+    for suffix in sorted(IMAGE_SUFFIXES):
+        path = tmp_path / f"a{suffix}"
+        assert cv2.imwrite(str(path), image[..., 0] if suffix == ".pgm" else image)
+        assert image_size(path) == (53, 37), suffix
+    for orientation in (1, 3, 6, 8):   # 6 and 8: a quarter turn, the sides swapped
+        exif = Image.Exif()
+        exif[0x0112] = orientation
+        for suffix in (".jpg", ".png", ".webp"):
+            path = tmp_path / f"o{orientation}{suffix}"
+            Image.fromarray(image).save(path, exif=exif)
+            assert image_size(path) == load_image(path).shape[1::-1], path.name
+    (tmp_path / "not.jpg").write_bytes(b"\xff\xd8 not a jpeg")
+    assert image_size(tmp_path / "not.jpg") is None and image_size(tmp_path / "none.png") is None
+
+
+def test_greyscale_frames_warned_once(ws: Path, tmp_path: Path) -> None:
+    """Greyscale frames given to a model that takes colour: one warning per command, naming the first such
+    frame (single-channel files at build-map, three equal channels in a stream); colour frames say nothing."""
+    refs = tmp_path / "grey_refs"
+    refs.mkdir()
+    for f in sorted((ws / "refs").glob("*.jpg")):
+        cv2.imwrite(str(refs / f.name), cv2.cvtColor(cv2.imread(str(f)), cv2.COLOR_BGR2GRAY))   # one channel
+    res = CliRunner().invoke(app, ["build-map", str(refs), "-o", str(tmp_path / "g.npz"), "--codebook",
+                                   str(ws / "cb.npz")])
+    assert res.exit_code == 0, res.stderr
+    assert _warnings(res.stderr, "greyscale") == [
+        f"vpr-edge: warning: {refs / '0000000.jpg'}: greyscale frame, but the model "
+        f"{bundled_model().name} expects colour (RGB); greyscale frames match less well than colour ones"]
+    stream = tmp_path / "some_grey"
+    shutil.copytree(ws / "queries", stream)
+    for name in ("0000004.jpg", "0000009.jpg"):   # three equal channels
+        grey = cv2.cvtColor(cv2.imread(str(stream / name)), cv2.COLOR_BGR2GRAY)
+        cv2.imwrite(str(stream / name), cv2.merge([grey, grey, grey]))
+    res = CliRunner().invoke(app, ["localize", "-m", str(ws / "good.npz"), "-s", str(stream), "--mode", "single"])
+    assert res.exit_code == 0, res.stderr
+    warned = _warnings(res.stderr, "greyscale")
+    assert len(warned) == 1 and warned[0].startswith(f"vpr-edge: warning: {stream / '0000004.jpg'}: greyscale frame"), \
+        res.stderr
+    res = CliRunner().invoke(app, ["localize", "-m", str(ws / "good.npz"), "-s", str(ws / "queries"), "--mode",
+                                   "single"])
+    assert res.exit_code == 0 and not _warnings(res.stderr, "greyscale"), res.stderr
+
+
+def test_what_is_greyscale() -> None:
+    """Three equal channels (or one) are greyscale; a frame of one shade (black) is not judged; the front ends
+    that read grey themselves are not watched."""
+    from vpr_edge.features import make_front_end
+    from vpr_edge.frames.images import GreyFrames, is_greyscale
+
+    rng = np.random.default_rng(0)
+    grey = rng.integers(0, 255, (120, 160), np.uint8)
+    assert is_greyscale(grey) and is_greyscale(np.dstack([grey] * 3))
+    assert not is_greyscale(rng.integers(0, 255, (120, 160, 3), np.uint8))
+    assert not is_greyscale(np.zeros((120, 160, 3), np.uint8))
+    assert GreyFrames.of(make_front_end("hog")).colour is None
+    assert GreyFrames.of(make_front_end("cnn")).colour == "RGB"
+
+
+def test_files_from_a_newer_vpr_edge(tmp_path: Path) -> None:
+    """A model whose metadata is of a newer schema says to upgrade vpr-edge (maps, codebooks and calibrations:
+    the table above); an older one keeps its line."""
+    from vpr_edge.features.cnn import MODEL_SCHEMA, _checked_info
+
+    with pytest.raises(VprError) as e:
+        _checked_info(Path("m.onnx"), json.dumps({"schema": MODEL_SCHEMA + 1}))
+    assert str(e.value) == (f"m.onnx: made by a newer vpr-edge (model metadata schema {MODEL_SCHEMA + 1}, this one "
+                            f"reads up to {MODEL_SCHEMA}): upgrade vpr-edge")
+    with pytest.raises(VprError, match="model metadata schema 0 unsupported"):
+        _checked_info(Path("m.onnx"), json.dumps({"schema": 0}))
 
 
 @pytest.mark.slow

@@ -174,6 +174,24 @@ def test_csv_readers_take_any_bytes(tmp_path: Path, data: bytes) -> None:
             assert name in str(e) and "\n" not in str(e)
 
 
+IMAGE_HEADS = [b"\xff\xd8", b"\xff\xd8\xff\xe1\x00\x40Exif\x00\x00II*\x00\x08\x00\x00\x00",
+               b"\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR", b"BM", b"II*\x00", b"MM\x00*", b"RIFF\x00\x00\x00\x00WEBPVP8X",
+               b"RIFF\x00\x00\x00\x00WEBPVP8 ", b"P6\n", b""]
+
+
+@FUZZ
+@given(head=st.sampled_from(IMAGE_HEADS), tail=st.binary(max_size=200))
+def test_image_headers_take_any_bytes(tmp_path: Path, head: bytes, tail: bytes) -> None:
+    """build-map reads each reference's size from its header (``frames.headers``): whatever follows a
+    format's magic bytes, a size of two positive numbers or None (left to the decoder), never an exception."""
+    from vpr_edge.frames.headers import image_size
+
+    path = tmp_path / "f.img"
+    path.write_bytes(head + tail)
+    size = image_size(path)
+    assert size is None or (len(size) == 2 and min(size) > 0 and all(isinstance(v, int) for v in size))
+
+
 @FUZZ
 @given(text=st.text(alphabet="0123456789 ,-\nqueryreferencs.x\"", max_size=80))
 def test_ground_truth_csv(tmp_path: Path, text: str) -> None:

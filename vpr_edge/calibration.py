@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vpr_edge.errors import InputError, VprError
-from vpr_edge.files import atomic_output
+from vpr_edge.files import atomic_output, newer_schema
 
 CALIBRATION_SCHEMA = 2     # 2: each mode's line
 READ_SCHEMAS = (1, 2)      # 1: no line (a target precision refused with it)
@@ -217,7 +217,8 @@ def _read(path: str | os.PathLike[str]) -> dict:
     if not isinstance(doc, dict) or doc.get("kind") != "calibration":
         raise InputError("{path}: not a vpr-edge calibration (evaluate {opt.save_calibration} writes one)", path=path)
     if doc.get("schema") not in READ_SCHEMAS:
-        raise VprError(f"{path}: calibration schema {doc.get('schema')} is not supported (this vpr-edge reads "
+        raise VprError(newer_schema(path, "calibration", doc.get("schema"), READ_SCHEMAS) or
+                       f"{path}: calibration schema {doc.get('schema')} is not supported (this vpr-edge reads "
                        f"{', '.join(map(str, READ_SCHEMAS))})")
     modes = doc.get("modes")
     if not isinstance(modes, dict):

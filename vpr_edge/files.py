@@ -381,9 +381,19 @@ def read_npz(path: str | os.PathLike[str], kind: str, schema: int | tuple[int, .
         raise VprError(f"{path}: not a vpr-edge {kind} (it is a vpr-edge {meta.get('kind')})")
     readable = (schema,) if isinstance(schema, int) else tuple(schema)
     if meta.get("schema") not in readable:
-        raise VprError(f"{path}: {kind} schema version {meta.get('schema')} is not supported "
+        raise VprError(newer_schema(path, kind, meta.get("schema"), readable) or
+                       f"{path}: {kind} schema version {meta.get('schema')} is not supported "
                        f"(this vpr-edge reads version {', '.join(map(str, readable))}); rebuild it")
     return arrays, meta
+
+
+def newer_schema(path: str | os.PathLike[str], kind: str, found: object, readable: tuple[int, ...]) -> str | None:
+    """The line for a file of ``kind`` whose schema version ``found`` is newer than any this vpr-edge reads
+    (``readable``): it was made by a newer vpr-edge, which reads it; None for any other version."""
+    if isinstance(found, int) and not isinstance(found, bool) and found > max(readable):
+        return (f"{path}: made by a newer vpr-edge ({kind} schema {found}, this one reads up to "
+                f"{max(readable)}): upgrade vpr-edge")
+    return None
 
 
 def _check_members(path: Path, z: zipfile.ZipFile, kind: str) -> None:

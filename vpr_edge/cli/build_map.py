@@ -119,6 +119,8 @@ def build_map_cmd(
                                         "places that whole-route searches go through (index.ivf: a few ms at a "
                                         f"million places); default: ivf on maps of {IVF_MIN_REFS:,} places or "
                                         "more."),
+    strict: bool = typer.Option(False, "--strict", help="Refuse a drive whose frames are not all one size "
+                                "(default: a warning, and each frame is resized to the model's input)."),
     batch_size: int = typer.Option(8, min=1, help="Images per model run."),
     threads: int = typer.Option(0, min=0, help=THREADS_HELP),
 ) -> None:
@@ -135,7 +137,7 @@ def build_map_cmd(
                                storage=_value(storage), positions=tuple(positions or ()),
                                timestamps=tuple(timestamps or ()), topic=topic,
                                positions_topic=positions_topic, append=append, batch_size=batch_size, threads=threads, ray=ray,
-                               index=index,
+                               index=index, strict=strict,
                                inputs=GivenConventions(input_size, mean, std, bgr, _value(layout)))
         if index not in (None, "ivf", "none"):
             raise VprError(f"--index {index}: choose ivf or none")

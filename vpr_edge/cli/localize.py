@@ -15,7 +15,7 @@ from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, PRECISION_H
 from vpr_edge.errors import Terminated, VprError, ctrl_c, held_signals, printable
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files import check_not_input, check_writable, output_path
-from vpr_edge.frames.images import Frame, open_stream
+from vpr_edge.frames.images import Frame, GreyFrames, open_stream
 from vpr_edge.frames.limits import Limited
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.matchers.constants import TARGET_PRECISION
@@ -133,7 +133,8 @@ def localize_cmd(
         if precision.value == "auto" and "form" in localizer.front_description:   # what auto chose, said once
             typer.echo(f"vpr-edge: --precision auto: {localizer.front_description['model']} "
                        f"({localizer.front_description['form']})", err=True)
-        limited = Limited(frames, max_frames, duration)
+        folder = stream if Path(stream).is_dir() else None   # a folder's frames named by their paths
+        limited = Limited(GreyFrames.of(localizer.query.front).watch(frames, folder), max_frames, duration)
         if max_frames is not None and count is not None:
             count = min(count, max_frames)
         sinks: list[ResultSink] = live_sinks(localizer, map_path, stream, out, view, record)

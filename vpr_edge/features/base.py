@@ -5,7 +5,9 @@ marks the real ones), ``binary`` (descriptors are +-1 bits), ``local(images) -> 
 (JSON recorded in a map so that queries are described the same way), ``identity()`` (what else a map records:
 the model's identity for ``cnn``), ``fingerprint`` (what a map checks), and a fitted part (``needs_fit``,
 ``fit``, ``select``: LDB's bit selection; the others fit nothing) and ``runs()`` (what runs, for the user:
-for cnn the model file and its numeric form). ``Handcrafted`` gives the defaults.
+for cnn the model file and its numeric form). ``colour`` is the colour order the model expects (cnn: RGB),
+or None for a front end that reads grey; greyscale frames given to the former draw a warning.
+``Handcrafted`` gives the defaults.
 """
 from __future__ import annotations
 
@@ -75,6 +77,7 @@ class Handcrafted:
     source_fingerprint: str | None = None
     needs_fit: bool = False
     is_global: bool = False
+    colour: str | None = None   # the colour a model expects (cnn: RGB); handcrafted front ends read grey
 
     def describe(self) -> dict:  # pragma: no cover - every subclass defines it
         raise NotImplementedError

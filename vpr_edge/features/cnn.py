@@ -13,7 +13,7 @@ import numpy as np
 from vpr_edge.errors import InputError, Message, VprError, warn
 from vpr_edge.features.conventions import GivenConventions, InputConventions
 from vpr_edge.features.resize import RESIZE, content_cells, fit_to_input
-from vpr_edge.files import file_sha256
+from vpr_edge.files import file_sha256, newer_schema
 from vpr_edge.resources import SMALL_MODEL_FILE, bundled_model
 
 MODEL_SCHEMA = 1
@@ -29,6 +29,9 @@ def _checked_info(path: Path, raw: str) -> dict:
         raise VprError(f"{path}: model metadata is not valid JSON ({e})") from None
     if not isinstance(info, dict):
         raise VprError(f"{path}: model metadata is a JSON {type(info).__name__}, expected an object")
+    newer = newer_schema(path, "model metadata", info.get("schema"), (MODEL_SCHEMA,))
+    if newer:
+        raise VprError(newer)
     missing = [k for k in _REQUIRED if k not in info]
     if info.get("schema") != MODEL_SCHEMA or missing:
         raise VprError(f"{path}: model metadata schema {info.get('schema')} unsupported "
@@ -173,6 +176,13 @@ class FeatureExtractor:
         return {"schema": MODEL_SCHEMA, "backbone": self.path.stem, "tap": self.session.get_outputs()[0].name,
                 "output": self.output, "channels": int(shape[1]), "grid_width": grid[0], "grid_height": grid[1],
                 "weights_sha256": self.fingerprint} | self.conventions.describe()
+
+    @property
+    def colour(self) -> str | None:
+        """The colour the model expects, in its channel order (RGB, or BGR): its metadata's ``color``, else
+        the input conventions'; None when the metadata names no colour order (a model of grey frames)."""
+        order = str(self.info.get("color", "BGR" if self.conventions.bgr else "RGB")).upper()
+        return order if order in ("RGB", "BGR") else None
 
     def as_run(self, form: str) -> "FeatureExtractor":
         """This extractor (the same session) described as running in ``form``: its numeric form and why it

@@ -1,9 +1,11 @@
-"""Image and frame-source I/O: folders of images in name order, video files, decoding errors."""
+"""Image and frame-source I/O: folders of images in name order, video files, decoding errors, and the
+frames that match less well, said (a drive's frames of mixed sizes, greyscale frames)."""
 from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterator
+from collections import Counter
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 import cv2
@@ -11,6 +13,7 @@ import numpy as np
 
 from vpr_edge.errors import InputError, VprError, warn
 from vpr_edge.frames.frame import MIN_SIDE, Frame
+from vpr_edge.frames.headers import image_size
 
 IMAGE_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm"})
 VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v", ".mpg", ".mpeg"})
@@ -51,6 +54,90 @@ def load_image(path: str | os.PathLike[str]) -> np.ndarray:
         raise VprError(f"{path}: image is {image.shape[1]}x{image.shape[0]} pixels, too small to describe a "
                        f"place (at least {MIN_SIDE}x{MIN_SIDE})")
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def check_frame_sizes(where: str | os.PathLike[str], files: Sequence[Path], strict: bool = False,
+                      names: Sequence[str] | None = None, resized_to: str = "the model's input") -> None:
+    """Frames of more than one size among ``files`` (one drive, ``where``), read from their headers
+    (``frames.headers``; a header that cannot be read is left to the decoder): one warning naming the sizes,
+    how many frames have each and the first file of another size than most (``names``: how to name the
+    files, if not by their paths); with ``strict`` an ``InputError`` instead."""
+    sizes = [image_size(f) for f in files]
+    counts = Counter(s for s in sizes if s is not None)
+    if len(counts) < 2:
+        return
+    first = next(s for s in sizes if s is not None)
+    most = max(counts, key=lambda s: (counts[s], s == first))   # a tie: the first frame's size
+    odd = [i for i, s in enumerate(sizes) if s is not None and s != most]
+    others = sorted((s for s in counts if s != most), key=lambda s: (-counts[s], sizes.index(s)))
+    text = "{}x{}".format
+    example = names[odd[0]] if names is not None else str(files[odd[0]])
+    total = sum(counts.values())
+    if len(others) == 1:
+        line = f"{where}: {len(odd)} of {total} frames are {text(*others[0])}, the rest {text(*most)} (e.g. {example})"
+    else:
+        listed = ", ".join(f"{text(*s)} ({counts[s]})" for s in others)
+        line = (f"{where}: {len(odd)} of {total} frames are of {len(others)} other sizes, {listed}, the rest "
+                f"{text(*most)} (e.g. {example})")
+    if strict:
+        raise InputError("{line}; {opt.strict} refuses frames of mixed sizes", line=line)
+    warn(f"{line}; they are resized to {resized_to}, which matches less well")
+
+
+GREY_GRID = 32        # a frame is judged greyscale on a grid of at most GREY_GRID x GREY_GRID of its pixels
+GREY_TOLERANCE = 2    # channels within this of each other are equal (a codec's rounding)
+GREY_FLAT = 16        # grid pixels within this of each other: a frame of one shade (black, blown out), not judged
+
+
+def is_greyscale(image: np.ndarray) -> bool:
+    """Whether ``image`` is greyscale: one channel, or three equal on a grid of its pixels (cheap: at most
+    ``GREY_GRID`` squared). A frame of one shade (a black or blown-out frame of a colour camera) is not."""
+    if image.ndim == 2 or image.shape[2] == 1:
+        return True
+    h, w = image.shape[:2]
+    grid = image[::max(1, h // GREY_GRID), ::max(1, w // GREY_GRID), :3].astype(np.int16)
+    if int(grid.max()) - int(grid.min()) <= GREY_FLAT:
+        return False
+    return bool(np.abs(grid[..., 0] - grid[..., 1]).max() <= GREY_TOLERANCE
+                and np.abs(grid[..., 1] - grid[..., 2]).max() <= GREY_TOLERANCE)
+
+
+class GreyFrames:
+    """One command's watch for greyscale frames given to a front end that takes colour (``colour``: its
+    channel order, e.g. RGB; None: it reads grey itself, and nothing is checked): the first one seen is said
+    in one warning naming it, the others are not looked at."""
+
+    def __init__(self, colour: str | None, model: str = "the model") -> None:
+        self.colour, self.model = colour, model
+        self.found: str | None = None
+
+    @classmethod
+    def of(cls, front: object) -> "GreyFrames":
+        """The watch for a front end: its ``colour`` (the cnn front end's; handcrafted ones read grey)."""
+        colour = getattr(front, "colour", None)
+        path = getattr(front, "path", None)
+        return cls(colour, f"the model {Path(path).name}" if path is not None else "the model")
+
+    def see(self, image: np.ndarray, where: str | os.PathLike[str]) -> None:
+        """Look at one frame (``where``: how to name it), until one is found greyscale."""
+        if self.colour is None or self.found is not None or not is_greyscale(image):
+            return
+        self.found = str(where)
+        warn(f"{where}: greyscale frame, but {self.model} expects colour ({self.colour}); greyscale frames "
+             f"match less well than colour ones")
+
+    def watch(self, frames: Iterable[Frame], folder: str | os.PathLike[str] | None = None) -> Iterator[Frame]:
+        """``frames`` as they are, each looked at (``see``) until one is found; a frame is named by its path
+        in ``folder`` if given, else by its name."""
+        try:
+            for frame in frames:
+                if frame.image is not None and self.found is None:
+                    self.see(frame.image, Path(folder) / frame.name if folder is not None else frame.name)
+                yield frame
+        finally:
+            close = getattr(frames, "close", None)
+            if close is not None:
+                close()
 
 
 def _folder_frames(files: list[Path], stamps: list[float] | None = None) -> Iterator[Frame]:

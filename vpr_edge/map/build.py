@@ -20,6 +20,7 @@ from vpr_edge.map.front import front_end_meta
 from vpr_edge.map.model import PlaceMap, Svm
 
 Progress = Callable[[int], None]
+Seen = Callable[[int, np.ndarray], None]   # each reference image as it is decoded: (its index in files, RGB image)
 # encodes the references files[order] in batches elsewhere (``map.fleet.encode_on_ray``): (files, order, front,
 # encoder, batch_size, progress) -> (indices (b,), encodings (b, D)) pairs
 EncodeElsewhere = Callable[[Sequence[Path], np.ndarray, FrontEnd, Encoder, int, "Progress | None"],
@@ -27,12 +28,18 @@ EncodeElsewhere = Callable[[Sequence[Path], np.ndarray, FrontEnd, Encoder, int, 
 
 
 def described(files: Sequence[Path], order: np.ndarray, front: FrontEnd, batch_size: int,
-              progress: Progress | None = None) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray | None]]:
+              progress: Progress | None = None, seen: Seen | None = None
+              ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray | None]]:
     """The images ``files[order]``, ``batch_size`` at a time, through ``front``: yields (indices (b,),
-    descriptors (b, N, K), mask (b, N) or None). VprError naming an unreadable file."""
+    descriptors (b, N, K), mask (b, N) or None), each image given to ``seen`` first. VprError naming an
+    unreadable file."""
     for i in range(0, len(order), batch_size):
         idx = order[i:i + batch_size]
-        x, m = front.local([load_image(files[j]) for j in idx])
+        images = [load_image(files[j]) for j in idx]
+        if seen is not None:
+            for j, image in zip(idx, images):
+                seen(int(j), image)
+        x, m = front.local(images)
         check_finite(x, [str(files[j]) for j in idx], front.name)
         if progress:
             progress(len(idx))
@@ -48,11 +55,11 @@ def _svm(encodings: np.ndarray, storage: str, seed: int) -> Svm:
 
 
 def extract_all(files: Sequence[Path], front: FrontEnd, folder: Path, batch_size: int = 8,
-                progress: Progress | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+                progress: Progress | None = None, seen: Seen | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """Local descriptors of every image into memory-mapped files in ``folder``: (R, N, K) float32 and, for
     front ends with a varying number of descriptors, the mask (R, N) bool (else None)."""
     local = mask = None
-    for idx, x, m in described(files, np.arange(len(files)), front, batch_size, progress):
+    for idx, x, m in described(files, np.arange(len(files)), front, batch_size, progress, seen):
         if local is None:
             local = np.lib.format.open_memmap(folder / "local.npy", mode="w+", dtype=np.float32,
                                               shape=(len(files),) + x.shape[1:])
@@ -71,7 +78,7 @@ FIT_POOL = 4   # a codebook is fitted on a random subset of references holding F
 
 
 def _fit_pool(files: Sequence[Path], front: FrontEnd, settings: FitSettings, batch_size: int,
-              progress: Progress | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+              progress: Progress | None, seen: Seen | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """The references a codebook is fitted on: images drawn at random (``settings.seed``) until they hold
     ``FIT_POOL * settings.max_descriptors`` real descriptors, or all of them. Returns (indices (P,) sorted,
     local (P, N, K), mask (P, N) or None), in file order."""
@@ -80,7 +87,7 @@ def _fit_pool(files: Sequence[Path], front: FrontEnd, settings: FitSettings, bat
     taken: list[np.ndarray] = []
     parts: list[tuple[np.ndarray, np.ndarray | None]] = []
     real = 0
-    for idx, x, m in described(files, order, front, batch_size, progress):
+    for idx, x, m in described(files, order, front, batch_size, progress, seen):
         taken.append(idx)
         parts.append((x, m))
         real += int(m.sum()) if m is not None else x.shape[0] * x.shape[1]
@@ -144,7 +151,7 @@ def _meta(front: FrontEnd, encoder: Encoder, fitted: bool, settings: FitSettings
 def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = DEFAULT_ENCODING,
               encoder: Encoder | None = None, settings: FitSettings = FitSettings(), batch_size: int = 8,
               svm: bool = False, storage: str = DEFAULT_STORAGE, progress: Progress | None = None,
-              elsewhere: EncodeElsewhere | None = None) -> PlaceMap:
+              elsewhere: EncodeElsewhere | None = None, seen: Seen | None = None) -> PlaceMap:
     """Describe every reference image in ``files`` (in that order; see ``list_images``) with ``front`` and
     make the map, encodings kept as ``storage`` (``index.encodings.STORAGES``). Each image is described once: unless
     ``encoder`` is given, the codebook is first fitted on a random subset of the references (``_fit_pool``;
@@ -152,20 +159,21 @@ def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = DEFAULT_EN
     and disk hold only the stored encodings, whatever the route's length (with ``svm`` also their float32
     copy, to train on). bow with tf-idf needs every reference's words to fit and goes through
     ``map_from_local``. With ``elsewhere`` the references outside the fit sample are described and encoded by
-    it (a Ray cluster: ``map.fleet``) in the same batches. Raises VprError on an unreadable image or an encoder
-    that does not fit the front end."""
+    it (a Ray cluster: ``map.fleet``) in the same batches. Each image decoded here goes to ``seen`` (its index
+    in ``files``, the image). Raises VprError on an unreadable image or an encoder that does not fit the front
+    end."""
     if not files:
         raise VprError("no reference images given")
     names, refs_folder = [f.name for f in files], str(Path(files[0]).parent)
     if encoder is None and encoding == "bow" and settings.tfidf:
         with tempfile.TemporaryDirectory(prefix="vpr-edge-") as tmp:
-            local, mask = extract_all(files, front, Path(tmp), batch_size, progress)
+            local, mask = extract_all(files, front, Path(tmp), batch_size, progress, seen)
             place_map = map_from_local(local, mask, front, names, refs_folder, encoding, None, settings, svm)
         return place_map if storage == "float32" else place_map.repacked(storage)
     fitted = encoder is None
     pool, n_real = np.zeros(0, np.int64), 0
     if fitted or front.needs_fit:
-        pool, local, mask = _fit_pool(files, front, settings, batch_size, progress)
+        pool, local, mask = _fit_pool(files, front, settings, batch_size, progress, seen)
         n_real = int(mask.sum()) if mask is not None else local.size // local.shape[-1]
         front, encoder, local = _fit(front, local, mask, encoding, encoder, settings)
     assert encoder is not None
@@ -180,7 +188,7 @@ def build_map(files: Sequence[Path], front: FrontEnd, encoding: str = DEFAULT_EN
         for idx, encoded in elsewhere(files, rest, front, encoder, batch_size, progress):
             store.put(idx, encoded)
     else:
-        for idx, x, m in described(files, rest, front, batch_size, progress):
+        for idx, x, m in described(files, rest, front, batch_size, progress, seen):
             store.put(idx, encoder.transform(x, m))
     classifier = _svm(store.floats, storage, settings.seed) if svm else None
     meta = _meta(front, encoder, fitted, settings, n_real, refs_folder)

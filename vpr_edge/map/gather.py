@@ -13,10 +13,10 @@ from vpr_edge.features import FrontEnd, make_front_end
 from vpr_edge.features.choice import model_for_frame
 from vpr_edge.frames.bags import extract_images
 from vpr_edge.frames.descriptor_files import read_descriptors
-from vpr_edge.frames.images import load_image, read_stamps
+from vpr_edge.frames.images import check_frame_sizes, load_image, read_stamps
 from vpr_edge.map.drives import Drives, spans_of
 from vpr_edge.map.options import BuildOptions
-from vpr_edge.map.plan import DrivePlan, MapPlan
+from vpr_edge.map.plan import DrivePlan, MapPlan, resized_to
 from vpr_edge.positions import Positions, read_positions
 
 
@@ -101,9 +101,10 @@ def _taken_in(d: DrivePlan, folder: Path | None, o: BuildOptions) -> DriveInputs
 
 
 def gather(plan: MapPlan) -> MapInputs:
-    """The work's first step: every drive taken in (``_taken_in``), their positions checked to be in one
-    frame (the appended map's, else the first drive's), and the bundled model picked by the camera where
-    the plan leaves it to the first frame (``features.choice``)."""
+    """The work's first step: every drive taken in (``_taken_in``; a bag's frames checked to be of one size,
+    as the plan checks a folder's), their positions checked to be in one frame (the appended map's, else the
+    first drive's), and the bundled model picked by the camera where the plan leaves it to the first frame
+    (``features.choice``)."""
     bags = any(d.kind == "bag" for d in plan.drives)
     inputs = MapInputs(plan, [], plan.front, scratch=tempfile.TemporaryDirectory(prefix="vpr-edge-bag-") if bags
                        else None)
@@ -111,6 +112,9 @@ def gather(plan: MapPlan) -> MapInputs:
         for k, d in enumerate(plan.drives):
             folder = Path(inputs.scratch.name) / str(k) if d.kind == "bag" else None
             inputs.drives.append(_taken_in(d, folder, plan.options))
+            if d.kind == "bag":   # (a folder's frame sizes are checked by the plan)
+                taken = inputs.drives[-1]
+                check_frame_sizes(d.source, taken.files, plan.options.strict, taken.names, resized_to(plan.front))
         first = plan.base.positions if plan.base is not None else \
             next((d.positions for d in inputs.drives if d.positions is not None), None)
         for d in inputs.drives:

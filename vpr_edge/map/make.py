@@ -9,7 +9,7 @@ from functools import partial
 
 from vpr_edge.errors import InputError
 from vpr_edge.files import writer_lock
-from vpr_edge.frames.images import load_image
+from vpr_edge.frames.images import GreyFrames, load_image
 from vpr_edge.index.ivf import IVF_MIN_REFS, fit_ivf
 from vpr_edge.map.build import Progress, build_map, map_from_descriptors
 from vpr_edge.map.fleet import encode_on_ray
@@ -44,9 +44,13 @@ def _write_map(inputs: MapInputs, progress: Progress | None) -> str:
     plan, o = inputs.plan, inputs.plan.options
     names = [n for d in inputs.drives for n in d.place_names()]
     size = {}
+    grey = GreyFrames.of(inputs.front)   # a folder's image named by its path, a bag's frame by its name
+    shown = [str(f) if d.names is None else n for d in inputs.drives for f, n in zip(d.files, d.place_names())]
     try:
         if inputs.drives[0].descriptors is None and inputs.files:   # what localize compares its frames with
-            height, width = load_image(inputs.files[0]).shape[:2]
+            first = load_image(inputs.files[0])
+            grey.see(first, shown[0])
+            height, width = first.shape[:2]
             size = {"frame_size": [int(width), int(height)]}
         if inputs.drives[0].descriptors is not None:
             place_map = map_from_descriptors([d.descriptors for d in inputs.drives], names,
@@ -54,7 +58,8 @@ def _write_map(inputs: MapInputs, progress: Progress | None) -> str:
         else:
             elsewhere = None if o.ray is None else partial(encode_on_ray, o.ray)
             place_map = build_map(inputs.files, inputs.front, plan.encoding, plan.given, plan.settings,
-                                  o.batch_size, o.svm, plan.storage, progress=progress, elsewhere=elsewhere)
+                                  o.batch_size, o.svm, plan.storage, progress=progress, elsewhere=elsewhere,
+                                  seen=lambda i, image: grey.see(image, shown[i]))
     finally:
         inputs.close()
     choice = {"model_choice": inputs.model_choice} if inputs.model_choice is not None else {}

@@ -42,6 +42,7 @@ class BuildOptions:
     threads: int = 0
     ray: str | None = None     # describe and encode on this Ray cluster (local, auto, HOST:PORT, ray://HOST:PORT)
     index: str | None = None   # ivf, none; None: ivf on maps of IVF_MIN_REFS places or more (index.ivf)
+    strict: bool = False       # a drive's frames of more than one size: refused (else a warning)
 
     def __post_init__(self) -> None:   # one value given as such: one drive's
         for key in ("positions", "timestamps"):

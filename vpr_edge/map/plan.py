@@ -1,9 +1,9 @@
 """A map's build planned (``plan_map``): every default decided and every option checked against the others,
 the drives and the files, before any work and without doing any. The plan lists the folders' images and reads
-what it checks (a codebook, the map appended to, descriptor files' headers, the model's metadata), but
-decodes no image, extracts no bag, reads no positions and picks no model by the camera: ``map.make`` does
-those, then builds. A wrong option is an ``InputError`` naming the options as ``BuildOptions`` calls them;
-the CLI says them as its flags."""
+what it checks (a codebook, the map appended to, descriptor files' headers, the model's metadata, the images'
+headers for their sizes), but decodes no image, extracts no bag, reads no positions and picks no model by
+the camera: ``map.make`` does those, then builds. A wrong option is an ``InputError`` naming the options as
+``BuildOptions`` calls them; the CLI says them as its flags."""
 from __future__ import annotations
 
 import os
@@ -23,7 +23,7 @@ from vpr_edge.features.registry import DEFAULT_FRONT_END
 from vpr_edge.files import check_not_input, check_writable
 from vpr_edge.frames.bags import is_bag
 from vpr_edge.frames.descriptor_files import descriptor_dims, is_descriptor_file
-from vpr_edge.frames.images import list_images
+from vpr_edge.frames.images import check_frame_sizes, list_images
 from vpr_edge.index.encodings import DEFAULT_STORAGE
 from vpr_edge.map.build import check_codebook_fits
 from vpr_edge.map.drives import check_unique, drive_name
@@ -280,6 +280,14 @@ def plan_map(refs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], ou
             given = given.with_alpha(o.alpha)
     if front.is_global and given is None:
         given = Flatten(front.dim, 1)       # the descriptor L2-normalised: nothing to fit
+    for d in drives:   # (a bag's frames are checked once extracted: map.gather)
+        if d.kind == "images":
+            check_frame_sizes(d.source, d.files, o.strict, resized_to=resized_to(front))
     storage = o.storage or (base.stored.storage if base else DEFAULT_STORAGE)
     return MapPlan(out, drives, front, enc_name, given, fit_settings(o), storage, o, base, cb_meta,
                    camera_picks, spec, ort_threads)
+
+
+def resized_to(front: FrontEnd) -> str:
+    """What every frame is resized to before ``front`` describes it, in words (for the mixed-sizes warning)."""
+    return "the model's input" if front.name == "cnn" else f"the {front.name} front end's input"
