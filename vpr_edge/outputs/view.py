@@ -235,6 +235,12 @@ class RerunSink:
 
 def recover(part: Path, target: Path) -> str | None:
     """A killed run's recording (``part.Recover``): made ``target`` as it is (Rerun reads a recording cut
-    short up to where it ends)."""
+    short up to where it ends); None, ``target`` untouched, when the kill came before a whole record."""
+    from rerun.chunk import RrdReader
+
+    try:
+        next(iter(RrdReader(part).stream()), None)
+    except Exception:   # noqa: BLE001 - too short to hold a record: nothing to keep
+        return None
     os.replace(part, target)
     return f"made {target} as it is"
