@@ -51,7 +51,7 @@ def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_qu
                                         aligned_gt: Path) -> None:
     js, png, sim = tmp_path / "r.json", tmp_path / "pr.png", tmp_path / "s.npy"
     proc = run("evaluate", "--map", eval_map, "--queries", small_queries, "--gt", aligned_gt, "--json", js,
-               "--plot", png, "--save-similarity", sim, "--modes", "single,stream,dtw,seqslam-online")
+               "--plot", png, "--save-similarity", sim, "--modes", "single,stream,dtw,seqslam-online", "--details")
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(js.read_text())
     assert set(doc) == {"schema_version", "n_queries", "n_refs", "tolerance", "front_end", "modes"}
@@ -109,6 +109,49 @@ def test_evaluate_similarity_needs_no_model_nor_torch(tmp_path: Path) -> None:
     doc = json.loads((tmp_path / "r.json").read_text())
     assert doc["n_queries"] == 40 and doc["n_refs"] == 60
     assert doc["modes"]["single"]["recall_at_1"] > 0.7 and doc["modes"]["stream"]["recall_at_1"] > 0.8
+
+
+def test_evaluate_by_default_runs_the_default_mode_beside_the_baselines_in_a_short_table(tmp_path: Path) -> None:
+    """Without --modes: localize's default mode, stream-filter and the baselines; --modes all: every mode over
+    cosine similarities. The table has the main columns, each explained under it; --details adds the other
+    columns and the tables behind them. Every file written is named on stderr, one line each."""
+    from vpr_edge.evaluation.report import SHORT
+    from vpr_edge.matchers import DEFAULT_MATCHER, MATCHERS
+
+    s, gt = planted_similarity(tmp_path)
+    outs = {"--json": "r.json", "--answers": "a.csv", "--save-similarity": "s2.npy", "--save-calibration": "c.json"}
+    args = [a for opt, name in outs.items() for a in (opt, tmp_path / name)]
+    proc = run("evaluate", "--similarity", s, "--gt", gt, *args)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert list(doc["modes"]) == [DEFAULT_MATCHER, "stream-filter", "single", "seqslam-online"]
+    assert all(set(m) == JSON_KEYS for m in doc["modes"].values())          # --json keeps every figure
+    lines = proc.stdout.splitlines()
+    assert lines[1].split() == ["mode", *SHORT]                 # ECE shown: stream-filter's probability has one
+    assert [line.split()[0] for line in lines[2:6]] == list(doc["modes"])
+    explained = [line.split()[0] for line in lines[7:7 + len(SHORT)]]
+    assert explained == list(SHORT)                              # each column in a line under the table
+    assert "lost frames by why" not in proc.stdout and "confidence against the share right" not in proc.stdout
+    assert "--details" in proc.stdout and "--modes all" in proc.stdout
+    wrote = [line for line in proc.stderr.splitlines() if line.startswith("vpr-edge: wrote ")]
+    assert len(wrote) == len(outs) == len(proc.stderr.splitlines())
+    assert {line.split()[2] for line in wrote} == {str(tmp_path / name) for name in outs.values()}
+    assert all((tmp_path / name).exists() for name in outs.values())
+
+    every = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "all", "--details", "--json", tmp_path / "a.json")
+    assert every.returncode == 0, every.stderr
+    assert list(json.loads((tmp_path / "a.json").read_text())["modes"]) == \
+        [n for n, m in MATCHERS.items() if m.scores == "cosine"]
+    header = every.stdout.splitlines()[1].split()
+    assert header[0] == "mode" and set(SHORT) < set(header) and {"R@5", "lock", "exit", "med.err"} < set(header)
+    for table in ("the line:", "where the answers fall", "lost frames by why", "confidence against the share right"):
+        assert table in every.stdout
+    assert "--modes all" not in every.stdout and "--details:" not in every.stdout
+    # a short table without a probability mode leaves ECE out
+    plain = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single,stream")
+    assert plain.returncode == 0 and "ECE" not in plain.stdout and plain.stderr == "", plain.stderr
+    assert_one_line_error(run("evaluate", "--similarity", s, "--gt", gt, "--modes", "all,nope"), "--modes",
+                          "unknown matcher 'nope'", "or all")
 
 
 @pytest.mark.slow
@@ -171,8 +214,17 @@ def test_evaluate_bad_input(tmp_path: Path, eval_map: Path, small_queries: Path,
     proc = subprocess.run([sys.executable, "-m", "vpr_edge", "evaluate", "--similarity", str(s), "--gt", str(gt),
                            "--plot", str(tmp_path / "pr.png"), "--json", str(existing)], capture_output=True,
                           text=True, timeout=300, env={"PYTHONPATH": str(fake), "PATH": "/usr/bin:/bin"})
-    assert_one_line_error(proc, "matplotlib")
+    assert_one_line_error(proc, "--plot needs matplotlib")
     assert proc.returncode == 2 and existing.read_text() == "{}" and not (tmp_path / "pr.png").exists()
+    for given, needle in ((["--plot-matrix", "m.png"], "--plot-matrix needs matplotlib"),
+                          (["--plot-route", "r.png", "--plot-matrix", "m.png"], "--plot-matrix, --plot-route need "
+                                                                                 "matplotlib")):
+        proc = subprocess.run([sys.executable, "-m", "vpr_edge", "evaluate", "--similarity", str(s), "--gt", str(gt),
+                               *(str(tmp_path / a) if a.endswith(".png") else a for a in given)],
+                              capture_output=True, text=True, timeout=300,
+                              env={"PYTHONPATH": str(fake), "PATH": "/usr/bin:/bin"})
+        assert_one_line_error(proc, needle)
+        assert not (tmp_path / "m.png").exists() and not (tmp_path / "r.png").exists()
 
 
 @pytest.mark.slow
@@ -294,7 +346,7 @@ def test_evaluate_target_precision_line_gap_and_answers(tmp_path: Path) -> None:
 
     s, gt = planted_similarity(tmp_path)
     proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream,stream-filter", "--target-precision",
-               "0.9", "--answers", tmp_path / "a.csv", "--json", tmp_path / "r.json")
+               "0.9", "--answers", tmp_path / "a.csv", "--json", tmp_path / "r.json", "--details")
     assert proc.returncode == 0, proc.stderr
     assert "line gap" in proc.stdout
     doc = json.loads((tmp_path / "r.json").read_text())

@@ -147,8 +147,8 @@ def test_every_front_end_encoding_and_matcher_runs(tmp_path: Path, small_refs: P
         assert code == 0, err
         pm = load_map(out)
         assert pm.features["name"] == front and pm.encoder.name == encoding and pm.svm is not None
-        code, stdout, err = invoke("evaluate", "-m", out, "-q", small_queries, "--gt", gt, "--json",
-                                   tmp_path / "r.json")
+        code, stdout, err = invoke("evaluate", "-m", out, "-q", small_queries, "--gt", gt, "--modes", "all",
+                                   "--json", tmp_path / "r.json")
         assert code == 0, err
         figures = json.loads((tmp_path / "r.json").read_text())["modes"]
         assert set(figures) == set(MATCHERS)                   # svm included: the map has one

@@ -43,10 +43,14 @@ def _env() -> dict[str, str]:
 
 @pytest.mark.slow
 def test_quick_start_and_every_python_block_run_as_written(tmp_path: Path) -> None:
-    """The quick start's commands, in a fresh folder, then each Python block of the README in that folder."""
+    """The main job's vpr-edge steps in a fresh folder, then the quick start's commands, which continue in that
+    folder (as a reader runs them), then each Python block of the README in that folder."""
+    main, _ = blocks(section(README, "Two commands"), "bash")
+    job = [step.strip() for step in main.strip().split(" && ") if step.strip().startswith("vpr-edge ")]
     (quick,) = blocks(section(README, "Quick start"), "bash")
-    for line in quick.strip().splitlines():
-        command = line.split("  #")[0].strip()
+    commands = [line.split("  #")[0].strip() for line in quick.strip().splitlines()]
+    assert "vpr-edge sample corridor" not in commands, "the quick start continues where the main job ended"
+    for command in job + commands:
         proc = subprocess.run(["bash", "-c", command], cwd=tmp_path, capture_output=True, text=True, env=_env(),
                               timeout=300)
         assert proc.returncode == 0, (command, proc.stderr)
@@ -175,10 +179,23 @@ def test_the_results_command_reads_only_what_it_is_given(tmp_path: Path) -> None
     assert not (tmp_path / "out").exists() and (ROOT / "README.md").read_bytes() == before
 
 
+def _heading_ids(text: str) -> set[str]:
+    """The anchors GitHub gives a Markdown file's headings (lower case, punctuation dropped, spaces to hyphens)."""
+    ids, fenced = set(), False
+    for line in text.splitlines():
+        fenced ^= line.startswith("```")
+        if line.startswith("#") and not fenced:
+            title = re.sub(r"^#+\s*", "", line).strip().lower()
+            ids.add(re.sub(r"[^\w\- ]", "", title).replace(" ", "-"))
+    return ids
+
+
 def test_readme_is_a_front_door() -> None:
-    assert README.count("\n") <= 300
+    assert README.count("\n") <= 150
     for link in re.findall(r"\]\((docs/[^)#]+)\)", README):
         assert (ROOT / link).is_file(), link
+    for link, anchor in re.findall(r"\]\((docs/[^)#]+\.md)#([^)]+)\)", README):
+        assert anchor in _heading_ids((ROOT / link).read_text()), f"{link}#{anchor}"
 
 
 @pytest.mark.parametrize("doc", [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))],

@@ -29,7 +29,7 @@ from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.frames.images import MIN_SIDE, Frame
 from vpr_edge.map import MapQuery, PlaceMap
 from vpr_edge.map.search import FrameSearch, coarse_search, uses_coarse
-from vpr_edge.matchers import Matcher, get_matcher, is_lost, lost_why, step
+from vpr_edge.matchers import DEFAULT_MATCHER, Matcher, get_matcher, is_lost, lost_why, step
 from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.threads import use_threads
 
@@ -105,7 +105,7 @@ class Localizer:
     """
 
     def __init__(self, map_path: str | os.PathLike[str], *, model: str | os.PathLike[str] | None = None,
-                 mode: str = "stream", params: dict | None = None, min_confidence: float | None = None,
+                 mode: str = DEFAULT_MATCHER, params: dict | None = None, min_confidence: float | None = None,
                  threads: int | None = None, coarse: bool | None = None,
                  calibration: str | os.PathLike[str] | None = None, precision: str = DEFAULT_PRECISION,
                  target_precision: float | None = None) -> None:

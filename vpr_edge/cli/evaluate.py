@@ -12,11 +12,11 @@ from vpr_edge.cli.common import (LIST_PARAMS, PARAM_HELP, PRECISION_HELP, THREAD
                                  param_options_for_all, user_errors)
 from vpr_edge.errors import VprError, printable, warn
 from vpr_edge.evaluation import Source, Truth, evaluate
-from vpr_edge.evaluation.run import default_matchers
+from vpr_edge.evaluation.run import BASELINES, DEFAULT_MODES, matchers_named
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
 from vpr_edge.frames.images import Frame
-from vpr_edge.matchers import MATCHERS, get_matcher
+from vpr_edge.matchers import MATCHERS
 from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.threads import use_threads
 
@@ -68,8 +68,13 @@ def evaluate_cmd(
     radius: float = typer.Option(25.0, min=0.0, help="With --gt-positions: references within this many "
                                                     "metres of a query are correct."),
     modes: Optional[str] = typer.Option(None, help="Comma-separated matchers to run on the same "
-                                        "similarity matrix: " + ", ".join(MATCHERS) + " (default: all that "
-                                        "apply; svm with a map built with --svm)."),
+                                        "similarity matrix: " + ", ".join(MATCHERS) + ". Default: "
+                                        + ", ".join(DEFAULT_MODES) + " (localize's default mode, the "
+                                        "probabilistic mode and the baselines); all: every one that applies "
+                                        "(svm with a map built with --svm)."),
+    details: bool = typer.Option(False, "--details", help="Print every column and the tables behind them "
+                                 "(one view, the line, where answers fall, lost frames by why, reliability); "
+                                 "default: the main columns."),
     tolerance: int = typer.Option(0, min=0, help="Frames of slack added around each reference the ground "
                                   "truth lists (default 0: the truth's own; a truth listing one frame with "
                                   "the thesis's slack: 1)."),
@@ -118,10 +123,12 @@ def evaluate_cmd(
     threads: int = typer.Option(0, min=0, help=THREADS_HELP),
     precision: PrecisionOpt = typer.Option(DEFAULT_PRECISION, help=PRECISION_HELP),
 ) -> None:
-    """Measure matchers against ground truth: recall@1/5/10, the precision-recall curve with AUC (thesis
-    eq. 5.1) and AP (eq. 5.2), precision at 100% recall, recall at 100% precision, median error in frames,
-    the share of frames reported lost, and matching time per frame. All modes run on one similarity matrix:
-    from --map and --queries, from --features pixels with --refs and --queries, or from --similarity."""
+    """Measure matchers against ground truth, all on one similarity matrix: from --map and --queries, from
+    --features pixels with --refs and --queries, or from --similarity. By default, stream beside stream-filter
+    and the baselines single and seqslam-online, in a short table: R@1, AUC (thesis eq. 5.1), the shares right
+    and lost, matching time; each column explained under it. --modes all runs every matcher; --details adds
+    recall@5/10, AP (eq. 5.2), the median error, lock-on and exit frames and the tables behind them; --json
+    holds every figure. Each file written is named on stderr."""
     import numpy as np
 
     from vpr_edge.evaluation import report
@@ -132,10 +139,7 @@ def evaluate_cmd(
                         threads, topic, precision.value)
         source.check()
         truth = Truth(gt, gt_positions, radius)
-        if modes is None:
-            matchers = default_matchers(source)
-        else:
-            matchers = {name: get_matcher(name) for name in (m.strip() for m in modes.split(",")) if name}
+        matchers = matchers_named(modes, source)
         if window is not None:
             if not any("window" in m.params for m in matchers.values()):
                 warn(f"--window does not apply to modes {','.join(matchers)}; ignored")
@@ -161,8 +165,10 @@ def evaluate_cmd(
                                f"{', '.join(held) or 'none'})")
         check_not_input(outputs, [map_path, queries, similarity, refs, gt, model, calibration_in,
                                   *(gt_positions or ())])
-        if plot_out or matrix_out or route_out:
-            report.require_matplotlib()
+        drawn = [name for name, out in (("plot", plot_out), ("plot_matrix", matrix_out), ("plot_route", route_out))
+                 if out]
+        if drawn:
+            report.require_matplotlib(*drawn)
         use_threads(threads)
 
         def skip(frame: Frame) -> None:
@@ -171,19 +177,32 @@ def evaluate_cmd(
 
         result = evaluate(source, truth, matchers, tolerance, min_confidence, skip, curves, target_precision)
         sim = result.similarity
-        if save_similarity:
-            with atomic_output(save_similarity) as tmp, open(tmp, "wb") as f:
-                np.save(f, sim.astype(np.float32), allow_pickle=False)
         ms = result.encode_ms
         typer.echo(f"{sim.shape[0]} queries ({result.n_mapped} of mapped places), {sim.shape[1]} references; "
                    f"{counted_correct(result.truth, tolerance)}; encoding {'-' if ms != ms else f'{ms:.1f}'} ms/frame"
                    + (f"; model {result.front['model']} ({result.front['form']})" if result.front and
                       "model" in result.front else ""))
-        typer.echo(report.table(result.reports))
+        typer.echo(report.table(result.reports, details))
+        if not details:
+            typer.echo("\n--details: every column and the tables behind them; --json FILE: every figure")
+        if modes is None:
+            others = ", ".join(m for m in DEFAULT_MODES[1:] if m not in BASELINES)
+            typer.echo(f"--modes all: every mode, not only localize's default ({DEFAULT_MODES[0]}), {others} and "
+                       f"the baselines {' and '.join(BASELINES)}")
+
+        def wrote(path: Path, what: str) -> None:
+            typer.echo(f"vpr-edge: wrote {printable(str(path))} ({what})", err=True)
+
+        if save_similarity:
+            with atomic_output(save_similarity) as tmp, open(tmp, "wb") as f:
+                np.save(f, sim.astype(np.float32), allow_pickle=False)
+            wrote(save_similarity, f"the {sim.shape[0]} x {sim.shape[1]} similarity matrix, .npy")
         if answers_out:
             report.write_answers(answers_out, result.reports)
+            wrote(answers_out, "each frame's answer per mode, CSV")
         if json_out:
             report.write_json(json_out, sim.shape[0], sim.shape[1], result.reports, tolerance, result.front)
+            wrote(json_out, "the report, every figure, JSON")
         title = report.figure_title(sim.shape, map_path=map_path, queries=queries, refs=refs, similarity=similarity)
         if calibration_out:
             from vpr_edge import calibration
@@ -195,10 +214,14 @@ def evaluate_cmd(
             typer.echo(f"\n{calibration_out}: with --target-precision {target:g}, each mode's line (the lowest "
                        "score whose answers at least as high these frames show right that often)")
             typer.echo("\n".join(f"  {n}: " + calibration.line_text(c, target) for n, c in curves.items()))
+            wrote(calibration_out, "each mode's calibration, for localize --calibration")
         if plot_out:
             report.plot(plot_out, result.reports, title)
+            wrote(plot_out, "each mode's precision-recall curve")
         if matrix_out:
             report.plot_matrix(matrix_out, sim, result.truth, result.reports, title)
+            wrote(matrix_out, "the similarity matrix with each mode's answers")
         if route_out:
             report.plot_route(route_out, result.positions, result.truth, result.reports, title)
-
+            wrote(route_out, "each mode's answers, right / wrong / lost, " + ("on the route" if result.positions
+                                                                               is not None else "by frame"))

@@ -17,7 +17,7 @@ from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files import check_not_input, check_writable, output_path
 from vpr_edge.frames.images import Frame, GreyFrames, open_stream
 from vpr_edge.frames.limits import Limited
-from vpr_edge.matchers import MATCHERS, get_matcher
+from vpr_edge.matchers import DEFAULT_MATCHER, MATCHERS, get_matcher
 from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.outputs.sink import ResultSink
 from vpr_edge.outputs.log import SUFFIX_FORMATS, ResultLog, writing
@@ -45,7 +45,7 @@ def localize_cmd(
     model: Optional[Path] = typer.Option(None, help="ONNX feature model; must be the map's model (default: "
                                          "$VPR_EDGE_MODEL if set, else the file the map was built with if it "
                                          "still exists, else the bundled one)."),
-    mode: ModeOpt = typer.Option("stream", metavar="MATCHER", help=MODE_HELP),
+    mode: ModeOpt = typer.Option(DEFAULT_MATCHER, metavar="MATCHER", help=MODE_HELP),
     variant: Optional[VariantOpt] = typer.Option(None, help="DTW modes: distance (minimise summed 1 - cosine, "
                                                  "default) or similarity (maximise summed cosine, the thesis)."),
     open_ends: Optional[bool] = typer.Option(None, "--open-ends/--fixed-ends", help="DTW modes: let the path "

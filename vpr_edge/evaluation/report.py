@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -15,30 +15,64 @@ from vpr_edge.matchers.base import LOST_WHY
 from vpr_edge.files import atomic_output
 from vpr_edge.positions import Positions
 
-_COLUMNS = ("R@1", "R@5", "R@10", "AUC", "AP", "P@R=1", "R@P=1", "med.err", "lost-off", "lost-on", "lock", "exit",
-            "ans.ok", "map.ok", "ECE", "ms/frame")
+def _cell(v: float, fmt: str = "{:.3f}") -> str:
+    return "-" if v != v else fmt.format(v)
 
 
-def table(reports: dict[str, ModeReport]) -> str:
-    """A fixed-width table, one row per mode. lost-off / lost-on: share of frames of unmapped / mapped
-    places reported lost ('-' where the mode has no lost state or there are no such frames). lock / exit: frames
-    a stream took to answer correctly after entering mapped places (its start, then each re-entry) / to report
-    lost after leaving them, one figure per entry / exit joined by '/' ('never': not within that stretch).
-    ans.ok / map.ok: share of answered (not lost) frames that are right / of mapped frames answered right.
-    ECE: the expected calibration error of the confidence, with a calibration, over the answers given; without
-    one, of a probability mode's probability over every frame ('-' for the other modes)."""
-    def cell(v: float, fmt: str = "{:.3f}") -> str:
-        return "-" if v != v else fmt.format(v)
+# every column of the table: name -> (its cell for a mode's report, what it means in a line)
+_COLUMNS: dict[str, tuple[Callable[[ModeReport], str], str]] = {
+    "R@1": (lambda r: _cell(r.recall[1]), "mapped frames whose first answer is right, lost or not"),
+    "R@5": (lambda r: _cell(r.recall[5]), "mapped frames with a right answer among the first 5"),
+    "R@10": (lambda r: _cell(r.recall[10]), "... among the first 10"),
+    "AUC": (lambda r: _cell(r.auc), "area under the precision-recall curve, answers ranked by score"),
+    "AP": (lambda r: _cell(r.ap), "average precision over the same ranking"),
+    "P@R=1": (lambda r: _cell(r.precision_at_full_recall), "precision with every answer taken"),
+    "R@P=1": (lambda r: _cell(r.recall_at_full_precision), "recall of the highest-scored answers before the first "
+              "wrong one"),
+    "med.err": (lambda r: _cell(r.median_error, "{:.1f}"), "median frames from the answer to the nearest right "
+                "reference, mapped frames"),
+    "lost-off": (lambda r: _cell(r.lost_unmapped), "frames of places not in the map reported lost (higher is "
+                 "better)"),
+    "lost-on": (lambda r: _cell(r.lost_mapped), "frames of mapped places reported lost (lower is better)"),
+    "lock": (lambda r: delays_text(r.lock_frames), "frames to the first right answer on entering mapped places "
+             "(start, each re-entry; never: not within)"),
+    "exit": (lambda r: delays_text(r.exit_frames), "frames to report lost on leaving them"),
+    "ans.ok": (lambda r: _cell(r.answered_right), "answers given (not lost) that are right: what a vehicle acting "
+               "on them sees"),
+    "map.ok": (lambda r: _cell(r.mapped_right), "mapped frames answered right (a lost frame is not)"),
+    "ECE": (lambda r: _cell(r.ece), "how far the confidence is from the share right (a probability's, or a "
+            "calibration's)"),
+    "ms/frame": (lambda r: _cell(r.match_ms, "{:.2f}"), "matching time per frame, encoding apart"),
+}
+SHORT = ("R@1", "AUC", "ans.ok", "map.ok", "lost-off", "lost-on", "ECE", "ms/frame")   # the table without --details
 
+
+def table(reports: dict[str, ModeReport], details: bool = False) -> str:
+    """The console report: a fixed-width table, one row per mode, each column explained in a line under it.
+    Without ``details``, the columns in ``SHORT`` (ECE only where a mode has one) and the error in metres with
+    a map built with positions; with ``details``, every column, then the tables behind
+    them: the shares away from where the map shows one view (with a map), the line, where the answers fall,
+    lost frames by why (modes that say why) and the reliability tables (modes with a probability or a
+    calibration). '-': the figure does not apply (no lost state, no such frames, no probability)."""
+    shown = list(_COLUMNS) if details else [c for c in SHORT if c != "ECE"
+                                            or any(r.ece == r.ece for r in reports.values())]
     width = max([len(m) for m in reports] + [4])
-    lines = [f"{'mode':<{width}} " + " ".join(f"{c:>8s}" for c in _COLUMNS)]
-    for name, r in reports.items():
-        vals = [*r.recall.values(), r.auc, r.ap, r.precision_at_full_recall, r.recall_at_full_precision]
-        cells = [cell(v) for v in vals] + [cell(r.median_error, "{:.1f}"), cell(r.lost_unmapped),
-                                           cell(r.lost_mapped), delays_text(r.lock_frames), delays_text(r.exit_frames),
-                                           cell(r.answered_right), cell(r.mapped_right), cell(r.ece),
-                                           cell(r.match_ms, "{:.2f}")]
-        lines.append(f"{name:<{width}} " + " ".join(f"{c:>8s}" for c in cells))
+    lines = [f"{'mode':<{width}} " + " ".join(f"{c:>8s}" for c in shown)]
+    lines += [f"{name:<{width}} " + " ".join(f"{_COLUMNS[c][0](r):>8s}" for c in shown)
+              for name, r in reports.items()]
+    named = max(len(c) for c in shown)
+    lines += [""] + [f"  {c:<{named}}  {_COLUMNS[c][1]}" for c in shown]
+    lines.append(f"  {'-':<{named}}  does not apply (no lost state, no such frames, no probability)")
+    if details:
+        lines += _detail_lines(reports, width)
+    lines += _metre_lines(reports, width)
+    return "\n".join(lines)
+
+
+def _detail_lines(reports: dict[str, ModeReport], width: int) -> list[str]:
+    """The tables ``--details`` adds under the main one."""
+    cell = _cell
+    lines: list[str] = []
     distinct = {name: r for name, r in reports.items() if r.one_view_frames >= 0}
     if distinct:
         n = next(iter(distinct.values())).one_view_frames
@@ -63,17 +97,26 @@ def table(reports: dict[str, ModeReport]) -> str:
                       "what the frame sees, no-trajectory = none has built up, ambiguous = a rival along the route, "
                       "off-map = the filter holds the camera off the map, settling = its belief is still spread",
                   f"{'mode':<{width}} " + " ".join(f"{k:>11s}" for k in kinds)]
-        lines += [f"{name:<{width}} " + " ".join(f"{str(w[k]['unmapped']) + ' / ' + str(w[k]['mapped']) if k in w else '-':>11s}"
-                                                for k in kinds) for name, w in why.items()]
-    lines += reliability_lines(reports, width)
+        lines += [f"{name:<{width}} " + " ".join(f"{_why_cell(w, k):>11s}" for k in kinds) for name, w in why.items()]
+    return lines + reliability_lines(reports, width)
+
+
+def _why_cell(why: dict[str, dict[str, int]], kind: str) -> str:
+    """A lost-why cell: 'unmapped / mapped' frames lost for ``kind``, '-' where the mode never gives it."""
+    return f"{why[kind]['unmapped']} / {why[kind]['mapped']}" if kind in why else "-"
+
+
+def _metre_lines(reports: dict[str, ModeReport], width: int) -> list[str]:
+    """The error in metres, for a map built with positions (nothing otherwise)."""
     metres = {name: r.metres for name, r in reports.items() if r.metres is not None}
-    if metres:
-        keys = list(next(iter(metres.values())))
-        lines += ["", f"{'error in metres (map positions)':<{width}}", f"{'mode':<{width}} "
-                  + " ".join(f"{k:>10s}" for k in keys)]
-        lines += [f"{name:<{width}} " + " ".join(f"{cell(m[k], '{:.2f}'):>10s}" for k in keys)
-                  for name, m in metres.items()]
-    return "\n".join(lines)
+    if not metres:
+        return []
+    keys = list(next(iter(metres.values())))
+    lines = ["", "error in metres (map positions): median_m, p90_m = from the answer to the nearest right reference "
+                 "(mapped frames answered); within_Xm = mapped frames answered that close",
+             f"{'mode':<{width}} " + " ".join(f"{k:>10s}" for k in keys)]
+    return lines + [f"{name:<{width}} " + " ".join(f"{_cell(m[k], '{:.2f}'):>10s}" for k in keys)
+                    for name, m in metres.items()]
 
 
 def reliability_lines(reports: dict[str, ModeReport], width: int) -> list[str]:
@@ -141,12 +184,15 @@ def write_answers(path: str | os.PathLike[str], reports: dict[str, ModeReport]) 
                             int(r.lost[i]), why, int(r.correct[i])])
 
 
-def require_matplotlib() -> None:
-    """Raise InputError unless matplotlib can be imported (checked before any work)."""
+def require_matplotlib(*options: str) -> None:
+    """Raise InputError unless matplotlib can be imported (checked before any work); the error names
+    ``options``, the inputs that draw (library names: ``plot``, ``plot_matrix``, ...; default ``plot``)."""
     try:
         import matplotlib  # noqa: F401
     except ImportError:
-        raise InputError("{opt.plot} needs matplotlib: pip install 'vpr-edge[plot]'") from None
+        named = options or ("plot",)
+        raise InputError(", ".join(f"{{opt.{o}}}" for o in named) + (" needs" if len(named) == 1 else " need")
+                         + " matplotlib: pip install 'vpr-edge[plot]'") from None
 
 
 def figure_title(shape: tuple[int, int], *, map_path: str | os.PathLike[str] | None = None,

@@ -15,7 +15,8 @@ from vpr_edge.evaluation import sources
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
 from vpr_edge.evaluation.truth import Truth, one_view
 from vpr_edge.features.choice import DEFAULT_PRECISION
-from vpr_edge.matchers import MATCHERS, Matcher, check_lost_line, check_target_precision, get_matcher
+from vpr_edge.matchers import (DEFAULT_MATCHER, MATCHERS, Matcher, check_lost_line, check_target_precision,
+                               get_matcher)
 from vpr_edge.matchers.constants import MEMORY
 from vpr_edge.matchers.motion import route_stands
 from vpr_edge.matchers.params import STREAM
@@ -76,15 +77,43 @@ class Evaluation:
     front: dict | None = None                 # the model file run and its form, with a map
 
 
-def default_matchers(source: Source, place_map: PlaceMap | None = None) -> dict[str, Matcher]:
-    """What ``evaluate`` runs without ``--modes``: every matcher over cosine similarities, and ``svm`` when
-    the source is a map built with ``--svm`` (``place_map``: that map, if already open)."""
+BASELINES = ("single", "seqslam-online")   # the plain matchers the default mode is measured against
+# what evaluate runs without --modes: the default mode, the probabilistic mode it is compared with, the baselines
+DEFAULT_MODES = (DEFAULT_MATCHER, "stream-filter", *BASELINES)
+ALL_MODES = "all"   # the --modes word for every matcher that applies (``every_matcher``)
+
+
+def default_matchers() -> dict[str, Matcher]:
+    """What ``evaluate`` runs without ``--modes``: ``DEFAULT_MODES``."""
+    return {name: get_matcher(name) for name in DEFAULT_MODES}
+
+
+def every_matcher(source: Source, place_map: PlaceMap | None = None) -> dict[str, Matcher]:
+    """What ``--modes all`` runs: every matcher over cosine similarities, and ``svm`` when the source is a map
+    built with ``--svm`` (``place_map``: that map, if already open)."""
     chosen = {n: m for n, m in MATCHERS.items() if m.scores == "cosine"}
     if source.map is not None:
         if place_map is None:
             place_map = load_map(source.map, mmap=True)
         if place_map.svm is not None:
             chosen["svm"] = get_matcher("svm")
+    return chosen
+
+
+def matchers_named(modes: str | None, source: Source) -> dict[str, Matcher]:
+    """The matchers a ``--modes`` value names (comma-separated; None: ``default_matchers``; the word ``all``:
+    ``every_matcher``). InputError naming the option for an unknown name."""
+    if modes is None:
+        return default_matchers()
+    chosen: dict[str, Matcher] = {}
+    for name in (m.strip() for m in modes.split(",")):
+        if name == ALL_MODES:
+            chosen |= {n: m for n, m in every_matcher(source).items() if n not in chosen}
+        elif name and name not in chosen:
+            if name not in MATCHERS:
+                raise InputError("{opt.modes}: unknown matcher {name!r}; choose from {names}, or " + ALL_MODES,
+                                 name=name, names=", ".join(MATCHERS))
+            chosen[name] = get_matcher(name)
     return chosen
 
 
@@ -137,9 +166,10 @@ def stream_search(query: MapQuery | None, matcher: Matcher, encodings: np.ndarra
 def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None = None, tolerance: int = 1,
              min_confidence: float | None = None, on_skip: sources.OnSkip = lambda frame: None,
              calibration: dict[str, Curve] | None = None, target_precision: float | None = None) -> Evaluation:
-    """Run every matcher (default: ``default_matchers``) on one similarity matrix from ``source`` and score
-    it against ``truth`` (frames that do not decode go to ``on_skip`` and lose their ground-truth row); the
-    modes with a curve in ``calibration`` (mode -> score-to-probability) also get its calibration error;
+    """Run every matcher (default: ``default_matchers``, as ``vpr-edge evaluate`` without ``--modes``) on one
+    similarity matrix from ``source`` and score it against ``truth`` (frames that do not decode go to
+    ``on_skip`` and lose their ground-truth row); the modes with a curve in ``calibration`` (mode ->
+    score-to-probability) also get its calibration error;
     ``target_precision``: the line of the modes whose score is a probability and of those with a curve (its
     drive's line), and where every mode's best line is read (``scoring.evaluate_mode``).
     VprError, before the work where it can be, for a bad source, ground truth or combination."""
@@ -149,7 +179,7 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
     query = None   # the map and its front end, opened once: the chain Localizer runs
     if source.map is not None:
         query = MapQuery(source.map, source.model, use_threads(source.threads), source.precision)
-    chosen = default_matchers(source, query and query.map) if matchers is None else matchers
+    chosen = default_matchers() if matchers is None else matchers
     if not chosen:
         raise InputError("{opt.modes} names no matcher")
     with_svm = any(m.scores == "svm" for m in chosen.values())

@@ -42,6 +42,9 @@ MATCHERS: dict[str, Matcher] = {m.name: m for m in (
 )}
 
 
+DEFAULT_MATCHER = "stream"   # what localize runs without --mode, and evaluate sets beside its baselines
+
+
 def get_matcher(name: str) -> Matcher:
     """The registered matcher ``name``; ValueError listing the names if there is none."""
     try:

@@ -56,7 +56,7 @@ def _run(a: argparse.Namespace) -> int:
     for front in FRONTS:
         for kind, ev in folder.evaluate(matchers, a.tolerance, pixels=front == "pixels"):
             q, r = ev.similarity.shape
-            (out / f"{kind}.{front}.txt").write_text(report.table(ev.reports) + "\n")
+            (out / f"{kind}.{front}.txt").write_text(report.table(ev.reports, details=True) + "\n")
             report.write_json(out / f"{kind}.{front}.json", q, r, ev.reports, a.tolerance, ev.front)
             if kind == a.plot:
                 title = report.figure_title(ev.similarity.shape, map_path=folder.map if front == "map" else None,
