@@ -145,28 +145,36 @@ def temp_stem(target: Path) -> str:
 def remove_stale_temps(target: Path) -> list[Path]:
     """Remove the temporary files that writers of ``target`` which have died (killed, power lost) left beside
     it: ``.STEM.PID.*.tmp`` (``temp_stem``) whose PID is no longer running. Returns what was removed."""
-    removed = []
+    removed = dead_temps(target)
+    for tmp in removed:
+        tmp.unlink(missing_ok=True)
+    return removed
+
+
+def dead_temps(target: Path) -> list[Path]:
+    """The temporary files beside ``target`` of its writers that have died: ``.STEM.PID.*.tmp``
+    (``temp_stem``) whose PID is no longer running."""
     stem = temp_stem(target)
+    dead = []
     for tmp in target.parent.glob(f".{glob_escape(stem)}.*{TEMP_SUFFIX}"):
         pid = tmp.name[len(stem) + 2:].split(".", 1)[0]
         if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
-            tmp.unlink(missing_ok=True)
-            removed.append(tmp)
-    return removed
+            dead.append(tmp)
+    return dead
+
+
+def lock_path(target: Path) -> Path:
+    """The one-writer lock file of ``target`` (``writer_lock``): ``.STEM.lock`` beside it."""
+    return target.parent / f".{temp_stem(target)}.lock"
 
 
 def dead_writers_files(target: Path) -> list[Path]:
     """What writers of ``target`` that died left beside it, without removing it: their temporary files
-    (``remove_stale_temps``) and a one-writer lock file nobody holds (``writer_lock``)."""
+    (``dead_temps``) and a one-writer lock file nobody holds (``writer_lock``)."""
     import fcntl
 
-    left = []
-    stem = temp_stem(target)
-    for tmp in target.parent.glob(f".{glob_escape(stem)}.*{TEMP_SUFFIX}"):
-        pid = tmp.name[len(stem) + 2:].split(".", 1)[0]
-        if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
-            left.append(tmp)
-    lock = target.parent / f".{stem}.lock"
+    left = dead_temps(target)
+    lock = lock_path(target)
     try:
         fd = os.open(lock, os.O_RDONLY)
     except OSError:
@@ -249,7 +257,7 @@ def writer_lock(path: str | os.PathLike[str], wait: bool = True) -> Iterator[Non
     import fcntl
 
     target = output_target(path)
-    lock = target.parent / f".{temp_stem(target)}.lock"
+    lock = lock_path(target)
     said = False
     while True:
         try:

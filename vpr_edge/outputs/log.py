@@ -18,17 +18,15 @@ import csv
 import io
 import json
 import os
-import stat
 import sys
 import time
 from pathlib import Path
 from typing import IO
 
 from vpr_edge.api import FIELDS, Match
-from vpr_edge.errors import VprError, warn
-from vpr_edge.files import adopt_mode, is_special, output_target
+from vpr_edge.files import adopt_mode, is_special
 from vpr_edge.frames.frame import Frame
-from vpr_edge.outputs.part import Fd, claim, part_path, writing
+from vpr_edge.outputs.part import Fd, open_output, part_path, writing
 
 FORMATS = ("csv", "jsonl")
 SUFFIX_FORMATS = {".csv": "csv", ".jsonl": "jsonl", ".json": "jsonl"}   # --out's suffix -> format
@@ -119,11 +117,7 @@ class ResultLog:
             with writing(self.where):
                 self._stream = open(out, "w", newline="")
         else:
-            self.target = output_target(out)
-            self._was = self.target.stat() if self.target.is_file() else None
-            if self._was is not None and not os.access(self.target, os.W_OK):
-                raise VprError(f"{out}: write-protected (mode {stat.S_IMODE(self._was.st_mode):04o}); not replaced")
-            self.part, self._fd = claim(self.target, recover)
+            self.target, self._was, self.part, self._fd = open_output(out, recover)
 
     @property
     def had_older(self) -> bool:

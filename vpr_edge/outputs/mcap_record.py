@@ -24,17 +24,16 @@ import contextlib
 import json
 import math
 import os
-import stat
 import time
 from pathlib import Path
 from typing import IO
 
 from vpr_edge.api import FIELDS, RESULTS_SCHEMA, Match
 from vpr_edge.errors import VprError, warn
-from vpr_edge.files import atomic_output, output_target
+from vpr_edge.files import atomic_output
 from vpr_edge.frames.frame import Frame
 from vpr_edge.map import PlaceMap
-from vpr_edge.outputs.part import FLUSH_INTERVAL_S, claim, finish, writing
+from vpr_edge.outputs.part import FLUSH_INTERVAL_S, finish, open_output, writing
 
 ANSWER, LOCATION, POSE = "/vpr/answer", "/vpr/location", "/vpr/pose"
 FRAME_ID = "map"
@@ -167,11 +166,7 @@ class McapSink:
         from vpr_edge import __version__
 
         self.map = place_map
-        self.target = output_target(Path(path))
-        self._was = self.target.stat() if self.target.is_file() else None
-        if self._was is not None and not os.access(self.target, os.W_OK):
-            raise VprError(f"{path}: write-protected (mode {stat.S_IMODE(self._was.st_mode):04o}); not replaced")
-        self.part, self._fd = claim(self.target, recover)
+        self.target, self._was, self.part, self._fd = open_output(Path(path), recover)
         self._stack = contextlib.ExitStack()
         self._stack.callback(os.close, self._fd)   # the lock, released last
         with contextlib.ExitStack() as undo:      # a failure here leaves no part

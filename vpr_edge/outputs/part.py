@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from vpr_edge.errors import InputError, VprError, warn
-from vpr_edge.files import adopt_mode
+from vpr_edge.files import adopt_mode, output_target
 
 PART_SUFFIX = ".part"     # NAME.part: the output while its stream runs
 FLUSH_INTERVAL_S = 1.0    # a recording hands what it holds to the system at least this often, seconds
@@ -85,6 +86,18 @@ def claim(target: Path, recover: Recover) -> tuple[Path, int]:
                  f"when this run ends")
         os.close(fd)
     raise VprError(f"{target}: its {part.name} keeps changing under this run; is another writer at work?")
+
+
+def open_output(out: Path, recover: Recover) -> tuple[Path, "os.stat_result | None", Path, int]:
+    """The file ``out`` names (a link's target), the status of the file there now (None: none), and its
+    claimed ``NAME.part`` and descriptor (``claim``). A file there this user may not write is refused first,
+    in one line."""
+    target = output_target(out)
+    was = target.stat() if target.is_file() else None
+    if was is not None and not os.access(target, os.W_OK):
+        raise VprError(f"{out}: write-protected (mode {stat.S_IMODE(was.st_mode):04o}); not replaced")
+    part, fd = claim(target, recover)
+    return target, was, part, fd
 
 
 def finish(part: Path, target: Path, was: os.stat_result | None) -> None:

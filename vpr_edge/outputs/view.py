@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import stat
 import time
 import uuid
 from pathlib import Path
@@ -39,11 +38,10 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.api import FIELDS, Match
-from vpr_edge.errors import VprError, warn
-from vpr_edge.files import output_target
+from vpr_edge.errors import warn
 from vpr_edge.frames.frame import Frame
 from vpr_edge.map import PlaceMap
-from vpr_edge.outputs.part import FLUSH_INTERVAL_S, claim, finish
+from vpr_edge.outputs.part import FLUSH_INTERVAL_S, finish, open_output
 from vpr_edge.outputs.pictures import ReferencePictures, card, jpeg
 from vpr_edge.positions import EARTH_RADIUS_M
 
@@ -113,12 +111,7 @@ class RerunSink:
         with contextlib.ExitStack() as undo:     # a failure here leaves no part
             undo.push(self._stack)
             if record is not None:
-                self.target = output_target(Path(record))
-                self._was = self.target.stat() if self.target.is_file() else None
-                if self._was is not None and not os.access(self.target, os.W_OK):
-                    raise VprError(f"{record}: write-protected (mode {stat.S_IMODE(self._was.st_mode):04o}); "
-                                   "not replaced")
-                self.part, fd = claim(self.target, recover)
+                self.target, self._was, self.part, fd = open_output(Path(record), recover)
                 self._stack.callback(os.close, fd)      # the lock, released last
                 undo.callback(self.part.unlink, missing_ok=True)
                 sinks.append(rr.FileSink(str(self.part)))
