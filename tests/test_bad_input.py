@@ -29,7 +29,7 @@ from vpr_edge.resources import bundled_model, sample_folder
 from vpr_edge.map import MAP_SCHEMA
 from vpr_edge.calibration import CALIBRATION_SCHEMA
 from vpr_edge.encoders.base import CODEBOOK_SCHEMA
-from vpr_edge.files import read_npz, write_npz
+from vpr_edge.files.npz import read_npz, write_npz
 from vpr_edge.evaluation.truth import write_ground_truth
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -268,7 +268,7 @@ CASES = [
     Case("loc-param-trust-refused", LOC + " --param trust=0", ("--param", "trust must be in (0, 1]")),
     Case("loc-param-refused", LOC + " --param decay=1.5", ("--param", "decay must be in (0, 1)")),
     Case("loc-param-still-refused", LOC + " --param still=1.5", ("--param", "still must be in [0, 1]")),
-    Case("loc-param-twice", LOC + " --decay 0.8 --param decay=0.7", ("--param decay", "--decay")),
+    Case("loc-param-of-another-mode", LOC + " --param open_ends=true", ("--param", "open_ends=true", "stream takes")),
     Case("loc-param-other-mode", LOC + " --mode single --param lock=3", ("--param", "single takes")),
     # outputs never alias inputs (following links), a trailing slash names a folder
     Case("loc-out-is-the-map", LOC + " -o {w}/good.npz", ("good.npz", "--out", "an input")),
@@ -429,10 +429,9 @@ def test_warnings_for_ignored_input(ws: Path, tmp_path: Path) -> None:
     (frames / "README.txt").write_text("not a frame")
     (frames / "0000010.jpg").unlink()
     cv2.imwrite(str(frames / "0000010.png"), np.zeros((2, 2, 3), np.uint8))
-    res = CliRunner().invoke(app, ["localize", "-m", str(ws / "good.npz"), "-s", str(frames), "--open-ends"])
+    res = CliRunner().invoke(app, ["localize", "-m", str(ws / "good.npz"), "-s", str(frames)])
     assert res.exit_code == 0, res.stderr
     warnings = [ln for ln in res.stderr.splitlines() if ln.startswith("vpr-edge: warning:")]
-    assert any("--open-ends does not apply to mode stream" in w for w in warnings), warnings
     assert any("1 file(s) that are not images ignored (e.g. README.txt)" in w for w in warnings), warnings
     assert any("0000010.png" in w and "2x2" in w and "frame skipped" in w for w in warnings), warnings
     assert len(res.stdout.splitlines()) == 24                  # 23 frames + header
@@ -597,7 +596,7 @@ def test_option_values_refused_by_the_parser() -> None:
     for argv in (["build-map", "x", "-o", "y.npz", "--storage", "int4"], ["localize", "-m", "m", "-s", "s",
                                                                           "--mode", "nope"],
                  ["build-map", "x", "-o", "y.npz", "--fit-iterations", "0"],
-                 ["localize", "-m", "m", "-s", "s", "--window", "-1"],
+                 ["localize", "-m", "m", "-s", "s", "--batch-size", "0"],
                  ["build-map", "x", "-o", "y.npz", "--resize", "squash"]):
         res = CliRunner().invoke(app, argv)
         assert res.exit_code == 2 and isinstance(res.exception, SystemExit), res.stderr

@@ -13,7 +13,7 @@ import pytest
 
 from helpers import assert_one_line_error, run, write_video
 from vpr_edge.map import MAP_SCHEMA, load_map
-from vpr_edge.files import read_npz, write_npz
+from vpr_edge.files.npz import read_npz, write_npz
 from vpr_edge.resources import LARGE_MODEL_FILE, bundled_model
 
 
@@ -40,9 +40,9 @@ def test_help() -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("argv, needle", [(["localize", "--bogus"], "--bogus"),
                                           (["build-map"], "Missing argument"),
-                                          (["localize", "-m", "a", "-s", "b", "--window", "-1"], "--window"),
+                                          (["localize", "-m", "a", "-s", "b", "--batch-size", "0"], "--batch-size"),
                                           (["evaluate", "--modes"], "--modes"),
-                                          (["evaluate", "--similarity", "s.npy", "--window", "-1"], "--window"),
+                                          (["evaluate", "--similarity", "s.npy", "--tolerance", "-1"], "--tolerance"),
                                           (["localize", "-m", "a", "-s", "b", "--param"], "--param"),
                                           (["localize", "-m", "a", "-s", "b", "--precision", "fp16"], "--precision"),
                                           (["build-map", "r", "-o", "m.npz", "--pca-dim", "-1"], "--pca-dim")])
@@ -92,8 +92,9 @@ def test_localize_says_the_line_a_calibration_gives(tmp_path: Path, small_map: P
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("mode", ["stream", "stream --min-confidence 0", "stream --window 3", "dtw", "single",
-                                  "dtw --variant distance --open-ends", "stream --param lock=5 --param turn=0.5"])
+@pytest.mark.parametrize("mode", ["stream", "stream --min-confidence 0", "stream --param window=3", "dtw", "single",
+                                  "dtw --param variant=distance --param open_ends=true",
+                                  "stream --param lock=5 --param turn=0.5"])
 def test_localize_matches_real_frames(small_map: Path, small_queries: Path, mode: str) -> None:
     proc = run("localize", "--map", small_map, "--stream", small_queries, "--mode", *mode.split())
     assert proc.returncode == 0, proc.stderr

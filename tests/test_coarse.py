@@ -96,7 +96,7 @@ def _rss_file_mb() -> float | None:
 def test_sign_pass_releases_a_memory_mapped_map(tmp_path: Path) -> None:
     """Packing the signs reads every stored row; on a memory-mapped map those pages are then dropped from
     the process (store.release_pages), the values still read the same, and an in-RAM map is left alone."""
-    from vpr_edge.files import read_npz, write_npz
+    from vpr_edge.files.npz import read_npz, write_npz
     from vpr_edge.index.rows import release_pages
 
     rng = np.random.default_rng(1)
@@ -129,7 +129,7 @@ def test_row_reader_against_the_array(tmp_path: Path, cache_rows: int) -> None:
     """RowReader.take equals plain indexing for runs, scattered rows, repeats and any order, whatever the
     cache's size (a small cache evicts between and within calls), for every stored dtype."""
     from vpr_edge.index.rows import RowReader
-    from vpr_edge.files import read_npz, write_npz
+    from vpr_edge.files.npz import read_npz, write_npz
 
     rng = np.random.default_rng(cache_rows)
     for dtype in (np.int8, np.float16, np.float32):

@@ -16,6 +16,7 @@ from vpr_edge.map import load_map
 from vpr_edge.map.drives import Drives
 from vpr_edge.matchers import MATCHERS
 from vpr_edge.matchers.road import RoadMatcher
+from vpr_edge.matchers.stream_config import StreamConfig
 from vpr_edge.matchers.route import RouteGraph, max_outside, merge, minus, places
 from vpr_edge.positions import Positions
 
@@ -87,9 +88,10 @@ def test_matcher_across_drives_against_naive_recursion(grid: int, vmax: float) -
     graph = RouteGraph(d.n_refs, d.starts, tuple(junctions))
     sim = rng.normal(size=(9, d.n_refs))
     params = dict(grid=grid, vmax=vmax, decay=0.9, bias=0.3, turn=0.5, stop_gain=0.3, stop_decay=0.95)
-    m = RoadMatcher(d.n_refs, memory=1e12, lock=1.0, rival_window=1, window=0, probe=1000, check=10, span=1,
-                    hold=2.0, seek=8, peaks=8, seek_frames=4, still=0.0, still_memory=30, evidence=-99.0, evidence_decay=0.5, hub=-99.0, unique=0.0,
-                    confirm=1, stuck=0, trust=1.0, graph=graph, **params)
+    config = StreamConfig.of(dict(memory=1e12, lock=1.0, rival_window=1, window=0, probe=1000, check=10, span=1,
+                                  hold=2.0, seek=8, peaks=8, seek_frames=4, still=0.0, still_memory=30, evidence=-99.0,
+                                  evidence_decay=0.5, hub=-99.0, unique=0.0, confirm=1, stuck=0, trust=1.0, **params))
+    m = RoadMatcher(d.n_refs, config, graph=graph)
     for row in sim:
         m.update(row)
     np.testing.assert_allclose(m.h, naive_road_over_drives(sim, graph, **params), atol=1e-4)

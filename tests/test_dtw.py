@@ -8,6 +8,7 @@ import pytest
 from helpers import places_at_speeds, planted
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.dtw import dtw_accumulate, dtw_align, remove_hubs
+from vpr_edge.matchers.params import DTW
 from vpr_edge.matchers.stream_dtw import StreamingDTW
 
 
@@ -16,6 +17,9 @@ def cosine_similarity(queries: np.ndarray, refs: np.ndarray) -> np.ndarray:
     q = queries / np.linalg.norm(queries, axis=1, keepdims=True)
     r = refs / np.linalg.norm(refs, axis=1, keepdims=True)
     return q @ r.T
+
+
+MAX_STEP = DTW["max_step"].default
 
 
 def best_match(sim: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -62,8 +66,9 @@ def test_dtw_matches_naive(variant: str, shape: tuple[int, int], open_ends: bool
     rng = np.random.default_rng(sum(shape))
     sim = rng.uniform(-1, 1, size=shape)
     want = naive_accumulate(sim, variant, open_ends)
-    np.testing.assert_allclose(dtw_accumulate(sim, variant, open_ends), want, rtol=1e-10, atol=1e-10)
-    result = dtw_align(sim, variant, open_ends)
+    np.testing.assert_allclose(dtw_accumulate(sim, variant=variant, open_ends=open_ends, max_step=MAX_STEP), want,
+                               rtol=1e-10, atol=1e-10)
+    result = dtw_align(sim, variant=variant, open_ends=open_ends, max_step=MAX_STEP)
     path = naive_path(want, variant, open_ends)
     np.testing.assert_array_equal(result.path, np.array(path))
     assert result.total == pytest.approx(want[path[-1]])
@@ -79,7 +84,7 @@ def test_dtw_recovers_a_time_warped_route(variant: str) -> None:
     refs = rng.normal(size=(60, 32))
     truth = np.clip(np.round(np.cumsum(rng.uniform(0.4, 1.6, size=70))).astype(int) - 1, 0, 59)
     queries = refs[truth] + 0.5 * rng.normal(size=(70, 32))
-    result = dtw_align(cosine_similarity(queries, refs), variant)
+    result = dtw_align(cosine_similarity(queries, refs), variant=variant, open_ends=False, max_step=MAX_STEP)
     assert np.mean(np.abs(result.matches - truth) <= 1) > 0.9
 
 
@@ -88,16 +93,16 @@ def test_subsequence_dtw_finds_a_clip_inside_a_long_route() -> None:
     refs = rng.normal(size=(200, 32))
     truth = np.arange(120, 150)
     sim = cosine_similarity(refs[truth] + 0.8 * rng.normal(size=(30, 32)), refs)
-    clip = dtw_align(sim, "distance", open_ends=True)
+    clip = dtw_align(sim, variant="distance", open_ends=True, max_step=MAX_STEP)
     assert np.mean(np.abs(clip.matches - truth) <= 1) > 0.9
     assert clip.path[0, 1] >= 118 and clip.path[-1, 1] <= 152
 
 
 def test_dtw_rejects_bad_input() -> None:
     with pytest.raises(ValueError):
-        dtw_align(np.zeros((0, 3)))
+        dtw_align(np.zeros((0, 3)), variant="distance", open_ends=False, max_step=MAX_STEP)
     with pytest.raises(ValueError):
-        dtw_align(np.zeros((2, 3)), "cosine")  # type: ignore[arg-type]
+        dtw_align(np.zeros((2, 3)), variant="cosine", open_ends=False, max_step=MAX_STEP)  # type: ignore[arg-type]
 
 
 def test_best_match_and_cosine() -> None:

@@ -14,7 +14,7 @@ from vpr_edge.encoders.fisher import FisherVector, Gmm, ImprovedFisherVector
 from vpr_edge.encoders.flat import Flatten
 from vpr_edge.encoders.words import BagOfWords, Vlad
 from vpr_edge.errors import VprError
-from vpr_edge.files import META_KEY, read_npz, write_npz
+from vpr_edge.files.npz import META_KEY, read_npz, write_npz
 
 
 def random_pca(rng: np.random.Generator, d: int, k: int) -> Pca:

@@ -8,7 +8,7 @@ import pytest
 
 from vpr_edge.index.encodings import Encodings, STORAGES, quantise_rows
 from vpr_edge.map import MAP_SCHEMA, load_map
-from vpr_edge.files import read_npz, write_npz
+from vpr_edge.files.npz import read_npz, write_npz
 
 
 def naive_quantise(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

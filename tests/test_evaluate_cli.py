@@ -229,7 +229,7 @@ def test_evaluate_bad_input(tmp_path: Path, eval_map: Path, small_queries: Path,
 
 @pytest.mark.slow
 def test_evaluate_window_reaches_the_stream_matcher(tmp_path: Path) -> None:
-    """--window sets the stream's local search as localize's does: each run equals the matcher called directly
+    """--param window=N sets the stream's local search as localize's does: each run equals the matcher called directly
     with that window (1,000 references: above the 400 where the default window engages)."""
     from vpr_edge.evaluation.scoring import evaluate_mode
     from vpr_edge.evaluation.truth import pad
@@ -239,7 +239,7 @@ def test_evaluate_window_reaches_the_stream_matcher(tmp_path: Path) -> None:
     sim, truth = np.load(s), pad([[p] for p in np.arange(200) + 10])
     for window in (None, 0, 20):
         js = tmp_path / f"w{window}.json"
-        extra = [] if window is None else ["--window", str(window)]
+        extra = [] if window is None else ["--param", f"window={window}"]
         proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream,single", "--json", js, *extra)
         assert proc.returncode == 0 and "does not apply" not in proc.stderr, proc.stderr
         got = json.loads(js.read_text())["modes"]["stream"]
@@ -248,8 +248,8 @@ def test_evaluate_window_reaches_the_stream_matcher(tmp_path: Path) -> None:
         assert got["recall_at_1"] == pytest.approx(want.recall[1]) and got["auc"] == pytest.approx(want.auc)
         assert got["settings"] == json.loads(json.dumps(want.settings))     # the window it ran with, recorded
         assert got["settings"]["window"] == (get_matcher("stream").params["window"] if window is None else window)
-    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single", "--window", "5")
-    assert proc.returncode == 0 and "--window does not apply" in proc.stderr
+    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single", "--param", "window=5")
+    assert proc.returncode == 2 and "none of the modes single has a parameter 'window'" in proc.stderr, proc.stderr
 
 
 @pytest.mark.slow

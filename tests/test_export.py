@@ -12,7 +12,7 @@ from vpr_edge.resources import sample_folder
 torch = pytest.importorskip("torch")
 
 from vpr_edge.features.cnn import FeatureExtractor  # noqa: E402
-from vpr_edge.files import file_sha256  # noqa: E402
+from vpr_edge.files.readers import file_sha256  # noqa: E402
 from vpr_edge_export.backbones import BACKBONES, build_backbone  # noqa: E402
 from vpr_edge_export.onnx_export import compare_with_torch, default_weights, export_onnx, load_state_dict  # noqa: E402
 

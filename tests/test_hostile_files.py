@@ -19,7 +19,7 @@ from vpr_edge.errors import VprError
 from vpr_edge.evaluation import sources, truth
 from vpr_edge.features.cnn import _checked_info
 from vpr_edge.features.patches import Patches
-from vpr_edge.files import read_npz, write_npz
+from vpr_edge.files.npz import read_npz, write_npz
 from vpr_edge.map import MAP_SCHEMA, load_map, map_from_local, save_map
 
 FUZZ = settings(max_examples=200, deadline=None, derandomize=True, database=None,

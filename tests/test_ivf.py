@@ -9,12 +9,13 @@ import numpy as np
 import pytest
 
 from helpers import alike_refs, driven_encodings, invoke
-from vpr_edge.files import read_npz, write_npz
+from vpr_edge.files.npz import read_npz, write_npz
 from vpr_edge.index.encodings import Encodings
 from vpr_edge.index.ivf import IvfIndex, fit_ivf
 from vpr_edge.map import MAP_SCHEMA, load_map
 from vpr_edge.matchers import MATCHERS, step
 from vpr_edge.matchers.road import RoadMatcher
+from vpr_edge.matchers.stream_config import StreamConfig
 
 
 def test_index_lists_every_place_once_and_finds_what_an_exhaustive_search_finds() -> None:
@@ -61,7 +62,7 @@ def test_compact_pass_equals_one_pass_per_window() -> None:
     rng = np.random.default_rng(2)
     sim = rng.normal(size=(60, 500))
     params = MATCHERS["stream"].params | {"window": 0}
-    a, b = RoadMatcher(500, **params), OnePassEach(500, **params)
+    a, b = RoadMatcher(500, StreamConfig.of(params)), OnePassEach(500, StreamConfig.of(params))
     for row in sim:
         cands = rng.choice(500, 12, replace=False)
         for m in (a, b):

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from vpr_edge.files import dead_writers_files
+from vpr_edge.files.temps import dead_writers_files
 from vpr_edge.map import load_map
 from vpr_edge.resources import sample_folder
 

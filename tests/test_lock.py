@@ -10,8 +10,9 @@ import pytest
 
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import MATCHERS, get_matcher
-from vpr_edge.matchers.lock import FrameReading, Judgement, LockVerdict, RecentViews, answer_view
+from vpr_edge.matchers.lock import FrameReading, Judgement, LockRules, LockVerdict, RecentViews, answer_view
 from vpr_edge.matchers.road import RoadMatcher
+from vpr_edge.matchers.stream_config import StreamConfig
 from vpr_edge.matchers.route import RouteGraph
 
 from helpers import places_at_speeds, planted
@@ -48,7 +49,7 @@ def test_the_lock_verdict_alone_against_its_rules(case: str) -> None:
         part[29:32] = part.mean()
     if case == "ambiguous":
         values[50] = 19.0
-    verdict = LockVerdict(RouteGraph.line(n), 10, **RULES)
+    verdict = LockVerdict(RouteGraph.line(n), LockRules(**RULES, rival_window=10))
     got = verdict.judge(reading(values, part))
     score, strong, why = naive_lock(values, part, 10)
     assert (got.why, got.strong) == (why, strong) and got.score == pytest.approx(score)
@@ -67,7 +68,7 @@ def test_the_lock_verdicts_hub_line_against_a_loop() -> None:
     n, rules = 40, RULES | {"evidence_decay": 0.5, "hub": 1.0}
     rng = np.random.default_rng(2)
     for case in ("hub", "moving", "stopped"):
-        verdict = LockVerdict(RouteGraph.line(n), 5, **rules)
+        verdict = LockVerdict(RouteGraph.line(n), LockRules(**rules, rival_window=5))
         mean, weight, seen, avg, whys, want = np.zeros(n), np.zeros(n), np.zeros(n), None, [], []
         for t in range(25):
             ref = 20 if case != "moving" else 5 + t
@@ -100,7 +101,7 @@ def test_the_lock_verdicts_evidence_is_averaged_over_frames_and_reset() -> None:
     strong_view = np.zeros(n)
     strong_view[10] = 10.0
     flat = np.r_[np.ones(n // 2), -np.ones(n // 2)]
-    verdict = LockVerdict(RouteGraph.line(n), 5, **rules)
+    verdict = LockVerdict(RouteGraph.line(n), LockRules(**rules, rival_window=5))
     assert verdict.judge(reading(values, strong_view)).why == "locked"
     here = verdict.judge(reading(values, flat))   # this frame alone is weak; the average is not
     assert here.why == "locked"
@@ -141,7 +142,7 @@ def test_the_recursion_hands_each_frame_to_its_verdict(strong: bool) -> None:
     rng = np.random.default_rng(2)
     sim = planted(rng, n, places_at_speeds([(1.0, 60)], start=100.0), noise=0.2)
     params = MATCHERS["stream"].params | {"window": 50}
-    m = RoadMatcher(n, **params)
+    m = RoadMatcher(n, StreamConfig.of(params))
     m.verdict = Recorder(strong)
     local = 0
     for i, row in enumerate(sim):
@@ -183,7 +184,7 @@ def test_a_jump_is_answered_from_its_confirm_th_frame(confirm: int) -> None:
     ``confirm`` - 1 frames, and locked from there on, as the stream's first frames are; at confirm 1 (off)
     every frame is locked."""
     n = 60
-    verdict = LockVerdict(RouteGraph.line(n), 10, **RULES | {"confirm": confirm})
+    verdict = LockVerdict(RouteGraph.line(n), LockRules(**RULES | {"confirm": confirm}, rival_window=10))
     rng = np.random.default_rng(4)
     whys = []
     for t in range(16):
@@ -219,7 +220,7 @@ def test_an_answer_kept_while_the_camera_moves_is_lost_at_stuck(cued: bool) -> N
     the ``stuck``-th such frame; frames of a standing camera do not count, and the answer moving on again is
     locked at once. Without a cue nothing says the camera moves: every frame stays locked."""
     n, stuck = 60, 4
-    verdict = LockVerdict(RouteGraph.line(n), 10, **RULES | {"stuck": stuck})
+    verdict = LockVerdict(RouteGraph.line(n), LockRules(**RULES | {"stuck": stuck}, rival_window=10))
     rng = np.random.default_rng(4)
     refs = list(range(5, 13)) + [12, 11, 12, 11, 11, 12, 11, 12] + [13, 14]
     standing = [False] * 8 + [False, False, True, True, False, False, False, False] + [False, False]

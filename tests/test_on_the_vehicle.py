@@ -52,8 +52,7 @@ def _match(i: int, lost: bool = False, why: str | None = None) -> Match:
 def test_summary_counts_and_says_the_misfit_once() -> None:
     s = RunSummary(ref_size=(64, 32))
     frame = Frame(0, "a", np.zeros((120, 160, 3), np.uint8))
-    first = s.add(_match(0, True, "weak-view"), frame)
-    assert len(first) == 1 and "160x120 pixels, the map's references 64x32" in first[0]
+    assert s.add(_match(0, True, "weak-view"), frame) == []           # a size alone is not said
     due = []
     for i in range(1, FIRST_STRETCH):
         due += s.add(_match(i, lost=i % 10 != 0, why="no-trajectory"), frame)
@@ -65,6 +64,15 @@ def test_summary_counts_and_says_the_misfit_once() -> None:
     assert ended == "stream ended: interrupted (Ctrl-C, SIGINT)"
     assert counts == ("51 frames in 10.2 s (5.0 frames/s): 4 answered, 47 lost (no-trajectory 45, "
                       "no reason given 1, weak-view 1), 1 undecodable skipped")
+
+
+def test_a_misfit_size_is_said_only_when_answers_suffer() -> None:
+    frame = Frame(0, "a", np.zeros((720, 1280, 3), np.uint8))
+    fine = RunSummary(ref_size=(160, 120))   # upscaled frames that still match: no word
+    assert all(fine.add(_match(i, lost=i % 5 == 0), frame) == [] for i in range(2 * FIRST_STRETCH))
+    poor = RunSummary(ref_size=(160, 120))
+    due = [d for i in range(2 * FIRST_STRETCH) for d in poor.add(_match(i, lost=i % 3 != 0), frame)]
+    assert len(due) == 1 and "1280x720 pixels, the map's references 160x120" in due[0] and "33 of the first" in due[0]
 
 
 def test_a_fitting_stream_is_not_warned() -> None:

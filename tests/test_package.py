@@ -78,6 +78,34 @@ def test_every_parameter_is_defined_once_and_constructors_take_them() -> None:
         m.run(__import__("numpy").random.default_rng(0).random((6, 5)), 1)   # the presets construct and run
 
 
+def test_no_parameter_default_is_repeated_in_a_signature() -> None:
+    """A matcher parameter's default lives in ``matchers.params`` alone: neither a matcher's entry point
+    (``align``, ``start``) nor any function or class of the modules that implement the parameter tables'
+    matchers gives a parameter of that name a keyword default of its own (it would drift from the table)."""
+    import importlib
+    import inspect
+
+    from vpr_edge.matchers import params as P
+
+    def defaulted(obj: object, names: set[str]) -> list[str]:
+        try:
+            signature = inspect.signature(obj)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            return []
+        return [f"{getattr(obj, '__qualname__', obj)}({name}={p.default!r})" for name, p in signature.parameters.items()
+                if name in names and p.default is not inspect.Parameter.empty]
+
+    repeated = [hit for m in MATCHERS.values() for entry in (m.align, m.start) if entry is not None
+                for hit in defaulted(entry, set(m.definitions))]
+    # contrast's ``window`` is seqslam's ``r_window`` by its own name
+    for module, names in (("dtw", set(P.DTW)), ("seqslam", set(P.SEQSLAM)), ("contrast", {"window"})):
+        mod = importlib.import_module(f"vpr_edge.matchers.{module}")
+        for obj in vars(mod).values():
+            if (inspect.isfunction(obj) or inspect.isclass(obj)) and obj.__module__ == mod.__name__:
+                repeated += defaulted(obj, names)
+    assert not repeated, f"defaults repeated outside matchers/params.py: {repeated}"
+
+
 def _imports(path: Path) -> list[tuple[str, str | None]]:
     """(module, name) for each ``from vpr_edge... import name`` and (module, None) for each ``import vpr_edge...``
     in ``path``, anywhere in it (lazy imports inside functions too)."""

@@ -154,7 +154,7 @@ def test_a_full_disk_names_the_file_and_leaves_nothing(tmp_path: Path, monkeypat
 
     import numpy as np
 
-    import vpr_edge.files as files
+    import vpr_edge.files.npz as npz
     from vpr_edge.errors import os_error_line
 
     (tmp_path / "m.npz").write_bytes(b"the previous map")
@@ -162,18 +162,18 @@ def test_a_full_disk_names_the_file_and_leaves_nothing(tmp_path: Path, monkeypat
     def full(*args, **kw) -> None:
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(files.np, "savez", full)
+    monkeypatch.setattr(npz.np, "savez", full)
     with pytest.raises(OSError) as e:
-        files.write_npz(tmp_path / "m.npz", {"a": np.zeros(3)}, {"kind": "map"})
+        npz.write_npz(tmp_path / "m.npz", {"a": np.zeros(3)}, {"kind": "map"})
     assert os_error_line(e.value) == f"{tmp_path / 'm.npz'}: No space left on device"
     assert (tmp_path / "m.npz").read_bytes() == b"the previous map" and not _temps(tmp_path)
 
 
 def test_writer_lock_serialises_two_writers(tmp_path: Path) -> None:
     """A second process asking for a map's writer lock waits until the first lets go (and says so)."""
-    from vpr_edge.files import writer_lock
+    from vpr_edge.files.one_writer import writer_lock
 
-    code = ("import sys, time; from vpr_edge.files import writer_lock\n"
+    code = ("import sys, time; from vpr_edge.files.one_writer import writer_lock\n"
             "with writer_lock(sys.argv[1]):\n    print('got', time.time(), flush=True)\n")
     with writer_lock(tmp_path / "m.npz"):
         waiting = subprocess.Popen([sys.executable, "-c", code, str(tmp_path / "m.npz")], stdout=subprocess.PIPE,
@@ -209,7 +209,10 @@ def test_outputs_at_the_name_limit_and_fifos(tmp_path: Path) -> None:
     import stat
 
     from vpr_edge.errors import VprError
-    from vpr_edge.files import atomic_output, check_writable, remove_stale_temps, temp_stem, writer_lock
+    from vpr_edge.files.atomic import atomic_output
+    from vpr_edge.files.checks import check_writable
+    from vpr_edge.files.one_writer import writer_lock
+    from vpr_edge.files.temps import remove_stale_temps, temp_stem
 
     name = "é" * 120 + "x" * 6 + ".npz"                       # 240 + 6 + 4 = 250 bytes
     assert len(name.encode()) == 250
@@ -263,7 +266,8 @@ def test_a_replaced_output_keeps_its_mode_and_dead_writers_temps_go(tmp_path: Pa
     import stat
 
     from vpr_edge.errors import VprError
-    from vpr_edge.files import atomic_output, temp_stem
+    from vpr_edge.files.atomic import atomic_output
+    from vpr_edge.files.temps import temp_stem
 
     for mode in (0o640, 0o444):
         target = tmp_path / f"m{mode:o}.npz"
@@ -293,7 +297,7 @@ def test_a_writer_killed_mid_write_leaves_a_temp_the_next_writer_removes(tmp_pat
     target = tmp_path / "route.npz"
     target.write_bytes(b"the old map")
     (tmp_path / "other.tmp").write_bytes(b"not ours")
-    code = ("import sys, time\nfrom vpr_edge.files import atomic_output\n"
+    code = ("import sys, time\nfrom vpr_edge.files.atomic import atomic_output\n"
             "with atomic_output(sys.argv[1]) as tmp:\n"
             "    tmp.write_bytes(b'half a map')\n    print('writing', flush=True)\n    time.sleep(60)\n")
     proc = subprocess.Popen([sys.executable, "-c", code, str(target)], stdout=subprocess.PIPE, text=True)
@@ -302,7 +306,7 @@ def test_a_writer_killed_mid_write_leaves_a_temp_the_next_writer_removes(tmp_pat
     proc.wait(timeout=30)
     left = [p for p in tmp_path.iterdir() if p.name.startswith(".route.npz.")]
     assert len(left) == 1 and target.read_bytes() == b"the old map"
-    again = subprocess.run([sys.executable, "-c", "import sys\nfrom vpr_edge.files import atomic_output\n"
+    again = subprocess.run([sys.executable, "-c", "import sys\nfrom vpr_edge.files.atomic import atomic_output\n"
                             "with atomic_output(sys.argv[1]) as tmp:\n    tmp.write_bytes(b'new map')\n",
                             str(target)], capture_output=True, text=True, timeout=60)
     assert again.returncode == 0 and "removed 1 temporary file(s) left by writers that died" in again.stderr

@@ -11,6 +11,7 @@ from helpers import naive_road, places_at_speeds, planted
 from vpr_edge.evaluation.scoring import evaluate_mode
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.matchers.road import RoadMatcher
+from vpr_edge.matchers.stream_config import StreamConfig
 
 
 @pytest.mark.parametrize("speed", [0.0, 0.5, 1.0, 2.0, 3.0])
@@ -198,7 +199,7 @@ def test_road_matcher_against_plain_loops(grid: int, vmax: float, stop_gain: flo
     sim = planted(rng, 20, places_at_speeds([(1.0, 12), (0.0, 5), (0.5, 8)], start=1), noise=0.6)
     params = {"vmax": vmax, "grid": grid, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 6.0, "lock": 3.0,
               "rival_window": 2, "stop_gain": stop_gain, "stop_decay": stop_decay}
-    m = RoadMatcher(20, **MATCHERS["stream"].params | params)
+    m = RoadMatcher(20, StreamConfig.of(MATCHERS["stream"].params | params))
     got, reasons, naive_reasons = [], [], []
     for row in sim:
         got.append(m.update(row))
@@ -221,7 +222,8 @@ def test_road_matcher_route_shorter_than_its_fastest_step(n_refs: int) -> None:
     params = dict(MATCHERS["stream"].params)
     params = {k: params[k] for k in ("vmax", "grid", "decay", "bias", "turn", "memory", "lock", "rival_window",
                                      "stop_gain", "stop_decay")} | {"bias": 0.5, "lock": 1.0}  # no all-0 states
-    m = RoadMatcher(n_refs, **MATCHERS["stream"].params | params | {"hub": -99.0})   # the loops have no hub line
+    # the loops have no hub line
+    m = RoadMatcher(n_refs, StreamConfig.of(MATCHERS["stream"].params | params | {"hub": -99.0}))
     got = [m.update(row) for row in sim]
     want = naive_road(sim, **params)
     assert [r for r, _ in got] == [r for r, _ in want]
@@ -229,7 +231,7 @@ def test_road_matcher_route_shorter_than_its_fastest_step(n_refs: int) -> None:
 
 
 def test_road_matcher_state_is_bounded() -> None:
-    m = RoadMatcher(50, **MATCHERS["stream"].params)
+    m = RoadMatcher(50, StreamConfig.default())
     rng = np.random.default_rng(0)
     before = m.h.nbytes
     for _ in range(300):
@@ -276,7 +278,7 @@ def test_lock_verdict_and_evidence_average_are_the_rules_in_order() -> None:
 
 def test_per_reference_is_each_places_best_cell_and_speed() -> None:
     """The best trajectory ending at each reference, against a plain loop over its speeds and grid cells."""
-    from vpr_edge.matchers.road import per_reference
+    from vpr_edge.matchers.trajectories import per_reference
 
     rng = np.random.default_rng(5)
     for grid in (1, 2, 3):

@@ -11,6 +11,7 @@ from vpr_edge.map.drives import Drives
 from vpr_edge.matchers import MATCHERS
 from vpr_edge.matchers.base import step
 from vpr_edge.matchers.road import RoadMatcher
+from vpr_edge.matchers.stream_config import StreamConfig
 from vpr_edge.matchers.route import RouteGraph
 
 from helpers import naive_road_all
@@ -42,7 +43,7 @@ def test_every_part_together_against_plain_loops(seed: int) -> None:
     params = MATCHERS["stream"].params | dict(vmax=2.0, grid=2, decay=0.9, bias=0.5, turn=0.5, memory=20.0,
                                               lock=2.0, hold=2.0, window=6, probe=20, check=7, span=2, seek=2,
                                               peaks=2, still=0.5, rival_window=3)
-    m = RoadMatcher(n, **params, route=route, graph=graph)
+    m = RoadMatcher(n, StreamConfig.of(params), route=route, graph=graph)
     want = naive_road_all(sim, graph, np.asarray(cues), route, candidates, **params)
     local = index = 0
     for k, row in enumerate(sim):

@@ -9,6 +9,7 @@ from helpers import naive_road_local, places_at_speeds, planted
 from vpr_edge.matchers import MATCHERS, get_matcher
 from vpr_edge.matchers.base import step
 from vpr_edge.matchers.road import RoadMatcher
+from vpr_edge.matchers.stream_config import StreamConfig
 
 
 def test_local_search_follows_a_long_route_and_finds_a_jump() -> None:
@@ -39,12 +40,13 @@ def test_local_search_follows_a_long_route_and_finds_a_jump() -> None:
 
 
 def test_local_search_is_off_on_small_routes() -> None:
-    m = RoadMatcher(400, **MATCHERS["stream"].params | {"window": 100})
+    m = RoadMatcher(400, StreamConfig.of(MATCHERS["stream"].params | {"window": 100}))
     for row in planted(np.random.default_rng(0), 400, np.arange(100, 150)):
         m.update(row)
         assert m.wanted() is None
+    m = RoadMatcher(3000, StreamConfig.of(MATCHERS["stream"].params | {"window": 50}))
     with pytest.raises(ValueError):
-        RoadMatcher(3000, **MATCHERS["stream"].params | {"window": 50}).update(np.zeros(10), np.arange(10))   # refs not asked for
+        m.update(np.zeros(10), np.arange(10))   # refs not asked for
 
 
 def test_road_matcher_local_search_against_plain_loops() -> None:

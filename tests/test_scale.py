@@ -11,6 +11,7 @@ from vpr_edge.evaluation.truth import load_csv
 from vpr_edge.index.ivf import SequenceQuery
 from vpr_edge.matchers import MATCHERS
 from vpr_edge.matchers.road import RoadMatcher
+from vpr_edge.matchers.stream_config import StreamConfig
 
 
 def test_stream_plan_has_its_detours_stop_and_far_reentry() -> None:
@@ -46,7 +47,7 @@ def test_route_and_stream_files_round_trip(tmp_path: Path) -> None:
 
 def test_a_large_route_searched_around_candidates_holds_no_whole_route_state() -> None:
     n = 200_000
-    m = RoadMatcher(n, **MATCHERS["stream"].params)
+    m = RoadMatcher(n, StreamConfig.of(MATCHERS["stream"].params))
     rng = np.random.default_rng(0)
     for t in range(30):
         refs = m.around(np.array([1000 + 2 * t, 150_000, int(rng.integers(n))]))
@@ -61,7 +62,7 @@ def test_a_large_route_searched_around_candidates_holds_no_whole_route_state() -
 
 def test_a_reference_first_seen_late_starts_from_the_prior() -> None:
     params = MATCHERS["stream"].params
-    m = RoadMatcher(1000, **params)
+    m = RoadMatcher(1000, StreamConfig.of(params))
     m._t = 500                                                 # 500 frames elsewhere on the route
     first = m._normalise(np.full(3, 4.0), 10, 0.0, 1.0)
     second = m._normalise(np.full(3, 4.0), 10, 0.0, 1.0)

@@ -82,5 +82,5 @@ def test_seqslam_matches_plain_loops(online: bool) -> None:
 
 
 def test_seqslam_difference_is_non_negative() -> None:
-    d = enhanced_difference(np.random.default_rng(2).normal(size=(5, 30)))
+    d = enhanced_difference(np.random.default_rng(2).normal(size=(5, 30)), r_window=10)
     assert d.min() == 0.0

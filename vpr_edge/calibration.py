@@ -32,7 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vpr_edge.errors import InputError, VprError
-from vpr_edge.files import atomic_output, newer_schema
+from vpr_edge.files.atomic import atomic_output
+from vpr_edge.files.npz import newer_schema
 
 CALIBRATION_SCHEMA = 2     # 2: each mode's line
 READ_SCHEMAS = (1, 2)      # 1: no line (a target precision refused with it)

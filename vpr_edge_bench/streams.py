@@ -19,7 +19,8 @@ import numpy as np
 from vpr_edge.errors import VprError
 from vpr_edge.frames.images import list_images, load_image
 from vpr_edge.evaluation.truth import write_ground_truth
-from vpr_edge.files import atomic_output, read_csv_rows
+from vpr_edge.files.atomic import atomic_output
+from vpr_edge.files.readers import read_csv_rows
 
 KINDS: tuple[str, ...] = ("aligned", "speed2", "speed3", "stop-and-go", "camera-stops", "variable", "partial",
                           "detour")

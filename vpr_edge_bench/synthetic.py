@@ -21,7 +21,7 @@ import numpy as np
 
 from vpr_edge.evaluation.metrics import runs
 from vpr_edge.evaluation.truth import write_ground_truth
-from vpr_edge.files import atomic_output
+from vpr_edge.files.atomic import atomic_output
 
 BLOCK = 65_536   # descriptors generated and written at a time
 

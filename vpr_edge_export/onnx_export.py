@@ -24,7 +24,8 @@ import numpy as np
 import torch
 
 from vpr_edge.errors import VprError, one_line_errors
-from vpr_edge.files import check_writable, file_sha256
+from vpr_edge.files.checks import check_writable
+from vpr_edge.files.readers import file_sha256
 from vpr_edge_export.backbones import BACKBONES, build_backbone
 from vpr_edge_export.place_nets import ARCHITECTURES
 

@@ -27,7 +27,9 @@ import numpy as np
 from vpr_edge.errors import VprError, one_line_errors
 from vpr_edge.features.cnn import FeatureExtractor
 from vpr_edge.frames.images import list_images, load_image
-from vpr_edge.files import atomic_output, check_writable, file_sha256
+from vpr_edge.files.atomic import atomic_output
+from vpr_edge.files.checks import check_writable
+from vpr_edge.files.readers import file_sha256
 
 
 class _Images:

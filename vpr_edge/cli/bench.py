@@ -10,7 +10,8 @@ from typing import Optional
 import typer
 
 from vpr_edge.cli.common import app, user_errors
-from vpr_edge.files import atomic_output, check_not_input, check_writable, output_path
+from vpr_edge.files.atomic import atomic_output
+from vpr_edge.files.checks import check_not_input, check_writable, output_path
 from vpr_edge.profiling.sweep import DEFAULT_FRAMES, header_lines, plan_bench, row_line, run_bench, verdict_line
 
 

@@ -16,7 +16,7 @@ from vpr_edge.features.conventions import GivenConventions
 from vpr_edge.features.resize import RESIZE
 from vpr_edge.encoders.base import DEFAULT_PCA_DIM
 from vpr_edge.errors import VprError
-from vpr_edge.files import output_path
+from vpr_edge.files.checks import output_path
 from vpr_edge.encoders.registry import DEFAULT_ENCODING
 from vpr_edge.features.registry import DEFAULT_FRONT_END
 from vpr_edge.index.encodings import DEFAULT_STORAGE

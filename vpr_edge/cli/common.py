@@ -12,14 +12,13 @@ import typer
 
 from vpr_edge import __version__
 from vpr_edge.encoders import ENCODERS
-from vpr_edge.errors import (InputError, Terminated, VprError, ctrl_c, input_names, os_error_line, printable,
-                             warn)
+from vpr_edge.errors import InputError, Terminated, VprError, ctrl_c, input_names, os_error_line, printable
 from vpr_edge.features import FRONT_ENDS
 from vpr_edge.features.choice import PRECISIONS
 from vpr_edge.features.conventions import LAYOUTS
 from vpr_edge.features.resize import RESIZE
 from vpr_edge.index.encodings import STORAGES
-from vpr_edge.matchers import MATCHERS, Matcher, get_matcher, param_key
+from vpr_edge.matchers import MATCHERS, Matcher, param_key
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   rich_markup_mode=None, context_settings={"help_option_names": ["-h", "--help"],
@@ -98,9 +97,9 @@ PRECISION_HELP = ("The model's numeric form: fp32 (default); int8: its int8 form
 THREADS_HELP = ("Threads for onnxruntime and NumPy's BLAS together, so the two pools never oversubscribe "
                 "the cores (0 = one per core).")
 PARAM_HELP = ("Set one of the matcher's parameters (repeatable), e.g. --param bias=1.6 --param lock=6: "
-              "calibrating the stream's lost state on a drive of your own route (docs/matchers.md). "
-              "--list-params names them all with their defaults and meanings; evaluate --json records the "
-              "values run.")
+              "calibrating the stream's lost state on a drive of your own route (docs/matchers.md). Each "
+              "matcher's parameters and defaults are listed at the end of this help; --list-params gives their "
+              "meanings; evaluate --json records the values run.")
 MODE_HELP = ("Matcher. Online (a result per frame): " + ", ".join(n for n, m in MATCHERS.items() if m.online)
              + ". Offline (results after the last frame): " + ", ".join(n for n, m in MATCHERS.items()
                                                                         if not m.online)
@@ -122,22 +121,25 @@ LIST_PARAMS = typer.Option(False, "--list-params", callback=_list_params, is_eag
                                 "and meanings, and exit.")
 
 
-def params_for(name: str, given: dict) -> dict:
-    """The options the user gave that matcher ``name`` takes; a warning for each it ignores."""
-    matcher = get_matcher(name)
-    for k in sorted(k for k, v in given.items() if v not in (None, False) and k not in matcher.params):
-        warn(f"--{k.replace('_', '-')} does not apply to mode {name}; ignored")
-    return {k: v for k, v in given.items() if v is not None and k in matcher.params}
+def _shown(value: object) -> str:
+    """A parameter's value as ``--param`` reads it (bools as true/false)."""
+    return str(value).lower() if isinstance(value, bool) else str(value)
 
 
-def with_param_options(matcher: Matcher, params: dict, items: list[str]) -> dict:
-    """``params`` (from the named options) plus ``--param KEY=VALUE`` items for ``matcher``; ValueError for an
-    item it does not take, VprError for a key given both ways."""
-    extra = matcher.parse_params(items)
-    both = sorted(set(extra) & set(params))
-    if both:
-        raise VprError(f"--param {both[0]} repeats --{both[0].replace('_', '-')}; give it once")
-    return params | extra
+def params_epilog() -> str:
+    """Every matcher's parameters with their defaults, ``KEY=DEFAULT``, read from the registry (whose tables are
+    ``matchers.params``): the end of ``localize -h`` and ``evaluate -h``. Matchers with the same parameters and
+    defaults share a paragraph."""
+    groups: dict[str, list[str]] = {}
+    for m in MATCHERS.values():
+        if m.params:
+            groups.setdefault(", ".join(f"{k}={_shown(v)}" for k, v in m.params.items()), []).append(m.name)
+    head = "\b\nMatcher parameters, set with --param KEY=VALUE, with their defaults\n(meanings: --list-params, " \
+           "docs/matchers.md):"     # \b: click keeps these two lines as they are
+    return "\n\n".join([head] + [f"{', '.join(names)}: {listed}" for listed, names in groups.items()])
+
+
+PARAMS_EPILOG = params_epilog()
 
 
 def param_options_for_all(matchers: dict[str, Matcher], items: list[str]) -> dict[str, Matcher]:

@@ -10,11 +10,11 @@ from typing import Optional
 import typer
 
 from vpr_edge.api import Localizer
-from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, PRECISION_HELP, THREADS_HELP, ModeOpt,
-                                 PrecisionOpt, app, params_for, user_errors, with_param_options)
+from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, PARAMS_EPILOG, PRECISION_HELP, THREADS_HELP,
+                                 ModeOpt, PrecisionOpt, app, user_errors)
 from vpr_edge.errors import Terminated, VprError, ctrl_c, held_signals, printable
 from vpr_edge.features.choice import DEFAULT_PRECISION
-from vpr_edge.files import check_not_input, check_writable, output_path
+from vpr_edge.files.checks import check_not_input, check_writable, output_path
 from vpr_edge.frames.images import Frame, GreyFrames, open_stream
 from vpr_edge.frames.limits import Limited
 from vpr_edge.matchers import DEFAULT_MATCHER, MATCHERS, get_matcher
@@ -25,78 +25,67 @@ from vpr_edge.outputs.live import check_live, is_mcap, live_sinks
 from vpr_edge.outputs.summary import RunSummary, reference_size
 
 
-class VariantOpt(str, Enum):
-    distance = "distance"
-    similarity = "similarity"
-
-
 class FormatOpt(str, Enum):
     csv = "csv"
     jsonl = "jsonl"
 
 
-@app.command("localize")
-def localize_cmd(
-    map_path: Path = typer.Option(..., "--map", "-m", help="Map file written by build-map."),
-    stream: str = typer.Option(..., "--stream", "-s", metavar="SOURCE",
-                               help="Folder of frames (file-name order), a video file, a camera (0, 1, ... "
-                                    "or /dev/video0), a network stream (rtsp://...), a ROS bag (--topic), or "
-                                    "for a map of descriptors a file of them (.npy rows, hloc .h5)."),
-    model: Optional[Path] = typer.Option(None, help="ONNX feature model; must be the map's model (default: "
-                                         "$VPR_EDGE_MODEL if set, else the file the map was built with if it "
-                                         "still exists, else the bundled one)."),
-    mode: ModeOpt = typer.Option(DEFAULT_MATCHER, metavar="MATCHER", help=MODE_HELP),
-    variant: Optional[VariantOpt] = typer.Option(None, help="DTW modes: distance (minimise summed 1 - cosine, "
-                                                 "default) or similarity (maximise summed cosine, the thesis)."),
-    open_ends: Optional[bool] = typer.Option(None, "--open-ends/--fixed-ends", help="DTW modes: let the path "
-                                             "start and end anywhere, 0-4 references per frame (dtw-open)."),
-    decay: Optional[float] = typer.Option(None, min=0.01, max=0.999, help="stream / stream-dtw: each frame "
-                                          "discounts the past by this factor (about 1/(1-decay) frames kept)."),
-    window: Optional[int] = typer.Option(None, min=0, help="stream: local search, references either side of a "
-                                         "firm lock read per frame, on routes over 4x this (default %d; 0 = "
-                                         "every reference every frame)." % MATCHERS["stream"].params["window"]),
-    min_confidence: Optional[float] = typer.Option(
-        None, help="Frames scoring below this are reported lost (reference and position fields empty). "
-                   "Default: the mode's own (stream: %.1f; other modes: never lost)."
-                   % MATCHERS["stream"].min_confidence),
-    target_precision: Optional[float] = typer.Option(
-        None, help="Modes whose score is the probability that the answer is right (stream-filter): the line, "
-                   "answers below it are lost (default %.2f). With --calibration, any mode: the line where the "
-                   "labelled drive's answers at least as sure were right this often; else refused for another "
-                   "mode (stream: its line is --min-confidence)." % TARGET_PRECISION),
-    param: Optional[list[str]] = typer.Option(None, "--param", metavar="KEY=VALUE", help=PARAM_HELP),
-    calibration: Optional[Path] = typer.Option(None, help="A calibration (evaluate --save-calibration on a "
-                                               "labelled drive of this route): each line's confidence is then "
-                                               "the probability that its answer is right."),
-    list_params: bool = LIST_PARAMS,
-    out_text: Optional[str] = typer.Option(None, "--out", "-o", help="Write results here instead of stdout: "
-                                           "lines go to NAME.part as frames are matched, renamed NAME when the "
-                                           "stream ends however it ends (Ctrl-C, SIGTERM, a limit, a failure: "
-                                           "every line written is kept); never over an input; a symbolic link "
-                                           "is written through."),
-    view: bool = typer.Option(False, "--view", help="Show the stream in a Rerun Viewer as it is matched: the "
-                              "frame beside the matched reference, where on the route, score, confidence and "
-                              "lost stretches (view extra; one already on port 9876 is used, else one is "
-                              "started with its usage analytics off)."),
-    rerun_text: Optional[str] = typer.Option(None, "--rerun", metavar="FILE.rrd", help="Record what --view "
-                                             "shows to this Rerun file (view extra; renamed into place when the "
-                                             "stream ends)."),
-    max_frames: Optional[int] = typer.Option(None, "--max-frames", min=1, metavar="N",
-                                             help="Stop after N frames read from the stream (exit 0)."),
-    duration: Optional[float] = typer.Option(None, min=0.001, metavar="SECONDS",
-                                             help="Stop reading frames this many seconds after the stream "
-                                                  "starts (exit 0)."),
-    fmt: Optional[FormatOpt] = typer.Option(None, "--format", help="csv or jsonl (default: from --out's "
-                                            "suffix, csv on stdout)."),
-    topic: Optional[str] = typer.Option(None, help="With a ROS 1/2 bag or MCAP file: the image topic "
-                                        "(sensor_msgs/Image or CompressedImage; frames stamped by their headers)."),
-    timestamps: Optional[Path] = typer.Option(None, help="With a folder of frames: a CSV frame,stamp giving "
-                                              "each frame's time in seconds (videos and live sources are "
-                                              "stamped by themselves)."),
-    batch_size: int = typer.Option(1, min=1, help="Frames per model run (1 = lowest latency)."),
-    threads: int = typer.Option(0, min=0, help=THREADS_HELP),
-    precision: PrecisionOpt = typer.Option(DEFAULT_PRECISION, help=PRECISION_HELP),
-) -> None:
+# the options, one constant each (the command's signature names them); a matcher's parameters are --param's
+_MAP = typer.Option(..., "--map", "-m", help="Map file written by build-map.")
+_STREAM = typer.Option(..., "--stream", "-s", metavar="SOURCE",
+                       help="Folder of frames (file-name order), a video file, a camera (0, 1, ... or /dev/video0), "
+                            "a network stream (rtsp://...), a ROS bag (--topic), or for a map of descriptors a file "
+                            "of them (.npy rows, hloc .h5).")
+_MODEL = typer.Option(None, help="ONNX feature model; must be the map's model (default: $VPR_EDGE_MODEL if set, "
+                                 "else the file the map was built with if it still exists, else the bundled one).")
+_MODE = typer.Option(DEFAULT_MATCHER, metavar="MATCHER", help=MODE_HELP)
+_MIN_CONFIDENCE = typer.Option(
+    None, help="Frames scoring below this are reported lost (reference and position fields empty). "
+               "Default: the mode's own (stream: %.1f; other modes: never lost)." % MATCHERS["stream"].min_confidence)
+_TARGET_PRECISION = typer.Option(
+    None, help="Modes whose score is the probability that the answer is right (stream-filter): the line, "
+               "answers below it are lost (default %.2f). With --calibration, any mode: the line where the "
+               "labelled drive's answers at least as sure were right this often; else refused for another "
+               "mode (stream: its line is --min-confidence)." % TARGET_PRECISION)
+_PARAM = typer.Option(None, "--param", metavar="KEY=VALUE", help=PARAM_HELP)
+_CALIBRATION = typer.Option(None, help="A calibration (evaluate --save-calibration on a labelled drive of this "
+                                       "route): each line's confidence is then the probability that its answer is "
+                                       "right.")
+_OUT = typer.Option(None, "--out", "-o", help="Write results here instead of stdout: lines go to NAME.part as "
+                                              "frames are matched, renamed NAME when the stream ends however it "
+                                              "ends (Ctrl-C, SIGTERM, a limit, a failure: every line written is "
+                                              "kept); never over an input; a symbolic link is written through.")
+_VIEW = typer.Option(False, "--view", help="Show the stream in a Rerun Viewer as it is matched: the frame beside "
+                                           "the matched reference, where on the route, score, confidence and lost "
+                                           "stretches (view extra; one already on port 9876 is used, else one is "
+                                           "started with its usage analytics off).")
+_RERUN = typer.Option(None, "--rerun", metavar="FILE.rrd", help="Record what --view shows to this Rerun file "
+                                                                "(view extra; renamed into place when the stream "
+                                                                "ends).")
+_MAX_FRAMES = typer.Option(None, "--max-frames", min=1, metavar="N",
+                           help="Stop after N frames read from the stream (exit 0).")
+_DURATION = typer.Option(None, min=0.001, metavar="SECONDS",
+                         help="Stop reading frames this many seconds after the stream starts (exit 0).")
+_FORMAT = typer.Option(None, "--format", help="csv or jsonl (default: from --out's suffix, csv on stdout).")
+_TOPIC = typer.Option(None, help="With a ROS 1/2 bag or MCAP file: the image topic (sensor_msgs/Image or "
+                                 "CompressedImage; frames stamped by their headers).")
+_TIMESTAMPS = typer.Option(None, help="With a folder of frames: a CSV frame,stamp giving each frame's time in "
+                                      "seconds (videos and live sources are stamped by themselves).")
+_BATCH_SIZE = typer.Option(1, min=1, help="Frames per model run (1 = lowest latency).")
+_THREADS = typer.Option(0, min=0, help=THREADS_HELP)
+_PRECISION = typer.Option(DEFAULT_PRECISION, help=PRECISION_HELP)
+
+
+@app.command("localize", epilog=PARAMS_EPILOG)
+def localize_cmd(map_path: Path = _MAP, stream: str = _STREAM, model: Optional[Path] = _MODEL, mode: ModeOpt = _MODE,
+                 min_confidence: Optional[float] = _MIN_CONFIDENCE,
+                 target_precision: Optional[float] = _TARGET_PRECISION, param: Optional[list[str]] = _PARAM,
+                 calibration: Optional[Path] = _CALIBRATION, list_params: bool = LIST_PARAMS,
+                 out_text: Optional[str] = _OUT, view: bool = _VIEW, rerun_text: Optional[str] = _RERUN,
+                 max_frames: Optional[int] = _MAX_FRAMES, duration: Optional[float] = _DURATION,
+                 fmt: Optional[FormatOpt] = _FORMAT, topic: Optional[str] = _TOPIC,
+                 timestamps: Optional[Path] = _TIMESTAMPS, batch_size: int = _BATCH_SIZE, threads: int = _THREADS,
+                 precision: PrecisionOpt = _PRECISION) -> None:
     """Localise every frame of a stream against a map. One line per frame: frame index, name and time
     (seconds), the matched reference's index and name, its position (x,y or lat,lon, heading, metres along
     the route) when the map has positions, score (higher = more confident) and lost (0/1); the reference and
@@ -104,44 +93,65 @@ def localize_cmd(
     stream ends (its end, a limit, Ctrl-C, SIGTERM, a failure) every line written is kept and a summary goes
     to stderr (docs/usage.md, On the vehicle)."""
     with user_errors():
-        out = output_path(out_text) if out_text else None
-        if out:
-            check_writable(out)
-            check_not_input({"--out": out}, [map_path, stream, model, timestamps, calibration])
-        else:
-            with writing("stdout"):
-                sys.stdout.write("")      # a closed standard output fails here, before any work
-        suffix_fmt = SUFFIX_FORMATS.get(out.suffix.lower()) if out else None
-        if fmt and suffix_fmt and fmt.value != suffix_fmt:
-            raise VprError(f"{out}: --format {fmt.value} contradicts the file's {out.suffix} suffix")
-        record = output_path(rerun_text) if rerun_text else None
-        check_live(out, fmt.value if fmt else None, view, record)     # the extras, before the work
-        if record is not None:
-            check_writable(record)
-            check_not_input({"--rerun": record}, [map_path, stream, model, timestamps, calibration])
-        params = params_for(mode.value, {"variant": variant.value if variant else None, "open_ends": open_ends,
-                                         "decay": decay, "window": window})
-        params = with_param_options(get_matcher(mode.value), params, param or [])
+        inputs = [map_path, stream, model, timestamps, calibration]
+        out, record, form = checked_outputs(out_text, fmt.value if fmt else None, rerun_text, view, inputs)
+        params = get_matcher(mode.value).parse_params(param or [])
         frames, count = open_stream(stream, timestamps, topic)
         localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
                               min_confidence=min_confidence, threads=threads, calibration=calibration,
                               precision=precision.value, target_precision=target_precision)
         localizer.query.check_source(stream)   # descriptors for a map of descriptors, images for one of images
-        if localizer.drive_line:   # the line in force, from the labelled drive
-            typer.echo(f"vpr-edge: lost below score {localizer.threshold:.6g}: where {calibration}'s labelled drive "
-                       f"shows precision {target_precision:g}", err=True)
-        if precision.value == "auto" and "form" in localizer.front_description:   # what auto chose, said once
-            typer.echo(f"vpr-edge: --precision auto: {localizer.front_description['model']} "
-                       f"({localizer.front_description['form']})", err=True)
+        say_choices(localizer, calibration, target_precision, precision.value)
         folder = stream if Path(stream).is_dir() else None   # a folder's frames named by their paths
         limited = Limited(GreyFrames.of(localizer.query.front).watch(frames, folder), max_frames, duration)
         if max_frames is not None and count is not None:
             count = min(count, max_frames)
-        sinks: list[ResultSink] = live_sinks(localizer, map_path, stream, out, view, record)
-        log = None if is_mcap(out) else ResultLog(fmt.value if fmt else (suffix_fmt or "csv"), out)
-        sinks = ([log] if log else []) + sinks   # every output of the stream: each gets every answer, then close()
+        sinks, log = result_sinks(localizer, map_path, stream, out, form, view, record)
         run_stream(localizer, limited, sinks, log, RunSummary(reference_size(localizer.map.meta)), batch_size,
                    count, stream)
+
+
+def checked_outputs(out_text: str | None, fmt: str | None, rerun_text: str | None, view: bool,
+                    inputs: list) -> tuple[Path | None, Path | None, str]:
+    """--out and --rerun checked before any work: writable, none of ``inputs``, --format (``fmt``) agreeing with
+    --out's suffix, the extras --view and --rerun need; standard output, when the lines go there, open. Returns
+    (out, record, the lines' format: csv or jsonl)."""
+    out = output_path(out_text) if out_text else None
+    if out:
+        check_writable(out)
+        check_not_input({"--out": out}, inputs)
+    else:
+        with writing("stdout"):
+            sys.stdout.write("")      # a closed standard output fails here, before any work
+    suffix_fmt = SUFFIX_FORMATS.get(out.suffix.lower()) if out else None
+    if fmt and suffix_fmt and fmt != suffix_fmt:
+        raise VprError(f"{out}: --format {fmt} contradicts the file's {out.suffix} suffix")
+    record = output_path(rerun_text) if rerun_text else None
+    check_live(out, fmt, view, record)     # the extras, before the work
+    if record is not None:
+        check_writable(record)
+        check_not_input({"--rerun": record}, inputs)
+    return out, record, fmt or suffix_fmt or "csv"
+
+
+def say_choices(localizer: Localizer, calibration: Path | None, target_precision: float | None,
+                precision: str) -> None:
+    """On stderr, once: the lost line a calibration's labelled drive set, and what --precision auto chose."""
+    if localizer.drive_line:   # the line in force, from the labelled drive
+        typer.echo(f"vpr-edge: lost below score {localizer.threshold:.6g}: where {calibration}'s labelled drive "
+                   f"shows precision {target_precision:g}", err=True)
+    if precision == "auto" and "form" in localizer.front_description:   # what auto chose, said once
+        typer.echo(f"vpr-edge: --precision auto: {localizer.front_description['model']} "
+                   f"({localizer.front_description['form']})", err=True)
+
+
+def result_sinks(localizer: Localizer, map_path: Path, stream: str, out: Path | None, form: str, view: bool,
+                 record: Path | None) -> tuple[list[ResultSink], ResultLog | None]:
+    """Every output of the stream (the result log, unless --out is an MCAP file, then the live ones), each to get
+    every answer, then close(); and the result log."""
+    sinks: list[ResultSink] = live_sinks(localizer, map_path, stream, out, view, record)
+    log = None if is_mcap(out) else ResultLog(form, out)
+    return ([log] if log else []) + sinks, log
 
 
 def _said(text: str) -> None:

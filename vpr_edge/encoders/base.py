@@ -14,7 +14,7 @@ from typing import ClassVar
 import numpy as np
 
 from vpr_edge.errors import VprError
-from vpr_edge.files import write_npz
+from vpr_edge.files.npz import write_npz
 
 CODEBOOK_SCHEMA = 2        # 2: any encoder (meta "encoding"); 1: the IFV's PCA + GMM only
 READS_CODEBOOK = (1, 2)

@@ -10,7 +10,7 @@ from vpr_edge.encoders.fisher import FisherVector, ImprovedFisherVector
 from vpr_edge.encoders.flat import Flatten
 from vpr_edge.encoders.words import BagOfWords, Vlad
 from vpr_edge.errors import VprError
-from vpr_edge.files import read_npz
+from vpr_edge.files.npz import read_npz
 
 ENCODERS: dict[str, type[Encoder]] = {c.name: c for c in (Flatten, BagOfWords, Vlad, FisherVector,
                                                           ImprovedFisherVector)}

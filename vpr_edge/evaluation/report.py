@@ -1,19 +1,17 @@
-"""Evaluation reports: the stdout table, the ``--json`` file, and figures: the PR curves (``--plot``), the
-similarity matrix with each mode's answers (``--plot-matrix``) and the route with each answer's place
-(``--plot-route``)."""
+"""Evaluation reports: the stdout table, the ``--json`` file, the answers' CSV, and the figures' titles; the
+figures themselves (the PR curves ``--plot``, the similarity matrix with each mode's answers ``--plot-matrix``,
+the route with each answer's place ``--plot-route``) are drawn in ``figures`` and named here as before."""
 from __future__ import annotations
 
 import json
 import os
 from collections.abc import Callable, Sequence
 
-import numpy as np
-
 from vpr_edge.errors import InputError
+from vpr_edge.evaluation.figures import plot, plot_matrix, plot_progress, plot_route  # noqa: F401 - drawn there
 from vpr_edge.evaluation.scoring import ModeReport
 from vpr_edge.matchers.base import LOST_WHY
-from vpr_edge.files import atomic_output
-from vpr_edge.positions import Positions
+from vpr_edge.files.atomic import atomic_output
 
 def _cell(v: float, fmt: str = "{:.3f}") -> str:
     return "-" if v != v else fmt.format(v)
@@ -205,180 +203,3 @@ def figure_title(shape: tuple[int, int], *, map_path: str | os.PathLike[str] | N
              (("map", map_path), ("references", refs), ("stream", queries), ("similarity", similarity))
              if p is not None]
     return ", ".join(named) + f" ({shape[0]} queries, {shape[1]} references)"
-
-
-def plot(path: str | os.PathLike[str], reports: dict[str, ModeReport], title: str) -> None:
-    """All modes' PR curves in one labelled PNG (the legend beside the axes), written atomically."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8.4, 4.4), dpi=100)
-    for name, r in reports.items():
-        ax.plot(r.curve.recall, r.curve.precision, label=f"{name} (AUC {r.auc:.3f}, R@1 {r.recall[1]:.3f})")
-    ax.set_xlabel("recall")
-    ax.set_ylabel("precision")
-    ax.set_xlim(0, 1)
-    ax.set_ylim(0, 1.02)
-    ax.set_title(title, fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
-    _save(fig, path)
-
-
-def _save(fig, path: str | os.PathLike[str], laid_out: bool = False) -> None:
-    """Write ``fig`` as a PNG atomically (laid out tightly first, unless ``laid_out``) and close it."""
-    import matplotlib.pyplot as plt
-
-    if not laid_out:
-        fig.tight_layout()
-    with atomic_output(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
-
-
-def plot_matrix(path: str | os.PathLike[str], sim: np.ndarray, truth: np.ndarray,
-                reports: dict[str, ModeReport], title: str) -> None:
-    """The (Q, R) similarity matrix (queries down, references across) with its colour bar, the ground truth's
-    correct references outlined and each mode's answers over it (lost frames left out), as SeqSLAM users look
-    at a run; the legend below the matrix. One PNG, written atomically."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    q, r = sim.shape
-    shown = {n: rep for n, rep in reports.items() if rep.refs is not None}
-    rows = -(-(len(shown) + 1) // 3)         # legend rows below the matrix
-    fig, ax = plt.subplots(figsize=(min(12.0, 4.2 + r / 40), min(12.0, 2.6 + q / 40) + 0.25 * rows), dpi=100)
-    im = ax.imshow(sim, aspect="auto", cmap="viridis", interpolation="nearest")
-    fig.colorbar(im, ax=ax, fraction=0.05, pad=0.02).set_label("similarity (higher = more alike)", fontsize=8)
-    tq, tr = np.nonzero(truth >= 0)
-    ax.scatter(truth[tq, tr], tq, s=9, marker="s", facecolors="none", edgecolors="white", linewidths=0.4,
-               alpha=0.6, label="ground truth")
-    markers = "o^sDv<>p*h"
-    for k, (name, rep) in enumerate(shown.items()):
-        keep = ~rep.lost
-        ax.scatter(rep.refs[keep], np.flatnonzero(keep), s=9, marker=markers[k % len(markers)], linewidths=0.4,
-                   label=f"{name} (lost {int(rep.lost.sum())})")
-    ax.set_xlabel("reference")
-    ax.set_ylabel("query frame")
-    ax.set_title(title, fontsize=9)
-    legend = ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=3, markerscale=1.5,
-                       frameon=False)
-    legend.legend_handles[0].set_edgecolor("0.3")      # the truth's white outline, seen on the white page
-    _save(fig, path)
-
-
-def _columns(n: int) -> int:
-    """Panels across for ``n`` panels: all of up to three in a row, four as two by two, else three."""
-    return 2 if n == 4 else min(3, n) or 1
-
-
-def _grid(n: int, width: float, height: float, share: bool = True):
-    """A figure of ``n`` panels, ``_columns`` across (sharing their axes, if ``share``); the unused panels
-    hidden."""
-    import matplotlib.pyplot as plt
-
-    cols = _columns(n)
-    rows = -(-n // cols) or 1
-    fig, axes = plt.subplots(rows, cols, figsize=(width * cols, height * rows + 0.6), dpi=100, squeeze=False,
-                             sharex=share, sharey=share)
-    for ax in list(axes.flat)[n:]:
-        ax.axis("off")
-    return fig, list(axes.flat)
-
-
-def _kinds(rep: ModeReport) -> dict[str, np.ndarray]:
-    """Each frame's answer as right / wrong / lost, (Q,) bool each."""
-    return {"right": rep.correct & ~rep.lost, "wrong": ~rep.correct & ~rep.lost, "lost": rep.lost}
-
-
-_STYLE = {"right": ("tab:green", "o"), "wrong": ("tab:red", "x"), "lost": ("0.55", "|")}
-
-
-def _counts(name: str, kinds: dict[str, np.ndarray]) -> str:
-    return f"{name}: " + ", ".join(f"{k} {int(m.sum())}" for k, m in kinds.items())
-
-
-def plot_route(path: str | os.PathLike[str], positions: Positions | None, truth: np.ndarray,
-               reports: dict[str, ModeReport], title: str) -> None:
-    """Each mode's answers, one panel each, right (green) / wrong (red) / lost (grey): with the map's
-    ``positions``, on the route drawn from them (each answer at its reference's place, a lost frame at its true
-    place where it has one); without, the reference answered against the frame, over the ground truth's
-    references (grey), lost frames as ticks along the bottom. One PNG, written atomically."""
-    if positions is None:
-        plot_progress(path, truth, reports, title)
-        return
-    import matplotlib
-
-    matplotlib.use("Agg")
-
-    shown = {n: r for n, r in reports.items() if r.refs is not None}
-    fig, axes = _grid(len(shown), 4.0, 3.8, share=False)
-    xy = positions.coords[:, ::-1] if positions.geo else positions.coords     # lon across, lat up
-    first = truth[:, 0]
-    for ax, (name, rep) in zip(axes, shown.items()):
-        ax.plot(xy[:, 0], xy[:, 1], color="0.8", linewidth=2, zorder=0, label="route")
-        kinds = _kinds(rep)
-        for kind, mask in kinds.items():
-            mask = mask & (first >= 0) if kind == "lost" else mask
-            at = rep.refs[mask] if kind != "lost" else first[mask]
-            color, marker = _STYLE[kind]
-            ax.scatter(xy[at, 0], xy[at, 1], s=12, c=color, marker=marker if kind != "lost" else ".", label=kind,
-                       zorder=2)
-        ax.set_title(_counts(name, kinds), fontsize=8)
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.set_xlabel("lon (deg)" if positions.geo else "x (m)", fontsize=8)
-        ax.set_ylabel("lat (deg)" if positions.geo else "y (m)", fontsize=8)
-    fig.suptitle(title, fontsize=9)
-    _legend_below(fig, axes[0])
-    _save(fig, path, laid_out=True)
-
-
-def plot_progress(path: str | os.PathLike[str], truth: np.ndarray, reports: dict[str, ModeReport],
-                  title: str) -> None:
-    """Where on the route each mode puts the vehicle, frame by frame, for a map without positions: the
-    reference answered (its index in the map) against the query frame, right (green) / wrong (red), over the
-    ground truth's references (grey); lost frames as grey ticks along the bottom, so that lost stretches show
-    as bars. One panel per mode, sharing axes. One PNG, written atomically."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-
-    shown = {n: r for n, r in reports.items() if r.refs is not None}
-    fig, axes = _grid(len(shown), 4.0, 3.2)
-    tq, tr = np.nonzero(truth >= 0)
-    q = len(truth)
-    top = max(int(truth.max()) if truth.size else 0, *(int(r.refs.max()) for r in shown.values())) + 1
-    rug = -0.05 * top
-    for ax, (name, rep) in zip(axes, shown.items()):
-        ax.scatter(tq, truth[tq, tr], s=14, marker="s", color="0.85", linewidths=0, zorder=0, label="ground truth")
-        kinds = _kinds(rep)
-        frames = np.arange(q)
-        for kind, mask in kinds.items():
-            color, marker = _STYLE[kind]
-            y = np.full(int(mask.sum()), rug) if kind == "lost" else rep.refs[mask]
-            ax.scatter(frames[mask], y, s=10 if kind != "lost" else 40, c=color, marker=marker, label=kind,
-                       linewidths=1.0 if kind != "right" else 0, zorder=2)
-        ax.set_title(_counts(name, kinds), fontsize=8)
-        ax.set_ylim(2 * rug, top * 1.03)
-        ax.grid(alpha=0.25)
-    cols = _columns(len(shown))
-    for i, ax in enumerate(axes[:len(shown)]):
-        if i + cols >= len(shown):      # no panel below: the frame axis labelled here
-            ax.set_xlabel("query frame", fontsize=8)
-            ax.tick_params(labelbottom=True)
-        if i % cols == 0:
-            ax.set_ylabel("reference (index in the map)", fontsize=8)
-    fig.suptitle(title, fontsize=9)
-    _legend_below(fig, axes[0])
-    _save(fig, path, laid_out=True)
-
-
-def _legend_below(fig, ax) -> None:
-    """One legend for every panel, below them."""
-    handles, labels = ax.get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False, markerscale=1.5)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))

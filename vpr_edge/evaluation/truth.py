@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import InputError, VprError
-from vpr_edge.files import atomic_output, read_csv_rows
+from vpr_edge.files.atomic import atomic_output
+from vpr_edge.files.readers import read_csv_rows
 from vpr_edge.positions import Positions, distances
 from vpr_edge.positions.csv import read_csv
 

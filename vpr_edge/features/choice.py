@@ -27,7 +27,7 @@ def model_for_frame(width: int, height: int) -> Path:
 
 def bundled_for_sha256(sha256: str | None) -> Path | None:
     """The bundled fp32 model whose file has this SHA-256, if any (a map or codebook made on another install)."""
-    from vpr_edge.files import file_sha256
+    from vpr_edge.files.readers import file_sha256
 
     for name in MODEL_FILES.values():
         path = bundled_model(name)

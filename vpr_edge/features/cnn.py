@@ -13,7 +13,8 @@ import numpy as np
 from vpr_edge.errors import InputError, Message, VprError, warn
 from vpr_edge.features.conventions import GivenConventions, InputConventions
 from vpr_edge.features.resize import RESIZE, content_cells, fit_to_input
-from vpr_edge.files import file_sha256, newer_schema
+from vpr_edge.files.npz import newer_schema
+from vpr_edge.files.readers import file_sha256
 from vpr_edge.resources import SMALL_MODEL_FILE, bundled_model
 
 MODEL_SCHEMA = 1

@@ -154,7 +154,7 @@ def read_stamps(path: str | os.PathLike[str], names: list[str]) -> list[float]:
     one row per image of the folder; VprError naming the file for a missing frame or a bad number."""
     import math
 
-    from vpr_edge.files import read_csv_rows
+    from vpr_edge.files.readers import read_csv_rows
 
     path = Path(path)
     rows = read_csv_rows(path, "timestamps")

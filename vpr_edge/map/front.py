@@ -8,7 +8,7 @@ from vpr_edge.errors import InputError, VprError
 from vpr_edge.features import FrontEnd, make_front_end
 from vpr_edge.features.choice import DEFAULT_PRECISION, bundled_for_sha256, choose_form, int8_sibling
 from vpr_edge.features.cnn import resolve_model
-from vpr_edge.files import file_sha256
+from vpr_edge.files.readers import file_sha256
 from vpr_edge.map.model import PlaceMap
 
 

@@ -11,7 +11,9 @@ from vpr_edge.encoders import encoder_from_arrays
 from vpr_edge.errors import VprError, warn
 from vpr_edge.features.registry import MAP_FRONT_ENDS
 from vpr_edge.features.resize import RESIZE
-from vpr_edge.files import dead_writers_files, is_special, output_target, read_npz, write_npz
+from vpr_edge.files.checks import is_special, output_target
+from vpr_edge.files.npz import read_npz, write_npz
+from vpr_edge.files.temps import dead_writers_files
 from vpr_edge.index.encodings import DEFAULT_STORAGE, Encodings
 from vpr_edge.index.ivf import IvfIndex
 from vpr_edge.map.drives import Drives

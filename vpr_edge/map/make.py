@@ -8,7 +8,7 @@ from dataclasses import replace
 from functools import partial
 
 from vpr_edge.errors import InputError
-from vpr_edge.files import writer_lock
+from vpr_edge.files.one_writer import writer_lock
 from vpr_edge.frames.images import GreyFrames, load_image
 from vpr_edge.index.ivf import IVF_MIN_REFS, fit_ivf
 from vpr_edge.map.build import Progress, build_map, map_from_descriptors
@@ -32,7 +32,7 @@ def write_map(plan: MapPlan | MapInputs, progress: Progress | None = None) -> st
     """Build the planned map and write it (and the codebook, if asked) atomically; returns a one-line summary.
     A plan is taken in first (``gather``; its scratch removed at the end). The drives are described and
     encoded one after another, as one route for the codebook fit. A new map holds the map's writer lock
-    (``files.writer_lock``: one writer at a time) from the start: a second build of that file is refused in
+    (``one_writer.writer_lock``: one writer at a time) from the start: a second build of that file is refused in
     one line before its work, never silently replaced. An append takes it only at the end, to read the map
     again, so that a concurrent append that finished meanwhile is kept, and to replace it."""
     with gather(plan) if isinstance(plan, MapPlan) else contextlib.nullcontext(plan) as inputs:

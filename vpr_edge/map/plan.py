@@ -20,7 +20,7 @@ from vpr_edge.features.choice import bundled_for_sha256
 from vpr_edge.features.cnn import model_from_env
 from vpr_edge.features.descriptors import GivenDescriptors
 from vpr_edge.features.registry import DEFAULT_FRONT_END
-from vpr_edge.files import check_not_input, check_writable
+from vpr_edge.files.checks import check_not_input, check_writable
 from vpr_edge.frames.bags import is_bag
 from vpr_edge.frames.descriptor_files import descriptor_dims, is_descriptor_file
 from vpr_edge.frames.images import check_frame_sizes, list_images

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 
-def local_contrast(sim: np.ndarray, window: int = 10) -> np.ndarray:
+def local_contrast(sim: np.ndarray, window: int) -> np.ndarray:
     """SeqSLAM's local contrast enhancement, on similarities: each value of ``sim`` (..., R) z-scored against
     the values of the same frame at references within +-``window``//2 of it (the window clipped at the ends
     of the route). Returns float64 (..., R), higher = more alike than the neighbourhood. Moving sums by

@@ -86,8 +86,7 @@ def _jumps(terms: np.ndarray, better: np.ufunc, max_step: int) -> tuple[np.ndarr
     return acc, step
 
 
-def dtw_accumulate(sim: np.ndarray, variant: Variant = "distance", open_ends: bool = False,
-                   max_step: int = 4) -> np.ndarray:
+def dtw_accumulate(sim: np.ndarray, *, variant: Variant, open_ends: bool, max_step: int) -> np.ndarray:
     """Accumulated matrix A (Q, R): classic from (0, 0), or with ``open_ends`` the jump pattern from any
     (0, j) with 0..``max_step`` references per query frame."""
     terms, better = _terms(np.asarray(sim), variant)
@@ -123,11 +122,10 @@ def _backtrack_classic(acc: np.ndarray, pick) -> list[tuple[int, int]]:
     return path[::-1]
 
 
-def dtw_align(sim: np.ndarray, variant: Variant = "distance", open_ends: bool = False,
-              max_step: int = 4) -> Alignment:
+def dtw_align(sim: np.ndarray, *, variant: Variant, open_ends: bool, max_step: int) -> Alignment:
     """Align query and reference sequences by DTW over ``sim`` (Q, R) and backtrack the best path.
 
-    By default the path runs from (0, 0) to (Q-1, R-1): both sequences cover the same route (ties in
+    Without ``open_ends`` the path runs from (0, 0) to (Q-1, R-1): both sequences cover the same route (ties in
     backtracking prefer the diagonal, then the vertical, then the horizontal step). With ``open_ends`` it
     may start and end at any reference and advances 0..``max_step`` references per query frame.
     """
@@ -155,8 +153,7 @@ def dtw_align(sim: np.ndarray, variant: Variant = "distance", open_ends: bool = 
     return Alignment(cells, cells[chosen, 1], vals[chosen], float(acc[cells[-1, 0], cells[-1, 1]]))
 
 
-def through_values(sim: np.ndarray, variant: Variant = "distance", open_ends: bool = False,
-                   max_step: int = 4) -> np.ndarray:
+def through_values(sim: np.ndarray, *, variant: Variant, open_ends: bool, max_step: int) -> np.ndarray:
     """(Q, R): the value of the best complete path through each cell (forward + backward - the cell)."""
     terms, better = _terms(np.asarray(sim), variant)
     if open_ends:
@@ -178,14 +175,15 @@ def remove_hubs(sim: np.ndarray) -> np.ndarray:
     return z - z.mean(axis=0, keepdims=True)
 
 
-def dtw_match(sim: np.ndarray, k: int = 10, variant: Variant = "distance", open_ends: bool = False,
-              max_step: int = 4, rival_window: int = 5, hubs: bool = False) -> Result:
-    """Registry entry: the DTW path's reference per frame, the margin of the best path through it over the
-    best path avoiding +-``rival_window`` references around it, and references ranked by through-value.
-    ``hubs``: run on ``remove_hubs(sim)`` (offline, so the column means see the whole query sequence)."""
+def dtw_match(sim: np.ndarray, k: int = 10, *, variant: Variant, open_ends: bool, max_step: int, rival_window: int,
+              hubs: bool) -> Result:
+    """Registry entry (its parameters and their defaults: ``params.DTW``): the DTW path's reference per frame,
+    the margin of the best path through it over the best path avoiding +-``rival_window`` references around it,
+    and references ranked by through-value. ``hubs``: run on ``remove_hubs(sim)`` (offline, so the column means
+    see the whole query sequence)."""
     sim = remove_hubs(sim) if hubs else np.asarray(sim)
-    refs = dtw_align(sim, variant, open_ends, max_step).matches
-    pref = through_values(sim, variant, open_ends, max_step)
+    refs = dtw_align(sim, variant=variant, open_ends=open_ends, max_step=max_step).matches
+    pref = through_values(sim, variant=variant, open_ends=open_ends, max_step=max_step)
     if variant == "distance":
         pref = -pref
     q, r = sim.shape

@@ -17,7 +17,8 @@ first rule that fails names why it is lost (``lock_verdict``). So locked frames 
 uniqueness. The answer is strong enough for a local search at H_best >= ``hold`` * ``lock``.
 
 The trajectory recursion (``road.RoadMatcher``) finds the answer and hands each frame to the verdict as a
-``FrameReading``; the verdict (``LockVerdict``) answers a ``Judgement``, so each is testable alone.
+``FrameReading``; the verdict (``LockVerdict``, its parameters a ``LockRules``) answers a ``Judgement``, so each
+is testable alone.
 """
 from __future__ import annotations
 
@@ -168,65 +169,77 @@ def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_l
     return AMBIGUOUS if own_uniqueness < unique else LOCKED
 
 
-class LockVerdict:
-    """The lock's rules over a stream (module docstring); parameters as ``matchers.params.STREAM`` names them
-    (``lock``, ``evidence``, ``evidence_decay``, ``hub``, ``unique``, ``confirm``, ``stuck``, ``trust``,
-    ``hold``). ``rival_window``:
-    places either side of the answer that a rival trajectory must lie beyond."""
+@dataclass(frozen=True)
+class LockRules:
+    """The lock's rules' parameters (``matchers.params.STREAM``: their defaults and meanings): ``lock``,
+    ``evidence``, ``evidence_decay``, ``hub``, ``unique``, ``confirm``, ``stuck``, ``trust``, ``hold``, and
+    ``rival_window``: places either side of the answer that a rival trajectory must lie beyond."""
 
-    def __init__(self, graph: RouteGraph, rival_window: int, *, lock: float, evidence: float, evidence_decay: float,
-                 hub: float, unique: float, confirm: int, stuck: int, trust: float, hold: float) -> None:
-        if not 0.0 <= evidence_decay < 1.0:
-            raise ValueError(f"evidence_decay must be in [0, 1), got {evidence_decay}")
-        if not 0.0 <= unique < 1.0:
-            raise ValueError(f"unique must be in [0, 1), got {unique}")
-        self.graph, self.rival_window = graph, rival_window
-        self.lock, self.evidence, self.evidence_decay, self.unique, self.hold = lock, evidence, evidence_decay, \
-            unique, hold
-        self.hub = hub
-        if int(confirm) < 1:
-            raise ValueError(f"confirm must be at least 1, got {confirm}")
-        self.confirm = int(confirm)
-        if int(stuck) < 0:
-            raise ValueError(f"stuck must be at least 0 (0: off), got {stuck}")
-        self.stuck = int(stuck)
-        if not 0.0 < trust <= 1.0:
-            raise ValueError(f"trust must be in (0, 1] (1: off), got {trust}")
-        self.trust = float(trust)
+    lock: float
+    evidence: float
+    evidence_decay: float
+    hub: float
+    unique: float
+    confirm: int
+    stuck: int
+    trust: float
+    hold: float
+    rival_window: int
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.evidence_decay < 1.0:
+            raise ValueError(f"evidence_decay must be in [0, 1), got {self.evidence_decay}")
+        if not 0.0 <= self.unique < 1.0:
+            raise ValueError(f"unique must be in [0, 1), got {self.unique}")
+        if int(self.confirm) < 1:
+            raise ValueError(f"confirm must be at least 1, got {self.confirm}")
+        if int(self.stuck) < 0:
+            raise ValueError(f"stuck must be at least 0 (0: off), got {self.stuck}")
+        if not 0.0 < self.trust <= 1.0:
+            raise ValueError(f"trust must be in (0, 1] (1: off), got {self.trust}")
+
+
+class LockVerdict:
+    """The lock's rules over a stream (module docstring) on the map's drives ``graph``, with parameters
+    ``rules``."""
+
+    def __init__(self, graph: RouteGraph, rules: LockRules) -> None:
+        self.graph, self.rules = graph, rules
         self.reset()
 
     def reset(self) -> None:
         self._evidence: float | None = None   # the answer's recent standing out of its rows
         self._hub: float | None = None        # the same, less its place's mean over the stream's recent frames
-        self._recent = RecentViews(self.graph.n_refs) if self.hub > OFF else None   # this stream's views per place
+        # this stream's views per place
+        self._recent = RecentViews(self.graph.n_refs) if self.rules.hub > OFF else None
         self._prev: int | None = None   # the frame before's answer
         self._held = 0                    # frames the answer's place has held, this one included
         self._anchor: int | None = None   # where the answer's place last moved on to
         self._kept = 0                    # frames the camera moved since, the answer kept there
 
     def judge(self, f: FrameReading) -> Judgement:
-        graph, n_refs = self.graph, self.graph.n_refs
-        near = graph.near(f.ref, self.rival_window)
+        graph, n_refs, r = self.graph, self.graph.n_refs, self.rules
+        near = graph.near(f.ref, r.rival_window)
         rival = max_outside(f.values, f.where, near)
         here = (float(answer_view(graph, f.ref, f.where, f.part).max()) - f.mean) / f.std
-        self._evidence = evidence_average(self._evidence, here, self.evidence_decay, f.standing)
+        self._evidence = evidence_average(self._evidence, here, r.evidence_decay, f.standing)
         if self._recent is not None:   # a standing camera or a stopped trajectory repeats one place: no hub
             repeats = f.standing or f.stopped
             views = self._recent.read(f.z, f.places, learn=not repeats)
             hub_view = float(answer_view(graph, f.ref, f.where, views).max())
-            self._hub = evidence_average(self._hub, hub_view, self.evidence_decay, repeats)
+            self._hub = evidence_average(self._hub, hub_view, r.evidence_decay, repeats)
         # the rule asks for an answer unambiguous along its own drive: another drive may be the same road
         # driven again, whose places are no rival to it
         first, last = graph.bounds(f.ref)
         own = rival if (first, last) == (0, n_refs - 1) else max_outside(
             f.values, f.where, merge([*near, (0, first), (last + 1, n_refs)]))
-        self._held = 1 if place_jumped(graph, self._prev, f.ref, self.rival_window) else self._held + 1
+        self._held = 1 if place_jumped(graph, self._prev, f.ref, r.rival_window) else self._held + 1
         self._prev = f.ref
         if place_advanced(graph, self._anchor, f.ref):
             self._anchor, self._kept = f.ref, 0
         elif f.cued and not f.standing:   # the cue says the camera moved (without a cue nothing says so)
             self._kept += 1
-        why = lock_verdict(self._evidence, f.best, uniqueness(own, f.best), self.evidence, self.lock,
-                           self.unique, np.inf if self._hub is None else self._hub, self.hub, self._held, self.confirm,
-                           self._kept, self.stuck, self.trust)
-        return Judgement(float(why == LOCKED) + uniqueness(rival, f.best), f.best >= self.hold * self.lock, why)
+        why = lock_verdict(self._evidence, f.best, uniqueness(own, f.best), r.evidence, r.lock, r.unique,
+                           np.inf if self._hub is None else self._hub, r.hub, self._held, int(r.confirm), self._kept,
+                           int(r.stuck), float(r.trust))
+        return Judgement(float(why == LOCKED) + uniqueness(rival, f.best), f.best >= r.hold * r.lock, why)

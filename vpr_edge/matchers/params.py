@@ -87,7 +87,7 @@ STREAM: dict[str, Param] = {
 # on nordland-dev, reported on Corridor (docs/decisions.md, "The stream filter's parameters")
 STREAM_FILTER: dict[str, Param] = {
     "vmax": Param(4, "fastest speed followed, in places per frame (speeds 0..vmax)"),
-    "speed_change": Param(0.1, "probability a frame's speed is one place a frame faster (and the same slower)"),
+    "speed_change": Param(0.03, "probability a frame's speed is one place a frame faster (and the same slower)"),
     "leave": Param(0.01, "probability a frame leaves the map (a detour, a road the map does not hold)"),
     "enter": Param(0.05, "probability a frame off the map comes back onto it, at any place"),
     "jump": Param(0.001, "probability a frame's place jumps anywhere on the map (a re-localisation)"),

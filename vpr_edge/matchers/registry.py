@@ -9,7 +9,7 @@ from vpr_edge.matchers import params as P
 from vpr_edge.matchers.base import Matcher
 from vpr_edge.matchers.bayes import bayes_filter
 from vpr_edge.matchers.dtw import dtw_match
-from vpr_edge.matchers.road import RoadMatcher
+from vpr_edge.matchers.road import stream_matcher
 from vpr_edge.matchers.seqslam import SeqSLAMOnline, seqslam_match
 from vpr_edge.matchers.single import BestMatch
 from vpr_edge.matchers.stream_dtw import StreamingDTW
@@ -18,7 +18,7 @@ from vpr_edge.matchers.constants import TARGET_PRECISION
 
 MATCHERS: dict[str, Matcher] = {m.name: m for m in (
     Matcher("stream", "trajectories over (position, speed) with contrast-normalised similarities: any speed "
-            "0-4 places/frame, lock-on anywhere, lost state (online, default)", start=RoadMatcher,
+            "0-4 places/frame, lock-on anywhere, lost state (online, default)", start=stream_matcher,
             definitions=P.STREAM, min_confidence=1.0, reads_route=True),
     Matcher("stream-filter", "a Bayes filter over (place, speed) and off the map: any speed 0-4 places/frame, "
             "stops, detours; its confidence is the probability the answer is right, lost below the target "

@@ -81,9 +81,10 @@ frame of a moving camera resembles (imagery of somewhere else) is no trajectory 
 (``lock.place_advanced``). So locked frames rank above lost ones, each by uniqueness, and ``--min-confidence``
 between 1 and 2 asks for a more unambiguous answer still.
 
-The max over speeds with the speed penalty is a distance transform (two passes over the speeds), so a frame
-costs O(grid * speeds * R) vectorised work in preallocated buffers, and the state is (grid * speeds + 1) * R
-floats, whatever the stream's length.
+The state and its recursion are ``trajectories.TrajectoryState``'s; the parameters, ``stream_config.StreamConfig``
+(from ``params.STREAM``). The max over speeds with the speed penalty is a distance transform (two passes over the
+speeds), so a frame costs O(grid * speeds * R) vectorised work in preallocated buffers, and the state is
+(grid * speeds + 1) * R floats, whatever the stream's length.
 
 Local search (``window`` > 0, used on routes of more than 4 * window references): while the best trajectory is
 firmly locked (H >= ``hold`` * lock, and no trajectory more than ``window`` references away has half its H),
@@ -97,9 +98,10 @@ frames outside the window, its old mean is weighted by (1 - 1/memory)^k.
 """
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import replace
+from typing import Any
 
-from collections.abc import Callable
+import numpy as np
 
 from vpr_edge.matchers.base import NO_TRAJECTORY
 from vpr_edge.matchers.constants import FIRM_RIVAL, LOCAL_ROUTE, MIN_SPREAD
@@ -107,91 +109,49 @@ from vpr_edge.matchers.lock import FrameReading, LockVerdict
 from vpr_edge.matchers.motion import stands
 from vpr_edge.matchers.search_policy import around_candidates, best_hypotheses, local_next
 from vpr_edge.matchers.route import Intervals, RouteGraph, max_outside, places
+from vpr_edge.matchers.stream_config import StreamConfig
+from vpr_edge.matchers.trajectories import TrajectoryState, per_reference
 
 
-def per_reference(state: np.ndarray, grid: int) -> np.ndarray:
-    """The best trajectory ending at each reference: ``state`` (speeds, n * grid), its columns ``grid`` cells
-    of each of n references in turn -> (n,), the highest over a reference's speeds and cells. Strided maxima,
-    not ``reshape(n, grid).max(axis=1)``, whose length-``grid`` reduction costs about 30x as much per place."""
-    cols = state.max(axis=0)
-    out = cols[0::grid].copy()
-    for k in range(1, grid):
-        np.maximum(out, cols[k::grid], out=out)
-    return out
-
-
-class RoadMatcher:
+class RoadMatcher(TrajectoryState):
     """Online matcher over (position, speed) trajectories; see the module docstring."""
 
     searches_locally = True
 
-    def __init__(self, n_refs: int, *, vmax: float, grid: int, decay: float, bias: float, turn: float,
-                 memory: float, lock: float, rival_window: int, window: int, probe: int, check: int, span: int,
-                 hold: float, seek: int, peaks: int, seek_frames: int, stop_gain: float, stop_decay: float, still: float,
-                 still_memory: int,
-                 evidence: float, evidence_decay: float, hub: float, unique: float, confirm: int, stuck: int,
-                 trust: float, route: np.ndarray | None = None, graph: RouteGraph | None = None,
-                 reach: int = 0) -> None:
-        """Parameters: ``matchers.params.STREAM`` (their defaults and meanings; the registry's ``stream``;
-        ``still_memory`` is the motion cue's, read where the cue is computed; ``seek_frames`` is what the index
-        is asked, read where it is asked, ``index.ivf.SequenceQuery``). ``route``: (n_refs,) bool, the
-        references where the map's drive stood (``motion.route_stands``; None: not known). ``graph``: the
-        map's drives and where they meet (``route.RouteGraph``; None: one drive). ``reach``: how far along
-        the map references stay alike (``likeness.reach``; 0: not known): a rival trajectory must lie beyond
-        it as well as beyond ``rival_window``. Each frame is judged by the lock's rules with the parameters
-        above (``lock.LockVerdict``)."""
+    def __init__(self, n_refs: int, config: StreamConfig, route: np.ndarray | None = None,
+                 graph: RouteGraph | None = None, reach: int = 0) -> None:
+        """``config``: the parameters (``stream_config.StreamConfig``, from ``matchers.params.STREAM``).
+        ``route``: (n_refs,) bool, the references where the map's drive stood (``motion.route_stands``; None:
+        not known). ``graph``: the map's drives and where they meet (``route.RouteGraph``; None: one drive).
+        ``reach``: how far along the map references stay alike (``likeness.reach``; 0: not known): a rival
+        trajectory must lie beyond it as well as beyond ``rival_window``. Each frame is judged by the lock's
+        rules (``lock.LockVerdict``, with ``config.rules``)."""
         if n_refs < 1:
             raise ValueError("need at least one reference")
-        if not 0.0 < decay < 1.0:
-            raise ValueError(f"decay must be in (0, 1), got {decay}")
-        if not (0.0 <= stop_gain <= 1.0 and 0.0 < stop_decay < 1.0):
-            raise ValueError(f"need stop_gain in [0, 1] and stop_decay in (0, 1), got {stop_gain}, {stop_decay}")
-        if not 0.0 <= still <= 1.0:
-            raise ValueError(f"still must be in [0, 1] (0: no motion cue), got {still}")
-        if grid < 1 or vmax < 0 or memory < 1 or window < 0 or probe < 2:
-            raise ValueError(f"need grid >= 1, vmax >= 0, memory >= 1, window >= 0, probe >= 2 (got {grid}, "
-                             f"{vmax}, {memory}, {window}, {probe})")
-        self.n_refs, self.grid, self.decay, self.bias = n_refs, grid, decay, bias
-        self.turn, self.memory = turn, memory
-        self.rival_window = max(0, int(rival_window), int(reach))
-        self.stop_gain, self.stop_decay, self.still = stop_gain, stop_decay, still
+        model, search = config.model, config.search
+        self.config = config
         self._why = NO_TRAJECTORY   # why the last frame is not answered, as its verdict said (``why``)
         if route is not None and np.shape(route) != (n_refs,):
             raise ValueError(f"route must flag each of the {n_refs} references, got shape {np.shape(route)}")
         self.route = None if route is None else np.asarray(route, bool)
-        self.n_speeds = int(round(vmax * grid)) + 1
         # local search pays only where the window is a small part of the route
-        self.window = int(window) if window and n_refs > LOCAL_ROUTE * window else 0
+        self.window = int(search.window) if search.window and n_refs > LOCAL_ROUTE * search.window else 0
         # references whose similarities estimate a frame's mean and spread while searching locally: a fixed
         # random sample, so that the estimate costs O(probe), not O(R)
-        self._probe = np.sort(np.random.default_rng(0).choice(n_refs, min(n_refs, probe), replace=False))
-        self.graph = RouteGraph.line(n_refs) if graph is None else graph
-        if self.graph.n_refs != n_refs:
-            raise ValueError(f"route graph of {self.graph.n_refs} references for {n_refs}")
-        self.verdict = LockVerdict(self.graph, self.rival_window, lock=lock, evidence=evidence,
-                                   evidence_decay=evidence_decay, hub=hub, unique=unique, confirm=confirm, stuck=stuck,
-                                   trust=trust, hold=hold)
-        # trajectories across drives: state entries whose predecessor in map order is another drive's (cut),
-        # and what the junctions carry from their sources' ends into their targets (fed)
-        self._cut = self.graph.cuts(grid, self.n_speeds)
-        self._feeds()
-        self._joins = bool(len(self._cut[1]) or self._src_cols is not None)
-        self._gap = -(-self.n_speeds // grid) + 1   # windows closer than this are searched as one
+        self._probe = np.sort(np.random.default_rng(0).choice(n_refs, min(n_refs, search.probe), replace=False))
+        graph = RouteGraph.line(n_refs) if graph is None else graph
+        if graph.n_refs != n_refs:
+            raise ValueError(f"route graph of {graph.n_refs} references for {n_refs}")
+        n_speeds = int(round(model.vmax * model.grid)) + 1
+        super().__init__(n_refs, model.grid, n_speeds, model.decay, model.turn, graph)
+        rival_window = max(0, int(config.rules.rival_window), int(reach))
+        self.verdict = LockVerdict(graph, replace(config.rules, rival_window=rival_window))
+        self._gap = -(-n_speeds // model.grid) + 1   # windows closer than this are searched as one
         self._win: Intervals | None = None   # references the next frame searches ([lo, hi) intervals); None = all
-        self.seek, self.peaks = max(0, int(seek)), max(1, int(peaks))
+        self.seek, self.peaks = max(0, int(search.seek)), max(1, int(search.peaks))
         self._last: tuple[np.ndarray, np.ndarray | None] = (np.zeros(0, np.float32), None)   # (``best_hypotheses``)
-        self.check, self.span = max(1, int(check)), max(0, int(span))
+        self.check, self.span = max(1, int(search.check)), max(0, int(search.span))
         self._held = 0                               # frames since the local search began
-        # the state H, held where it may be non-zero: over the whole route (``_full``, (speeds, positions); a
-        # frame that searches everything) or compact over the intervals a local or index search keeps
-        # (``_kept``; ``_cols``, their state columns; ``_vals``, (speeds, columns)), so that on a large map
-        # searched around candidates it costs memory for the candidates' neighbourhoods, not for every place.
-        # float32: the per-frame passes over (speeds x positions) are memory-bound; halving the bytes halved
-        # the time at 100,000 references (python -m vpr_edge_bench bench-matcher)
-        self._full: np.ndarray | None = None   # made at the first whole-route frame, kept (with its buffers)
-        self._kept: Intervals | None = []      # None: the state is ``_full``
-        self._cols = np.zeros(0, np.int64)
-        self._vals = np.zeros((self.n_speeds, 0), np.float32)
         self._mean = np.zeros(n_refs)     # running mean z per reference
         self._stopped = False
         self._position: float | None = None   # the last answer on the reference grid (``position``)
@@ -202,7 +162,7 @@ class RoadMatcher:
         # updates); the prior does not age: a reference first seen late (a large map searched around an
         # index's candidates) starts from it as one seen at the first frame does, so that its first sighting
         # does not become its whole mean and cancel the next frame's evidence there
-        self._weight = np.full(n_refs, float(memory))
+        self._weight = np.full(n_refs, float(model.memory))
         self._seen = np.full(n_refs, -1, np.int64)
         self._t = 0                       # frames counted for the means (not those of a stopped vehicle)
 
@@ -230,7 +190,7 @@ class RoadMatcher:
         out = z - run
         if not self._stopped:   # frames of a stopped vehicle repeat one place: they say nothing of hubs
             seen = self._seen[lo:lo + len(s)]
-            keep = 1.0 - 1.0 / self.memory
+            keep = 1.0 - 1.0 / self.config.model.memory
             if len(seen) == self.n_refs and seen.min() == seen.max() == self._t - 1:   # a whole-route pass
                 weight *= keep                                   # after another: every age one frame
             else:
@@ -240,179 +200,10 @@ class RoadMatcher:
             run += (z - run) / weight
         return out
 
-    @property
-    def h(self) -> np.ndarray:
-        """The state H over every position, (speeds, n_refs * grid) float32 (zero where nothing is held; a copy
-        unless the state is held whole)."""
-        if self._kept is None:
-            return self._full
-        out = np.zeros((self.n_speeds, self.n_refs * self.grid), np.float32)
-        out[:, self._cols] = self._vals
-        return out
-
-    def _take(self, cols: np.ndarray) -> np.ndarray:
-        """The state at state columns ``cols`` (int array), (speeds, len(cols)); 0 where nothing is held."""
-        if self._kept is None:
-            return self._full[:, cols]
-        out = np.zeros((self.n_speeds, len(cols)), np.float32)
-        if len(self._cols) and len(cols):
-            i = np.minimum(np.searchsorted(self._cols, cols), len(self._cols) - 1)
-            ok = self._cols[i] == cols
-            out[:, ok] = self._vals[:, i[ok]]
-        return out
-
-    def _hold(self, win: Intervals, cols: np.ndarray, vals: np.ndarray) -> None:
-        """Hold the state compact: ``vals`` (speeds, len(cols)) at the state columns ``cols`` of ``win``."""
-        self._kept, self._cols, self._vals = list(win), cols, np.ascontiguousarray(vals, np.float32)
-
-    def _densify(self) -> None:
-        """Hold the state over the whole route (``_full``, made once, with the whole-route pass's buffers)."""
-        if self._kept is None:
-            return
-        if self._full is None:
-            shape = (self.n_speeds, self.n_refs * self.grid)
-            self._full = np.zeros(shape, np.float32)
-            self._m, self._new = np.empty(shape, np.float32), np.empty(shape, np.float32)   # reused every frame
-            self._zs = np.empty((2, shape[1]), np.float32)   # speed 0's share of z (and scratch)
-            self._zbuf = np.empty(shape[1], np.float32)
-        else:
-            self._full.fill(0.0)
-        self._full[:, self._cols] = self._vals
-        self._kept = None
-
-    def _state_cols(self, win: Intervals) -> np.ndarray:
-        g = self.grid
-        return np.concatenate([np.arange(lo * g, hi * g) for lo, hi in win]) if win else np.zeros(0, np.int64)
-
-    def _advance(self, a: int, b: int, z: np.ndarray, gain: float, stop_decay: float,
-                 fed: np.ndarray | None) -> None:
-        """One frame of the recursion on the whole state's columns [a, b), ``z`` its frame's: the max over
-        v' of H(v', p) - turn * |v - v'| (forward and backward passes over speeds), shifted v grid steps
-        ahead, decayed, plus z (at speed 0: decayed by ``stop_decay``, plus ``gain`` of a positive z),
-        floored at 0. Columns left of ``a`` feed it as predecessors, except across a drive's start, where
-        the junctions into it do (``fed``: what each junction carries, ``_fed``)."""
-        a0 = max(0, a - (self.n_speeds - 1))
-        m, new, w = self._m[:, : b - a0], self._new[:, : b - a], b - a
-        np.copyto(m, self._full[:, a0:b])
-        self._speed_max(m)
-        for v in range(self.n_speeds):   # a trajectory at speed v came from v grid steps behind
-            k = a - v - a0
-            if k >= 0:
-                new[v] = m[v, k:k + w]
-            else:                        # before the route's start: nothing
-                new[v, :-k] = 0.0
-                new[v, -k:] = m[v, : max(0, w + k)]   # nothing when the step is longer than the columns
-        if self._joins:
-            def locate(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-                ok = (c >= a) & (c < b)
-                return ok, c[ok] - a
-            self._join(new, locate, fed)
-        self._decay_and_add(new, z, gain, stop_decay, self._zs[:, :w])
-        self._full[:, a:b] = new
-
-    def _decay_and_add(self, new: np.ndarray, z: np.ndarray, gain: float, stop_decay: float,
-                     scratch: np.ndarray) -> None:
-        """In place on the shifted state ``new`` (speeds, columns): decayed (speed 0 by ``stop_decay``),
-        floored at 0, plus the frame's ``z`` (speed 0: ``gain`` of a positive z), floored at 0 (``scratch``:
-        (2, columns) float32)."""
-        new[1:] *= self.decay
-        new[0] *= stop_decay
-        np.maximum(new, 0.0, out=new)
-        zs, neg = scratch
-        new[1:] += z
-        np.maximum(z, 0.0, out=zs)
-        zs *= gain
-        np.minimum(z, 0.0, out=neg)
-        zs += neg
-        new[0] += zs
-        np.maximum(new, 0.0, out=new)
-
-    def _advance_many(self, wins: Intervals, z: np.ndarray, gain: float, stop_decay: float,
-                      fed: np.ndarray | None) -> None:
-        """``_advance`` over the windows of a local or index search (``z``: the frame's over their state
-        columns, in order): their columns gathered into one compact array, each window after n_speeds - 1
-        empty columns (nothing comes from outside the windows, where the state is 0), one pass of the
-        recursion, the result held compact over the windows: a fixed number of array operations whatever the
-        number of windows, memory for the windows only."""
-        g, pad = self.grid, self.n_speeds - 1
-        cols = np.concatenate([np.r_[np.full(pad, -1, np.int64), np.arange(lo * g, hi * g)] for lo, hi in wins])
-        real = cols >= 0
-        at, pos = cols[real], np.flatnonzero(real)
-        m = np.zeros((self.n_speeds, len(cols)), np.float32)
-        m[:, pos] = self._take(at)
-        self._speed_max(m)
-        new = np.zeros_like(m)
-        new[0] = m[0]
-        for v in range(1, self.n_speeds):   # a trajectory at speed v came from v grid steps behind
-            new[v, v:] = m[v, :-v]
-        if self._joins:
-            def locate(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-                i = np.minimum(np.searchsorted(at, c), len(at) - 1)
-                ok = at[i] == c
-                return ok, pos[i[ok]]
-            self._join(new, locate, fed)
-        zp = np.zeros(len(cols), np.float32)
-        zp[pos] = z
-        self._decay_and_add(new, zp, gain, stop_decay, np.empty((2, len(cols)), np.float32))
-        self._hold(wins, at, new[:, pos])
-
-    def _speed_max(self, m: np.ndarray) -> None:
-        """In place over (speeds, columns): each entry the max over speeds v' of itself - turn * |v - v'|."""
-        for v in range(1, self.n_speeds):
-            np.maximum(m[v], m[v - 1] - self.turn, out=m[v])
-        for v in range(self.n_speeds - 2, -1, -1):
-            np.maximum(m[v], m[v + 1] - self.turn, out=m[v])
-
-    def _feeds(self) -> None:
-        """Precompute what ``_fed`` gathers and ``_join`` scatters: the junctions' source columns grouped by
-        (junction, k) (``_src_cols``, ``_src_groups``; None: no junction) and the target entries (speed, column,
-        group), sorted by column."""
-        (sj, sk, sc), (tj, tv, tk, tc) = self.graph.feeds(self.grid, self.n_speeds)
-        self._src_cols: np.ndarray | None = None
-        self._tgt = (np.zeros(0, np.int64),) * 3
-        if not len(sc):
-            return
-        gid = sj * self.n_speeds + sk
-        order = np.argsort(gid, kind="stable")
-        self._src_cols, g = sc[order], gid[order]
-        speeds = np.arange(self.n_speeds)
-        self._turns = (self.turn * np.abs(speeds[:, None] - speeds[None, :])).astype(np.float32)   # (v, v')
-        self._src_groups = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
-        row_of = np.full(len(self.graph.junctions) * self.n_speeds, -1, np.int64)
-        row_of[g[self._src_groups]] = np.arange(len(self._src_groups))
-        row = row_of[tj * self.n_speeds + tk]
-        keep = row >= 0          # a (junction, k) with no source column (a drive shorter than the speeds reach)
-        self._tgt = (tv[keep], tc[keep], row[keep])
-
-    def _fed(self) -> np.ndarray | None:
-        """What the junctions carry into the next frame, from the state as it is: (speeds, groups), per
-        (junction, k) group the best speed-penalised state k columns back from the junction's end over its
-        sources (None: a map without junctions)."""
-        if self._src_cols is None:
-            return None
-        hs = (self._take(self._src_cols)[None] - self._turns[:, :, None]).max(axis=1)   # few columns: at once
-        return np.maximum.reduceat(hs, self._src_groups, axis=1)
-
-    def _join(self, new: np.ndarray, locate: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
-              fed: np.ndarray | None) -> None:
-        """The shifted state ``new``: predecessors across a drive's start dropped, those the junctions carry
-        (``fed``) taken in. ``locate(columns)``: which of these state columns ``new`` holds (a mask) and where
-        (their positions in it)."""
-        cv, cc = self._cut
-        ok, where = locate(cc)
-        new[cv[ok], where] = 0.0
-        if fed is None:
-            return
-        tv, tc, row = self._tgt
-        ok, where = locate(tc)
-        if ok.any():   # entries reaching one (speed, column) from several junctions: the best of them
-            v = tv[ok]
-            np.maximum.at(new, (v, where), fed[v, row[ok]])
-
     def stands(self, still: float | None) -> bool:
         """Whether a frame with motion cue ``still`` shows a standing camera (its view again) where the map's
         drive moved on: such a frame leaves the state as it was (see the module docstring)."""
-        if not stands(still, self.still):
+        if not stands(still, self.config.model.still):
             return False
         if self.route is None or self._position is None:
             return True
@@ -421,13 +212,13 @@ class RoadMatcher:
 
     def _cued(self, still: float | None) -> bool:
         """Whether a frame with motion cue ``still`` is read by the cue (one is given and ``still`` is not 0)."""
-        return still is not None and bool(self.still)
+        return still is not None and bool(self.config.model.still)
 
     def _stop_rule(self, still: float | None) -> tuple[float, float]:
         """(share of a positive z counted at speed 0, speed 0's decay) for a frame that moves, with motion cue
         ``still`` (see the module docstring)."""
         if not self._cued(still):
-            return self.stop_gain, self.stop_decay
+            return self.config.model.stop_gain, self.config.model.stop_decay
         return 0.0, self.decay
 
     def update(self, sim_row: np.ndarray, refs: np.ndarray | None = None,
@@ -465,7 +256,7 @@ class RoadMatcher:
                 z[at:at + hi - lo] = self._normalise(part[at:at + hi - lo], lo, mean, std)[:, None]
                 at += hi - lo
             z = z.reshape(-1)
-            z -= self.bias
+            z -= self.config.model.bias
             gain, decay = self._stop_rule(still)
             if self._win is None:
                 self._advance(0, self.n_refs * g, z, gain, decay, fed)
@@ -541,14 +332,6 @@ class RoadMatcher:
         self._search(around_candidates(self.graph, candidates, self.seek, hypotheses, reach, self._gap))
         return np.concatenate([places(self._win), self._probe])
 
-    def ranking(self) -> np.ndarray:
-        """Best trajectory score ending at each reference (R,) (0 where nothing is held)."""
-        if self._kept is None:
-            return per_reference(self._full, self.grid)
-        out = np.zeros(self.n_refs, np.float32)
-        out[self._cols[::self.grid] // self.grid] = per_reference(self._vals, self.grid)
-        return out
-
     def reset(self) -> None:
         """Forget the stream."""
         self._position = None
@@ -558,9 +341,19 @@ class RoadMatcher:
         self._hold([], np.zeros(0, np.int64), np.zeros((self.n_speeds, 0), np.float32))
         self._mean[:] = 0.0
         self._stopped = False
-        self._weight[:] = self.memory
+        self._weight[:] = self.config.model.memory
         self._seen[:] = -1
         self._t = 0
         self._win = None
         self._last = (np.zeros(0, np.float32), None)
         self._held = 0
+
+
+def stream_matcher(n_refs: int, *, route: np.ndarray | None = None, graph: RouteGraph | None = None,
+                   reach: int = 0, **params: Any) -> RoadMatcher:
+    """The registry's ``stream`` (``params.STREAM``); ``route``, ``graph`` and ``reach`` are the map's
+    (``Matcher.on_route``)."""
+    return RoadMatcher(n_refs, StreamConfig.of(params), route, graph, reach)
+
+
+stream_matcher.searches_locally = RoadMatcher.searches_locally   # type: ignore[attr-defined]

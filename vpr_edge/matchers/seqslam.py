@@ -44,15 +44,16 @@ def _ratio_score(values: np.ndarray, best: int, match_window: int) -> float:
     return 1.0 - float(values[best]) / second if second > 0 else 0.0
 
 
-def enhanced_difference(sim: np.ndarray, r_window: int = 10) -> np.ndarray:
+def enhanced_difference(sim: np.ndarray, r_window: int) -> np.ndarray:
     """SeqSLAM's contrast-enhanced difference matrix (Q, R), shifted so that its minimum is 0."""
     d = -local_contrast(sim, r_window)
     return d - d.min()
 
 
-def seqslam_match(sim: np.ndarray, k: int = 10, ds: int = 10, vmin: float = 0.5, vmax: float = 3.0,
-                  r_window: int = 10, match_window: int = 10) -> Result:
-    """Offline SeqSLAM over ``sim`` (Q, R) with a window centred on each frame."""
+def seqslam_match(sim: np.ndarray, k: int = 10, *, ds: int, vmin: float, vmax: float, r_window: int,
+                  match_window: int) -> Result:
+    """Offline SeqSLAM over ``sim`` (Q, R) with a window centred on each frame (its parameters and their
+    defaults: ``params.SEQSLAM``)."""
     d = enhanced_difference(sim, r_window)
     q, r = d.shape
     length = min(ds + 1, q)

@@ -24,7 +24,8 @@ from pathlib import Path
 from typing import IO
 
 from vpr_edge.api import FIELDS, Match
-from vpr_edge.files import adopt_mode, is_special
+from vpr_edge.files.atomic import adopt_mode
+from vpr_edge.files.checks import is_special
 from vpr_edge.frames.frame import Frame
 from vpr_edge.outputs.part import Fd, open_output, part_path, writing
 

@@ -30,7 +30,7 @@ from typing import IO
 
 from vpr_edge.api import FIELDS, RESULTS_SCHEMA, Match
 from vpr_edge.errors import VprError, warn
-from vpr_edge.files import atomic_output
+from vpr_edge.files.atomic import atomic_output
 from vpr_edge.frames.frame import Frame
 from vpr_edge.map import PlaceMap
 from vpr_edge.outputs.part import FLUSH_INTERVAL_S, finish, open_output, writing

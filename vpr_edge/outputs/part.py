@@ -16,7 +16,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from vpr_edge.errors import InputError, VprError, warn
-from vpr_edge.files import adopt_mode, output_target
+from vpr_edge.files.atomic import adopt_mode
+from vpr_edge.files.checks import output_target
 
 PART_SUFFIX = ".part"     # NAME.part: the output while its stream runs
 FLUSH_INTERVAL_S = 1.0    # a recording hands what it holds to the system at least this often, seconds

@@ -1,6 +1,7 @@
 """How a stream went, counted as its answers come: frames answered and lost (by ``Match.lost_why``), the
-frame rate, and the early warning that a stream does not fit its map (frames far from the references' size,
-nearly every frame lost over the first stretch). Pure: no I/O, no clock (the caller gives the wall time)."""
+frame rate, and the early warning that a stream does not fit its map, said only when matching suffers: many
+frames lost over the first stretch (with their size, when it is far from the references'). Pure: no I/O, no
+clock (the caller gives the wall time)."""
 from __future__ import annotations
 
 from collections import Counter
@@ -12,6 +13,7 @@ from vpr_edge.frames.frame import Frame
 
 FIRST_STRETCH = 50   # frames: the first stretch of a stream judged for the "does not fit" warning
 LOST_SHARE = 0.9     # share of that stretch lost that says the stream hardly fits the map
+SIZE_LOST_SHARE = 0.5   # ... that says frames far from the references' size cost answers (a fair size: nothing)
 SIZE_FACTOR = 2.0    # a frame side more than this many times the references' (or less than a part): no fit
 ASPECT_FACTOR = 1.3  # aspect ratios further apart than this (4:3 against 16:9 is 1.33): another camera
 UNSAID = "no reason given"   # a lost frame whose matcher names no reason (lost_why None)
@@ -47,27 +49,31 @@ class RunSummary:
         self.skipped += 1
 
     def add(self, match: Match, frame: Frame | None = None) -> list[str]:
-        """Count ``match``; return the warnings this frame makes due (each said once): the first frame far
-        from the references' size, and ``LOST_SHARE`` of the first ``FIRST_STRETCH`` frames lost."""
+        """Count ``match``; return the warning this frame makes due (said once, after the first
+        ``FIRST_STRETCH`` frames): ``LOST_SHARE`` of them lost, or ``SIZE_LOST_SHARE`` of them lost while the
+        first frame's size is far from the references' (a misfit that does not cost answers is not said)."""
         if match.lost:
             self.lost[match.lost_why or UNSAID] += 1
         else:
             self.answered += 1
-        due = []
         if self.frame_size is None and frame is not None and frame.image is not None:
             self.frame_size = (int(frame.image.shape[1]), int(frame.image.shape[0]))
-            if self.ref_size is not None and size_misfit(self.frame_size, self.ref_size):
-                due.append(self._say("size", f"frames are {self._size_text()}: frames far from the references' "
-                                             f"size hardly match (check that the camera and its resolution are "
-                                             f"the ones the map was built from)"))
-        if self.frames == FIRST_STRETCH and "lost" not in self.warned:
-            lost = sum(self.lost.values())
-            if lost >= LOST_SHARE * FIRST_STRETCH:
-                size = f"; frames are {self._size_text()}" if "size" in self.warned else ""
-                due.append(self._say("lost", f"{lost} of the first {FIRST_STRETCH} frames lost: this stream "
-                                             f"hardly fits the map (check that it is the map's route, camera and "
-                                             f"model{size}; the lost line: " + said("{opt.min_confidence}") + ")"))
-        return [d for d in due if d]
+        if self.frames != FIRST_STRETCH or self.warned:
+            return []
+        lost = sum(self.lost.values())
+        misfit = (self.ref_size is not None and self.frame_size is not None
+                  and size_misfit(self.frame_size, self.ref_size))
+        size = f"; frames are {self._size_text()}" if misfit else ""
+        if lost >= LOST_SHARE * FIRST_STRETCH:
+            return [self._say("lost", f"{lost} of the first {FIRST_STRETCH} frames lost: this stream hardly fits "
+                                      f"the map (check that it is the map's route, camera and model{size}; the "
+                                      f"lost line: " + said("{opt.min_confidence}") + ")")]
+        if misfit and lost >= SIZE_LOST_SHARE * FIRST_STRETCH:
+            return [self._say("size", f"{lost} of the first {FIRST_STRETCH} frames lost, and frames are "
+                                      f"{self._size_text()}: frames far from the references' size match less "
+                                      f"well (check that the camera and its resolution are the ones the map "
+                                      f"was built from)")]
+        return []
 
     def _say(self, key: str, text: str) -> str:
         self.warned.add(key)

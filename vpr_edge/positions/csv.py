@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError
-from vpr_edge.files import read_csv_rows
+from vpr_edge.files.readers import read_csv_rows
 from vpr_edge.positions.fill import by_order
 from vpr_edge.positions.model import FRAMES, Positions, check_range
 

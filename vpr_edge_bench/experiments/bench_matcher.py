@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError
-from vpr_edge.files import read_npz, write_npz
+from vpr_edge.files.npz import read_npz, write_npz
 from vpr_edge.index.coarse import CoarseSearch
 from vpr_edge.index.encodings import STORAGES, Encodings
 from vpr_edge.index.ivf import SequenceQuery, fit_ivf

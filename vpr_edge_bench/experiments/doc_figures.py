@@ -18,7 +18,7 @@ from pathlib import Path
 
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation import Source, Truth, evaluate, report
-from vpr_edge.files import check_writable
+from vpr_edge.files.checks import check_writable
 from vpr_edge.map.make import BuildOptions, plan_map, write_map
 from vpr_edge.matchers import get_matcher
 from vpr_edge.resources import sample_folder

@@ -289,7 +289,7 @@ def section_markers(name: str) -> tuple[str, str]:
 def write_sections(made: dict[str, str]) -> None:
     """Each section run put between its markers, in the document of docs/ that holds them (VprError, before
     anything is written, for a section no document has markers for)."""
-    from vpr_edge.files import atomic_output
+    from vpr_edge.files.atomic import atomic_output
 
     texts = {path: path.read_text() for path in sorted((ROOT / "docs").glob("*.md"))}
     where = {name: next((path for path, text in texts.items() if section_markers(name)[0] in text), None)
@@ -308,7 +308,7 @@ def write_sections(made: dict[str, str]) -> None:
 def write_docs(doc: dict) -> None:
     """docs/generated/results.json, and the README's and docs/results.md's tables rewritten from it
     (``doc_tables``)."""
-    from vpr_edge.files import atomic_output
+    from vpr_edge.files.atomic import atomic_output
 
     gen = ROOT / "docs" / "generated"
     gen.mkdir(exist_ok=True)
