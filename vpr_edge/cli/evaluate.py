@@ -132,8 +132,8 @@ def evaluate_cmd(map_path: Optional[Path] = _MAP, queries: Optional[Path] = _QUE
                  model: Optional[Path] = _MODEL, batch_size: int = _BATCH_SIZE, threads: int = _THREADS,
                  precision: PrecisionOpt = _PRECISION) -> None:
     """Measure matchers against ground truth, all on one similarity matrix: from --map and --queries, from
-    --features pixels with --refs and --queries, or from --similarity. By default, stream beside stream-filter
-    and the baselines single and seqslam-online, in a short table: R@1, AUC (thesis eq. 5.1), the shares right
+    --features pixels with --refs and --queries, or from --similarity. By default, stream beside the
+    baselines single and seqslam-online, in a short table: R@1, AUC (thesis eq. 5.1), the shares right
     and lost, matching time; each column explained under it. --modes all runs every matcher; --details adds
     recall@5/10, AP (eq. 5.2), the median error, lock-on and exit frames and the tables behind them; --json
     holds every figure. Each file written is named on stderr."""
@@ -213,9 +213,9 @@ def print_table(result: Evaluation, tolerance: int, details: bool, modes: str | 
     if not details:
         typer.echo("\n--details: every column and the tables behind them; --json FILE: every figure")
     if modes is None:
-        others = ", ".join(m for m in DEFAULT_MODES[1:] if m not in BASELINES)
-        typer.echo(f"--modes all: every mode, not only localize's default ({DEFAULT_MODES[0]}), {others} and "
-                   f"the baselines {' and '.join(BASELINES)}")
+        others = "".join(f"{m}, " for m in DEFAULT_MODES[1:] if m not in BASELINES)
+        typer.echo(f"--modes all: every mode (stream-filter, dtw, ...), not only localize's default "
+                   f"({DEFAULT_MODES[0]}), {others}the baselines {' and '.join(BASELINES)}")
 
 
 def write_outputs(outputs: dict[str, Path | None], result: Evaluation, tolerance: int, named: dict,
