@@ -1,6 +1,7 @@
 """`vpr-edge evaluate` end to end: real frames, a similarity matrix without a model, pixels, bad input."""
 from __future__ import annotations
 
+import csv
 import json
 import shutil
 import subprocess
@@ -378,3 +379,26 @@ def test_evaluate_target_precision_line_gap_and_answers(tmp_path: Path) -> None:
         assert proc.returncode == 2
         assert_one_line_error(proc, "--target-precision")
         assert not (tmp_path / "x.json").exists()
+
+
+@pytest.mark.slow
+def test_evaluate_agrees_with_a_count_from_localizes_own_output(tmp_path: Path) -> None:
+    """On the sample, evaluate's default mode counts what localize writes: mapped frames answered right and
+    answers right, counted from localize's CSV against the sample's ground truth (it lists +-2), at evaluate's
+    default tolerance (the truth's own window)."""
+    c = tmp_path / "corridor"
+    assert run("sample", "corridor", "--to", c).returncode == 0
+    m, out, js = tmp_path / "c.npz", tmp_path / "run.csv", tmp_path / "r.json"
+    assert run("build-map", c / "ref", "-o", m).returncode == 0
+    assert run("localize", "-m", m, "-s", c / "query", "-o", out).returncode == 0
+    proc = run("evaluate", "--map", m, "--queries", c / "query", "--gt", c / "ground_truth.csv", "--json", js)
+    assert proc.returncode == 0, proc.stderr
+    truth = {int(q): {int(r) for r in refs.split()}
+             for q, refs in csv.reader((c / "ground_truth.csv").read_text().splitlines()[1:])}
+    rows = list(csv.DictReader(out.read_text().splitlines()))
+    given = [r for r in rows if r["lost"] == "0"]
+    right = [r for r in given if int(r["ref_index"]) in truth[int(r["frame_index"])]]
+    assert len(rows) == 111 and len(right) > 80
+    stream = json.loads(js.read_text())["modes"]["stream"]
+    assert stream["mapped_right"] == pytest.approx(len(right) / len(rows))
+    assert stream["answered_right"] == pytest.approx(len(right) / len(given))

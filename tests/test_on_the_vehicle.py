@@ -72,7 +72,9 @@ def test_a_misfit_size_is_said_only_when_answers_suffer() -> None:
     assert all(fine.add(_match(i, lost=i % 5 == 0), frame) == [] for i in range(2 * FIRST_STRETCH))
     poor = RunSummary(ref_size=(160, 120))
     due = [d for i in range(2 * FIRST_STRETCH) for d in poor.add(_match(i, lost=i % 3 != 0), frame)]
-    assert len(due) == 1 and "1280x720 pixels, the map's references 160x120" in due[0] and "33 of the first" in due[0]
+    assert due == ["33 of the first 50 frames lost, and frames are 1280x720 pixels, the map's references 160x120: "
+                   "frames far from the references' size match less well (check that the camera and its resolution "
+                   "are the ones the map was built from)"]
 
 
 def test_a_fitting_stream_is_not_warned() -> None:

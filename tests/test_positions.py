@@ -268,12 +268,15 @@ def test_evaluate_draws_the_matrix_and_the_route(positioned: Path, small_queries
     for png in ("m.png", "r.png"):
         image = cv2.imread(str(tmp_path / png))
         assert image is not None and min(image.shape[:2]) > 300 and image.std() > 10      # a real figure
+    wrote = {line.split()[2] for line in proc.stderr.splitlines() if line.startswith("vpr-edge: wrote ")}
+    assert wrote == {str(tmp_path / "m.png"), str(tmp_path / "r.png")}                   # each named on stderr
     sim = np.random.default_rng(0).random((24, 24))
     np.save(tmp_path / "s.npy", sim)
     # without positions: the reference answered against the frame
     plain = run("evaluate", "--similarity", tmp_path / "s.npy", "--gt", tmp_path / "gt.csv", "--plot-route",
                 tmp_path / "x.png", "--modes", "single,stream")
     assert plain.returncode == 0, plain.stderr
+    assert f"vpr-edge: wrote {tmp_path / 'x.png'} " in plain.stderr
     image = cv2.imread(str(tmp_path / "x.png"))
     assert image is not None and min(image.shape[:2]) > 300 and image.std() > 10
 
