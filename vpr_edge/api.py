@@ -23,6 +23,7 @@ import numpy as np
 # frame does not pay for it (15 ms, a whole-route frame's cost again)
 import numpy.ma  # noqa: F401
 
+from vpr_edge.encoders.standardise import STANDARDISE
 from vpr_edge.errors import InputError, VprError, printable
 from vpr_edge.features import FrontEnd
 from vpr_edge.features.choice import DEFAULT_PRECISION
@@ -96,7 +97,8 @@ class Localizer:
     onnxruntime's threads and, process-wide, NumPy's BLAS pool to that count (0: one per core for both;
     None: onnxruntime's default, BLAS untouched). ``coarse``: a local-search matcher's whole-route frames use
     ``coarse.CoarseSearch`` (signs, exact values for the best candidates); None = on maps of at least
-    ``COARSE_MIN_REFS`` references. Construction is thread-safe (nothing global but the
+    ``COARSE_MIN_REFS`` references. ``standardise``: compare standardised encodings (``encoders.standardise``:
+    each traversal's own mean taken away; ``reset`` forgets the stream's mean too). Construction is thread-safe (nothing global but the
     BLAS limit); ``push`` may be called from any thread, one frame at a time (a lock orders them). Each frame
     is matched with its motion cue (its encoding's likeness to the last frame that moved, against the stream's
     typical moving step: ``matchers.MotionCue``),
@@ -108,7 +110,7 @@ class Localizer:
                  mode: str = DEFAULT_MATCHER, params: dict | None = None, min_confidence: float | None = None,
                  threads: int | None = None, coarse: bool | None = None,
                  calibration: str | os.PathLike[str] | None = None, precision: str = DEFAULT_PRECISION,
-                 target_precision: float | None = None) -> None:
+                 target_precision: float | None = None, standardise: bool = STANDARDISE) -> None:
         self.matcher: Matcher = get_matcher(mode).with_params(**(params or {}))
         # checked before the map opens; a calibration's line (its labelled drive's) sets a target precision's
         self._calibration = None
@@ -135,7 +137,7 @@ class Localizer:
         wanted = uses_coarse(len(self.map.names), coarse, self.matcher.scores,
                              self._online is not None and self._online.searches_locally)
         self._search = FrameSearch(self.query, self.matcher.scores, self.matcher.params.get("seek_frames", 1),
-                                   coarse_search(self.query, wanted))
+                                   coarse_search(self.query, wanted), standardise)
         self._lock = threading.Lock()
         self._count = 0
         self._cue = self.matcher.motion_cue()   # each frame's likeness to the last that moved

@@ -27,7 +27,8 @@ class StreamFigures:
     """One mode's figures on one stream (``ModeReport``'s, NaN where they do not apply: foreign imagery has
     only ``unmapped_lost``, and only the detour and foreign imagery have that); ``single``: the front end
     alone's R@1, ``first_exit``: frames until the first lost one after leaving the map (NaN: none lost there;
-    None: the mode has no lost state or the stream no unmapped run)."""
+    None: the mode has no lost state or the stream no unmapped run); ``exact``: mapped frames answered at the
+    truth's place itself, ``lead``: the mean signed error of the right answers, in places (+: ahead)."""
 
     best_r1: float
     answered_right: float
@@ -39,6 +40,8 @@ class StreamFigures:
     stream: str = ""
     single: float = float("nan")
     first_exit: float | None = None
+    exact: float = float("nan")
+    lead: float = float("nan")
 
 
 def targets(streams: Sequence[StreamFigures], foreign: Sequence[float] | None,

@@ -8,11 +8,12 @@ from typing import TYPE_CHECKING, Optional
 import typer
 
 from vpr_edge.calibration import DEFAULT_METHOD, METHODS
-from vpr_edge.cli.common import (LIST_PARAMS, PARAM_HELP, PARAMS_EPILOG, PRECISION_HELP, THREADS_HELP,
-                                 PrecisionOpt, app, param_options_for_all, user_errors)
+from vpr_edge.cli.common import (LIST_PARAMS, PARAM_HELP, PARAMS_EPILOG, PRECISION_HELP, STANDARDISE_HELP,
+                                 THREADS_HELP, PrecisionOpt, app, param_options_for_all, user_errors)
 from vpr_edge.errors import VprError, printable
 from vpr_edge.evaluation import Evaluation, Source, Truth, evaluate
 from vpr_edge.evaluation.run import BASELINES, DEFAULT_MODES, matchers_named
+from vpr_edge.encoders.standardise import STANDARDISE
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files.atomic import atomic_output
 from vpr_edge.files.checks import check_not_input, check_writable, output_path
@@ -114,6 +115,7 @@ _MODEL = typer.Option(None, help="With --map: the map's model, if not where it w
 _BATCH_SIZE = typer.Option(8, min=1, help="Frames per model run.")
 _THREADS = typer.Option(0, min=0, help=THREADS_HELP)
 _PRECISION = typer.Option(DEFAULT_PRECISION, help=PRECISION_HELP)
+_STANDARDISE = typer.Option(STANDARDISE, "--standardise/--raw-cosines", help=STANDARDISE_HELP)
 
 
 @app.command("evaluate", epilog=PARAMS_EPILOG)
@@ -130,7 +132,7 @@ def evaluate_cmd(map_path: Optional[Path] = _MAP, queries: Optional[Path] = _QUE
                  calibration_text: Optional[str] = _SAVE_CALIBRATION, calibration_fit: FitOpt = _CALIBRATION_FIT,
                  calibration_in: Optional[Path] = _CALIBRATION, similarity_text: Optional[str] = _SAVE_SIMILARITY,
                  model: Optional[Path] = _MODEL, batch_size: int = _BATCH_SIZE, threads: int = _THREADS,
-                 precision: PrecisionOpt = _PRECISION) -> None:
+                 precision: PrecisionOpt = _PRECISION, standardise: bool = _STANDARDISE) -> None:
     """Measure matchers against ground truth, all on one similarity matrix: from --map and --queries, from
     --features pixels with --refs and --queries, or from --similarity. By default, stream beside the
     baselines single and seqslam-online, in a short table: R@1, AUC (thesis eq. 5.1), the shares right
@@ -140,7 +142,7 @@ def evaluate_cmd(map_path: Optional[Path] = _MAP, queries: Optional[Path] = _QUE
     with user_errors():
         # --- everything that can be checked before the work ---
         source = Source(similarity, map_path, queries, refs, features == FeaturesOpt.pixels, model, batch_size,
-                        threads, topic, precision.value)
+                        threads, topic, precision.value, standardise)
         source.check()
         truth = Truth(gt, gt_positions, radius)
         matchers = matchers_named(modes, source)

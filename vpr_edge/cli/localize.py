@@ -10,9 +10,10 @@ from typing import Optional
 import typer
 
 from vpr_edge.api import Localizer
-from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, PARAMS_EPILOG, PRECISION_HELP, THREADS_HELP,
-                                 ModeOpt, PrecisionOpt, app, user_errors)
+from vpr_edge.cli.common import (LIST_PARAMS, MODE_HELP, PARAM_HELP, PARAMS_EPILOG, PRECISION_HELP, STANDARDISE_HELP,
+                                 THREADS_HELP, ModeOpt, PrecisionOpt, app, user_errors)
 from vpr_edge.errors import Terminated, VprError, ctrl_c, held_signals, printable
+from vpr_edge.encoders.standardise import STANDARDISE
 from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.files.checks import check_not_input, check_writable, output_path
 from vpr_edge.frames.images import Frame, GreyFrames, open_stream
@@ -74,6 +75,7 @@ _TIMESTAMPS = typer.Option(None, help="With a folder of frames: a CSV frame,stam
 _BATCH_SIZE = typer.Option(1, min=1, help="Frames per model run (1 = lowest latency).")
 _THREADS = typer.Option(0, min=0, help=THREADS_HELP)
 _PRECISION = typer.Option(DEFAULT_PRECISION, help=PRECISION_HELP)
+_STANDARDISE = typer.Option(STANDARDISE, "--standardise/--raw-cosines", help=STANDARDISE_HELP)
 
 
 @app.command("localize", epilog=PARAMS_EPILOG)
@@ -85,7 +87,7 @@ def localize_cmd(map_path: Path = _MAP, stream: str = _STREAM, model: Optional[P
                  max_frames: Optional[int] = _MAX_FRAMES, duration: Optional[float] = _DURATION,
                  fmt: Optional[FormatOpt] = _FORMAT, topic: Optional[str] = _TOPIC,
                  timestamps: Optional[Path] = _TIMESTAMPS, batch_size: int = _BATCH_SIZE, threads: int = _THREADS,
-                 precision: PrecisionOpt = _PRECISION) -> None:
+                 precision: PrecisionOpt = _PRECISION, standardise: bool = _STANDARDISE) -> None:
     """Localise every frame of a stream against a map. One line per frame: frame index, name and time
     (seconds), the matched reference's index and name, its position (x,y or lat,lon, heading, metres along
     the route) when the map has positions, score (higher = more confident) and lost (0/1); the reference and
@@ -99,7 +101,8 @@ def localize_cmd(map_path: Path = _MAP, stream: str = _STREAM, model: Optional[P
         frames, count = open_stream(stream, timestamps, topic)
         localizer = Localizer(map_path, model=model, mode=mode.value, params=params,
                               min_confidence=min_confidence, threads=threads, calibration=calibration,
-                              precision=precision.value, target_precision=target_precision)
+                              precision=precision.value, target_precision=target_precision,
+                              standardise=standardise)
         localizer.query.check_source(stream)   # descriptors for a map of descriptors, images for one of images
         say_choices(localizer, calibration, target_precision, precision.value)
         folder = stream if Path(stream).is_dir() else None   # a folder's frames named by their paths

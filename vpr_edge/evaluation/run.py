@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.calibration import Curve
+from vpr_edge.encoders.standardise import STANDARDISE
 from vpr_edge.errors import InputError, VprError
 from vpr_edge.evaluation import sources
 from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
@@ -46,6 +47,7 @@ class Source:
     threads: int = 0
     topic: str | None = None      # queries is a ROS bag / MCAP file: its image topic
     precision: str = DEFAULT_PRECISION   # the model's form (features.choice), with map
+    standardise: bool = STANDARDISE      # with map: cosines of the standardised encodings (encoders.standardise)
 
     def check(self) -> None:
         """VprError unless exactly one source is complete (called before any work)."""
@@ -144,7 +146,7 @@ def map_same_view(blocks: Iterable[np.ndarray]) -> np.ndarray:
 
 
 def stream_search(query: MapQuery | None, matcher: Matcher, encodings: np.ndarray | None, sim: np.ndarray,
-                  coarse: list[CoarseSearch]) -> StreamSearch | None:
+                  coarse: list[CoarseSearch], standardise: bool = STANDARDISE) -> StreamSearch | None:
     """The rows ``matcher`` reads over the stream of ``encodings`` (Q, D) on ``query``'s map as ``Localizer``
     reads them (``map.search``: the index's candidates, coarse whole-route rows on a long map), exact rows from
     ``sim`` (Q, R); None where that is ``sim``'s rows alone (an offline matcher, no map, no index and no coarse
@@ -157,7 +159,7 @@ def stream_search(query: MapQuery | None, matcher: Matcher, encodings: np.ndarra
         rows = coarse[0]
     else:
         rows = None
-    search = FrameSearch(query, matcher.scores, matcher.params.get("seek_frames", 1), rows)
+    search = FrameSearch(query, matcher.scores, matcher.params.get("seek_frames", 1), rows, standardise)
     if search.index is None and search.coarse is None:
         return None
     return StreamSearch(search, encodings, sim)
@@ -197,7 +199,7 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
         sims = sources.from_pixels(source.refs, source.queries, len(rows), truth.name, on_skip, source.topic)
     else:
         sims = sources.from_map(query, source.queries, len(rows), truth.name, on_skip, source.batch_size, with_svm,
-                                source.topic)
+                                source.topic, source.standardise)
     if sims.kept is not None:
         if sims.kept.max() >= len(rows):
             raise VprError(f"{source.queries}: {sims.kept.max() + 1} frames but the ground truth {truth.name} has "
@@ -219,7 +221,8 @@ def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None =
                                    (calibration or {}).get(name),
                                    None if sims.encodings is None else m.cue(sims.encodings), drive,
                                    None if same_view is None else one_view(rows, same_view), target_precision,
-                                   stream_search(query, m, sims.encodings, by_kind[m.scores], coarse))
+                                   stream_search(query, m, sims.encodings, by_kind[m.scores], coarse,
+                                                 source.standardise))
                for name, m in chosen.items()}
     return Evaluation(reports, sims.cosine, int((rows >= 0).any(axis=1).sum()), tolerance, sims.encode_ms, rows,
                       sims.positions, sims.front)

@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from vpr_edge.encoders.standardise import STANDARDISE, centred_stream
 from vpr_edge.errors import VprError
 from vpr_edge.frames.images import Frame, list_images, load_image, open_stream
 from vpr_edge.index.encodings import Encodings
@@ -100,11 +101,13 @@ def from_pixels(refs: str | os.PathLike[str], queries: str | os.PathLike[str], n
 
 
 def from_map(query: MapQuery, queries: str | os.PathLike[str], n_truth: int, truth_src: str, on_skip: OnSkip,
-             batch_size: int = 8, svm: bool = False, topic: str | None = None) -> Similarities:
+             batch_size: int = 8, svm: bool = False, topic: str | None = None,
+             standardise: bool = STANDARDISE) -> Similarities:
     """The query frames encoded as the map's references were (``query``: the map opened with its front end,
-    the chain ``Localizer`` runs), their cosine similarities to the map's references, with ``svm`` the map's
-    per-place SVM decision values, and each decoded frame's query encodings (from which each matcher's motion
-    cue is computed, as ``localize`` computes it)."""
+    the chain ``Localizer`` runs), their cosine similarities to the map's references (``standardise``: of the
+    standardised encodings, as ``map.search.FrameSearch`` computes them frame by frame), with ``svm`` the
+    map's per-place SVM decision values, and each decoded frame's query encodings (from which each matcher's
+    motion cue is computed, as ``localize`` computes it)."""
     frames = _count_checked(queries, n_truth, truth_src, topic)   # a descriptor file's values checked here
     query.check_source(queries)
     if svm:
@@ -117,7 +120,15 @@ def from_map(query: MapQuery, queries: str | os.PathLike[str], n_truth: int, tru
     if not enc:
         return _finish(queries, kept, t0, np.zeros((0, 0)))
     stacked = np.stack(enc)
-    cosine = query.scores(stacked).astype(np.float64)
+    cosine = (standardised(query, stacked) if standardise else query.scores(stacked)).astype(np.float64)
     scores = query.scores(stacked, "svm").astype(np.float64) if svm else None
     return replace(_finish(queries, kept, t0, cosine, scores, query.map.positions), front=query.runs(),
                    encodings=stacked, references=query.map.stored)
+
+
+def standardised(query: MapQuery, encodings: np.ndarray) -> np.ndarray:
+    """A stream's encodings (Q, D) in order -> the cosines of the standardised pairs (Q, R) float32
+    (``encoders.standardise``: each frame centred on the running mean of the frames before it)."""
+    route = query.map.route_mean
+    centred = centred_stream(encodings, route.mean)
+    return route.scores(query.scores(centred), centred)

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
 from vpr_edge.encoders import Encoder
+from vpr_edge.encoders.standardise import RouteMean
 from vpr_edge.errors import InputError, Message, VprError, warn
 from vpr_edge.index.encodings import Encodings
 from vpr_edge.index.ivf import IvfIndex
@@ -62,6 +64,12 @@ class PlaceMap:
     def encodings(self) -> np.ndarray:
         """All reference encodings as float32 (R, D) in RAM (for analysis; matching uses ``similarity``)."""
         return self.stored.dense()
+
+    @cached_property
+    def route_mean(self) -> RouteMean:
+        """The references' mean unit encoding and each one's distance from it (``encoders.standardise``): one
+        pass over the stored rows on first use."""
+        return RouteMean.of(self.stored.in_order)
 
     @property
     def features(self) -> dict:

@@ -15,6 +15,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from vpr_edge.encoders.standardise import STANDARDISE, StreamMean
 from vpr_edge.index.coarse import COARSE_MIN_REFS, CoarseSearch
 from vpr_edge.index.ivf import SequenceQuery
 from vpr_edge.map.query import MapQuery
@@ -38,32 +39,39 @@ def coarse_search(query: MapQuery, wanted: bool) -> CoarseSearch | None:
 class FrameSearch:
     """The search inputs of one stream's frames on ``query``'s map, for a matcher comparing ``kind`` scores
     (``cosine`` or ``svm``) whose index query is the mean of ``seek_frames`` encodings; ``coarse``: the coarse
-    search whole-route rows come from (``coarse_search``; None: exact rows). ``push(encoding)`` for each frame
-    in order, then ``rows`` and ``candidates`` are that frame's."""
+    search whole-route rows come from (``coarse_search``; None: exact rows); ``standardise``: cosines of the
+    standardised encodings (``encoders.standardise``: each frame centred on the stream's running mean, the
+    references on theirs; the index and the coarse search are asked with the centred encoding).
+    ``push(encoding)`` for each frame in order, then ``rows`` and ``candidates`` are that frame's."""
 
-    def __init__(self, query: MapQuery, kind: str, seek_frames: int, coarse: CoarseSearch | None) -> None:
+    def __init__(self, query: MapQuery, kind: str, seek_frames: int, coarse: CoarseSearch | None,
+                 standardise: bool = STANDARDISE) -> None:
         self.query, self.kind = query, kind
         self.index = query.map.index if kind == "cosine" else None
         self.coarse = coarse
+        self.mean = StreamMean(query.map.route_mean.mean) if standardise and kind == "cosine" else None
         self._seq = SequenceQuery(seek_frames)
         self._enc: np.ndarray | None = None
         self._exact: Rows | None = None
 
     def push(self, encoding: np.ndarray, exact: Rows | None = None) -> None:
         """The next frame's encoding (D,); ``exact``: its exact rows if already computed (a whole stream's
-        similarity matrix, ``evaluate``; None: computed from the map when asked)."""
-        self._enc = np.asarray(encoding, np.float32)
+        similarity matrix, ``evaluate``, standardised as here; None: computed from the map when asked)."""
+        enc = np.asarray(encoding, np.float32)
+        self._enc = enc if self.mean is None else self.mean.centre(enc)
         self._exact = exact
         self._seq.push(self._enc)
 
     def rows(self, refs: np.ndarray | None) -> np.ndarray:
         """The frame's similarities to the references ``refs`` (sorted int array; None: every one, coarse on a
         long map)."""
-        if refs is None and self.coarse is not None:
-            return self.coarse.similarity(self._enc)
-        if self._exact is not None:
+        if self._exact is not None and (refs is not None or self.coarse is None):
             return self._exact(refs)
-        return self.query.scores(self._enc[None], self.kind, refs)[0]
+        dots = self.coarse.similarity(self._enc)[None] if refs is None and self.coarse is not None else \
+            self.query.scores(self._enc[None], self.kind, refs)
+        if self.mean is None:
+            return dots[0]
+        return self.query.map.route_mean.scores(dots, self._enc[None], None if refs is None else refs)[0]
 
     def candidates(self) -> Callable[[], np.ndarray] | None:
         """What ``matchers.step`` asks the index, for this frame (None: the map has no index)."""
@@ -73,8 +81,10 @@ class FrameSearch:
         return lambda: index.candidates(stored, seq.query())
 
     def reset(self) -> None:
-        """Forget the stream (the index's sequence query)."""
+        """Forget the stream (the index's sequence query, the stream's mean)."""
         self._seq.reset()
+        if self.mean is not None:
+            self.mean.reset()
 
 
 class StreamSearch:

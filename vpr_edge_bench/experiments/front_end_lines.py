@@ -178,8 +178,8 @@ def _score_all(a: argparse.Namespace, fronts_of: dict[Path, list[str]], half: st
     print(f"tolerance {a.tolerance}, target precision {a.target_precision}")
     row = (lambda text: None) if a.ranges or a.counts else (lambda text: print(text, flush=True))   # per stream
     row("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
-        "best line @P | line gap | unmapped lost (first) |")
-    row("|---|---|---|---|---|---|---|---|---|---|---|")
+        "best line @P | line gap | unmapped lost (first) | exact | signed error |")
+    row("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for ds, fronts in fronts_of.items():
         for front in fronts:
             drive = ds / front / f"{a.calibrate_on}.npz" if a.calibrate_on else None
@@ -224,7 +224,8 @@ def stream_figures(r: ModeReport, stem: str, case: dict[str, np.ndarray]) -> Str
         return StreamFigures(nan, nan, nan, nan, nan, nan, r.lost_unmapped, stem)
     return StreamFigures(r.recall[1], r.answered_right, r.distinct_answered_right, r.mapped_right,
                          r.best_line_recall, r.line_gap, r.lost_unmapped if stem == "detour" else nan, stem,
-                         float(case.get("single_r1_tol", nan)), r.exit_frames[0] if r.exit_frames else None)
+                         float(case.get("single_r1_tol", nan)), r.exit_frames[0] if r.exit_frames else None,
+                         r.exact, r.lead)
 
 
 def stream_answers(r: ModeReport, stem: str, case: dict[str, np.ndarray]) -> StreamAnswers:
@@ -238,10 +239,10 @@ def figures_row(key: tuple[str, str, str], fig: StreamFigures, r: ModeReport) ->
     """The per-stream table's row of ``fig`` (``r``'s figures) for (dataset, front end, mode) ``key``."""
     ds, front, mode = key
     if fig.stream == "foreign":
-        return f"| {ds} | {front} | {mode} | foreign | - | - | - | - | - | - | {r.lost_unmapped:.3f} |"
+        return f"| {ds} | {front} | {mode} | foreign | - | - | - | - | - | - | {r.lost_unmapped:.3f} | - | - |"
     return (f"| {ds} | {front} | {mode} | {fig.stream} | {fig.single:.3f} | {r.recall[1]:.3f} | "
             f"{r.answered_right:.3f} | {r.mapped_right:.3f} | {r.best_line_recall:.3f} | {r.line_gap:.3f} | "
-            f"{unmapped(r.lost_unmapped, fig.first_exit)} |")
+            f"{unmapped(r.lost_unmapped, fig.first_exit)} | {r.exact:.3f} | {r.lead:+.2f} |")
 
 
 def print_oracle(answers: dict[tuple[str, str, str], list[StreamAnswers]], target: float) -> None:
@@ -333,13 +334,18 @@ def print_ranges(seen: dict[tuple[str, str, str], list[StreamFigures]]) -> None:
     def span(values: list[float]) -> str:
         v = [x for x in values if not np.isnan(x)]
         return f"{min(v):.2f}-{max(v):.2f}" if v else "-"
+
+    def signed(values: list[float]) -> str:
+        v = [x for x in values if not np.isnan(x)]
+        return f"{min(v):+.2f} to {max(v):+.2f}" if v else "-"
     print("\n| dataset | front end | mode | single R@1 | best R@1 | answered right | mapped right | "
-          "best line @P | line gap | detour unmapped lost (first) | foreign lost |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "best line @P | line gap | detour unmapped lost (first) | foreign lost | exact | signed error |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for (ds, front, mode), figs in seen.items():
         streams = [f for f in figs if f.stream != "foreign"]
         foreign = next((f"{f.unmapped_lost:.3f}" for f in figs if f.stream == "foreign"), "-")
         detour = next((unmapped(f.unmapped_lost, f.first_exit) for f in streams if f.stream == "detour"), "-")
         cols = [span([getattr(f, k) for f in streams])
                 for k in ("single", "best_r1", "answered_right", "mapped_right", "best_line", "line_gap")]
-        print(f"| {ds} | {front} | `{mode}` | " + " | ".join(cols) + f" | {detour} | {foreign} |")
+        print(f"| {ds} | {front} | `{mode}` | " + " | ".join(cols) + f" | {detour} | {foreign} | "
+              f"{span([f.exact for f in streams])} | {signed([f.lead for f in streams])} |")
