@@ -108,6 +108,7 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("one-view-check", ["--streams", "{tmp}"], NOT_STREAMS),
     ("eval-streams", ["--streams", "{tmp}"], NOT_STREAMS),
     ("eval-streams", ["--streams", "{tmp}", "--modes", "stream,nope"], "--modes 'stream,nope': unknown nope"),
+    ("eval-streams", ["--streams", "{tmp}", "--fronts", "nope"], "--fronts 'nope': choose from map, pixels"),
     ("leave-one-out", ["--streams", "{tmp}", "{tmp}"], "names name the datasets and must differ"),
     ("lost-reasons", ["--streams", "{tmp}"], NOT_STREAMS),
     ("lost-reasons", ["--streams", "{tmp}", "--tolerance", "-1"], "--tolerance must be >= 0"),
@@ -484,6 +485,11 @@ def test_eval_streams_tables_every_mode_on_every_stream(every_stream: Path) -> N
             r1 = json.loads((out / f"{kind}.{front}.json").read_text())["modes"][mode]["recall_at_1"]
             assert cell == f"{r1:.3f}", (label, kind)
     assert "stream mode, detour stream" in text and "  map: lost " in text and "  pixels: lost " in text
+    assert "\nmapped right (" in text and "\nanswered right (" in text
+    std = tool("eval-streams", "--streams", str(every_stream), "--modes", "single", "--tolerance", "2", "--fronts",
+               "map", "--standardise", "--plot", "")
+    cells = [line for line in std.split("\nAUC")[0].splitlines() if line.startswith("| IFV single")]
+    assert len(cells) == 1 and "pixels" not in std      # the map's front end alone, its cosines standardised
 
 
 @pytest.mark.slow

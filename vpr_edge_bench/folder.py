@@ -65,14 +65,16 @@ class StreamsFolder:
 
     def evaluate(self, matchers: dict[str, Matcher], tolerance: int, *, map: Path | None = None,
                  pixels: bool = False, truth_in: Path | None = None, threads: int = 0,
-                 kinds: Sequence[str] | None = None) -> Iterator[tuple[str, Evaluation]]:
+                 kinds: Sequence[str] | None = None, standardise: bool = False
+                 ) -> Iterator[tuple[str, Evaluation]]:
         """``evaluate`` (the function behind ``vpr-edge evaluate``) on each stream, in kind order: (kind, its
         evaluation). Frames through ``map`` (default: the folder's map.npz), or with ``pixels`` SeqSLAM's pixel
         front end against ``ref/``; truth from ``truth_in``/KIND.csv (default: the folder's own); ``kinds``:
-        a subset of the folder's."""
+        a subset of the folder's; ``standardise``: the map's cosines standardised (``evaluate --standardise``)."""
         for kind in self.kinds if kinds is None else kinds:
             source = Source(pixels=True, refs=self.ref, queries=self.frames(kind)) if pixels else \
-                Source(map=self.map if map is None else map, queries=self.frames(kind), threads=threads)
+                Source(map=self.map if map is None else map, queries=self.frames(kind), threads=threads,
+                       standardise=standardise)
             gt = self.truth(kind) if truth_in is None else Path(truth_in) / f"{kind}.csv"
             yield kind, evaluate(source, Truth(gt=gt), matchers, tolerance)
 
