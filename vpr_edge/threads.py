@@ -1,6 +1,6 @@
 """One thread budget for the two pools a frame passes through: onnxruntime's and NumPy's BLAS.
 
-Left at their defaults on a 2-core board, the two pools fight (docs/results.md, "Tried and not taken"). Stages
+Left at their defaults on a 2-core board, the two pools fight (docs/decisions.md, "Tried and not taken"). Stages
 run one after the other, so each pool may use the whole budget; what matters is that neither grows past it
 and that onnxruntime's idle workers do not spin (``features.cnn.FeatureExtractor`` turns spinning off).
 """

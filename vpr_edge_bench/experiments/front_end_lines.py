@@ -14,7 +14,7 @@ and recall the line delivers (answered right, mapped right), the best line's rec
 delivered recall), and on the detour the unmapped frames lost and the first lost after leaving; foreign
 imagery (the other dataset's aligned frames against this map): the share of frames lost. Tolerance 2 (the
 derived streams' truth names one place). Then the same as ranges over the derived streams, one row per
-dataset, front end and mode (docs/results.md's table), and per dataset and mode the streams that meet each
+dataset, front end and mode (docs/tables.md's table), and per dataset and mode the streams that meet each
 target of the line (``targets``): a line gap of at most ``GAP``; where the front end allows the target
 (*eligible*: the best line reaches it with at least half of the best answers' R@1), a precision of answers
 at least the target, over every frame and over the frames whose truth is not where the map shows one view
@@ -98,7 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--fronts", default=None, help="comma-separated front ends (default: every one cached)")
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--target-precision", type=float, default=TARGET_PRECISION)
-    p.add_argument("--ranges", action="store_true", help="print the ranges over the streams only (docs/results.md)")
+    p.add_argument("--ranges", action="store_true", help="print the ranges over the streams only (docs/tables.md)")
     p.add_argument("--oracle", action="store_true",
                    help="also the one line per dataset, front end and mode that meets the most targets at once, "
                         "chosen with the truth: what the mode's ranking allows")

@@ -63,23 +63,6 @@ class Section:
     fenced: bool = False                      # it prints plain text, not Markdown: kept as a code block
 
 
-def _gem(tap: str) -> tuple[str, ...]:
-    """Export the bundled Lite0 cut at ``tap`` with GeM pooling, 160x120, to OUT/models (needs the export extra)."""
-    return ("-m", "vpr_edge_export.onnx_export", "--architecture", "gem", "--backbone", "efficientnet_lite0",
-            "--tap", tap, "--width", "160", "--height", "120", "--out", f"{{out}}/models/lite0_{tap}_gem_160x120.onnx")
-
-
-_CODEBOOKS = "0x128,31x32,62x16,24x41,16x62,12x82,20x49"   # the compact codebooks the default was chosen among
-
-
-def _size(dataset: str, tolerance: int, configs: str, suffix: str = "") -> "Section":
-    """size-sweep on one dataset's every stream: ``configs`` (PCA x components) over three codebook seeds."""
-    name = f"size-{dataset}{suffix}"
-    return Section(name, "size-sweep", ("--streams", f"{{{dataset}}}", "--kinds", "all", "--tolerance",
-                                        str(tolerance), "--storages", "int8", "--seeds", "0,1,2", "--modes",
-                                        "stream", "--configs", configs, "--out", f"{{out}}/size/{dataset}{suffix}"))
-
-
 def _e2e(dataset: str) -> "Section":
     """bench-e2e on one dataset: the default and its int8 form, whole commands beside the yardstick."""
     return Section(f"e2e-{dataset}", "bench-e2e", ("--streams", f"{{{dataset}}}", "--config", "default=",
@@ -87,71 +70,18 @@ def _e2e(dataset: str) -> "Section":
                                                    f"{{out}}/e2e-{dataset}"))
 
 
-_INDEX_BENCH = ("--refs", "100000", "--frames", "5000", "--dim", "512", "--storage", "int8", "--walk", "0.9",
-                "--noise", "1.0", "--cue", "--checkpoints", "5000")
-
-_FRONTS_CACHE = (("-m", "vpr_edge_bench", "front-end-cache", "--streams", "{corridor}", "{nordland-dev}", "--out",
-                  "{out}/fronts"),)   # the front ends' matrices (kept where made)
-
+# The generated tables of docs/: the default chain's speed, the lost line on nine front ends (behind the hub,
+# stuck and trust records of docs/decisions.md) and the million-place targets. The other experiments' figures
+# are quoted in docs/ with their commands.
 SECTIONS = (
-    Section("lost-line", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "evidence",
-                                           "--values=-99,1,1.25,1.5,1.75,2")),
-    Section("lost-lock", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "lock",
-                                           "--values=5,6,6.5,7,7.5,8")),
-    Section("lost-unique", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "unique",
-                                             "--values=0,0.01,0.02,0.03,0.04,0.05,0.1,0.15,0.2,0.25,0.3,0.4,0.5",
-                                             "--against", "0")),
-    Section("lost-confirm", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "confirm",
-                                              "--values=1,2,3,4", "--against", "1")),
-    Section("lost-stuck", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "stuck",
-                                            "--values=0,2,4,8", "--against", "0")),
-    Section("lost-trust", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "trust",
-                                            "--values=0.4,0.5,0.6,0.7,0.8,1", "--against", "1")),
-    Section("lost-still", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary", "still",
-                                            "--values=0.3,0.4,0.5,0.6,0.7")),
-    Section("lost-still-memory", "lost-tradeoff", ("--streams", "{nordland-dev}", "{corridor}", "--vary",
-                                                   "still_memory", "--values=10,30,100")),
-    Section("calibration", "calibration-check", ("--streams", "{corridor}", "{nordland-dev}", "--modes",
-                                                 "stream,single", "--fits", "logistic,isotonic")),
-    Section("one-view", "one-view-check", ("--streams", "{nordland-dev}", "{corridor}")),
-    Section("leave-one-out", "leave-one-out", ("--streams", "{nordland-dev}", "{corridor}")),
-    Section("lost-reasons", "lost-reasons", ("--streams", "{nordland-dev}", "{corridor}")),
-    Section("evaluating-corridor", "eval-streams", ("--streams", "{corridor}")),
-    Section("evaluating-nordland-dev", "eval-streams", ("--streams", "{nordland-dev}")),
-    _size("nordland-dev", 2, _CODEBOOKS),
-    _size("corridor", 2, _CODEBOOKS),
-    _size("corridor", 1, "0x128,24x41", "-1"),
     _e2e("nordland-dev"),
     _e2e("corridor"),
-    Section("front-ends", "compare-front-ends", ("--streams", "{nordland-dev}", "{corridor}", "--front", "default",
-                                                 "--front", "gem={out}/models/lite0_stage5_gem_160x120.onnx",
-                                                 "--front", "head-gem={out}/models/lite0_head_gem_160x120.onnx"),
-            setup=(_gem("stage5"), _gem("head"))),
     Section("front-end-lines", "front-end-lines", ("--cache", "{out}/fronts", "--modes",
                                                    "stream,stream-filter,seqslam-online", "--ranges",
                                                    "--oracle"),
-            setup=_FRONTS_CACHE),
-    Section("front-end-lines-calibrated", "front-end-lines", ("--cache", "{out}/fronts", "--modes",
-                                                              "stream,stream-filter", "--ranges",
-                                                              "--calibrate-on", "aligned"),
-            setup=_FRONTS_CACHE),
-    Section("front-end-lines-halves", "front-end-lines", ("--cache", "{out}/fronts", "--modes",
-                                                          "stream,stream-filter", "--counts", "--half",
-                                                          "both"),
-            setup=_FRONTS_CACHE),
-    Section("front-end-lines-halves-calibrated", "front-end-lines", ("--cache", "{out}/fronts", "--modes",
-                                                                     "stream,stream-filter", "--counts",
-                                                                     "--half", "both", "--calibrate-on", "aligned"),
-            setup=_FRONTS_CACHE),
-    Section("drives", "compare-drives", ("--streams", "{nordland-dev}", "{corridor}", "--drives", "4")),
-    Section("drives-append", "compare-drives", ("--streams", "{nordland-dev}", "{corridor}", "--kinds",
-                                                "aligned,speed2,speed3,variable", "--append-seeds", "4")),
-    Section("fleet", "bench-fleet", ("--refs", "{nordland-dev}/ref")),
-    Section("fleet-codebook-given", "bench-fleet", ("--refs", "{nordland-dev}/ref", "--codebook-first")),
+            setup=(("-m", "vpr_edge_bench", "front-end-cache", "--streams", "{corridor}", "{nordland-dev}",
+                    "--out", "{out}/fronts"),)),   # the front ends' matrices (kept where made)
     Section("scale", "bench-scale", ("--work", "{out}/scale")),
-    Section("scale-100k-frames", "bench-scale", ("--work", "{out}/scale", "--skip-build", "--frames", "100000")),
-    Section("index-100k-whole", "bench-matcher", _INDEX_BENCH, fenced=True),
-    Section("index-100k", "bench-matcher", (*_INDEX_BENCH, "--index"), fenced=True),
 )
 
 
