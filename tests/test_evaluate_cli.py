@@ -61,6 +61,7 @@ def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_qu
     assert all(set(m) == JSON_KEYS for m in doc["modes"].values())
     assert doc["modes"]["dtw"]["recall_at_1"] > 0.9            # aligned sequences: fixed-end DTW is right
     assert png.read_bytes()[:4] == b"\x89PNG"
+    assert f"vpr-edge: wrote {png} " in proc.stderr                     # each file written is named
     assert np.load(sim).shape == (24, 24)
     assert "R@1" in proc.stdout and "seqslam-online" in proc.stdout
     assert "away from where the map shows one view" in proc.stdout       # a map: its views are known
