@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vpr_edge_bench.experiments.front_end_cache import single_r1
+from vpr_edge_bench.front_end_streams import single_r1
 
 HALVES = ("first", "second")
 MIN_FRAMES = 20   # a stream with fewer frames of the half is left out (a partial route of the other half)
