@@ -92,24 +92,16 @@ _PLOT = typer.Option(None, "--plot", help="Write all modes' PR curves to this PN
                                           "extra).")
 _PLOT_MATRIX = typer.Option(None, "--plot-matrix", help="Write the similarity matrix with the ground truth and each "
                                                         "mode's answers over it to this PNG (plot extra).")
-_PLOT_ROUTE = typer.Option(None, "--plot-route", help="Write each mode's answers, right / wrong / lost, to this PNG "
-                                                      "(plot extra): on the route, for a map built with --positions; "
-                                                      "else the reference answered against the frame, over the "
-                                                      "ground truth.")
-_SAVE_CALIBRATION = typer.Option(None, "--save-calibration", help="Write each mode's calibration here (score -> "
-                                                                  "probability the answer is right, on these "
-                                                                  "frames' answers given; and the line at each "
-                                                                  "precision, over every answer), for localize "
-                                                                  "--calibration.")
-_CALIBRATION_FIT = typer.Option(DEFAULT_METHOD, "--calibration-fit", help="How --save-calibration fits: logistic "
-                                                                          "(Platt scaling, two numbers; carries to "
-                                                                          "another route better) or isotonic (a "
-                                                                          "non-decreasing step curve).")
-_CALIBRATION = typer.Option(None, "--calibration", help="A calibration from another drive or route (evaluate "
-                                                        "--save-calibration): score each mode's confidence against "
-                                                        "these frames (ECE and the reliability table in --json) for "
-                                                        "the modes it holds; with --target-precision, their lost "
-                                                        "line is its drive's.")
+_PLOT_ROUTE = typer.Option(None, "--plot-route", help="Write each mode's answers (right / wrong / lost) to this PNG "
+                           "(plot extra): on the route for a map with --positions, else against the frame.")
+_SAVE_CALIBRATION = typer.Option(None, "--save-calibration", help=(
+    "Write each mode's calibration here, for localize --calibration: score -> probability the answer is right, "
+    "fitted on these frames' answers, and the line at each precision."))
+_CALIBRATION_FIT = typer.Option(DEFAULT_METHOD, "--calibration-fit", help=(
+    "How --save-calibration fits: logistic (Platt scaling: carries to another route better) or isotonic."))
+_CALIBRATION = typer.Option(None, "--calibration", help=(
+    "A calibration from another drive (evaluate --save-calibration): each mode's confidence scored on these "
+    "frames (ECE, reliability in --json); with --target-precision, its lost line is that drive's."))
 _SAVE_SIMILARITY = typer.Option(None, "--save-similarity", help="Also save the (Q, R) similarity matrix (.npy).")
 _MODEL = typer.Option(None, help="With --map: the map's model, if not where it was.")
 _BATCH_SIZE = typer.Option(8, min=1, help="Frames per model run.")
