@@ -1,8 +1,11 @@
 """Descriptor standardisation (``encoders.standardise``) against plain loops."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+from helpers import invoke
 
 from vpr_edge.encoders.standardise import RouteMean, StreamMean, centred_stream
 
@@ -92,3 +95,28 @@ def test_a_streams_frames_read_what_the_whole_stream_reads() -> None:
     raw = FrameSearch(query, "cosine", 1, None, standardise=False)
     raw.push(enc[0])
     np.testing.assert_allclose(raw.rows(None), enc[0] @ refs.T, rtol=1e-5)
+
+
+def test_build_map_stores_the_statistics_and_load_checks_them(tmp_path: Path, small_refs: Path) -> None:
+    """build-map writes the references' mean and spread; a map without them computes the same on first use;
+    a spread that does not fit the encodings is one line naming the file."""
+    from vpr_edge.errors import VprError
+    from vpr_edge.files.npz import read_npz, write_npz
+    from vpr_edge.map import load_map
+
+    out = tmp_path / "ldb.npz"
+    assert invoke("build-map", small_refs, "-o", out, "--features", "ldb", "--encoding", "none")[0] == 0
+    held = load_map(out)
+    assert held.stored_mean is not None
+    fresh = RouteMean.of(held.stored.in_order)
+    np.testing.assert_allclose(held.route_mean.mean, fresh.mean, atol=1e-6)
+    np.testing.assert_allclose(held.route_mean.spread, fresh.spread, atol=1e-6)
+    arrays, meta = read_npz(out, "map", meta_schema := int(load_map(out).meta["schema"]))
+    older = {k: v for k, v in arrays.items() if not k.startswith("route_")}
+    write_npz(tmp_path / "older.npz", older, meta)
+    old = load_map(tmp_path / "older.npz")
+    assert old.stored_mean is None and np.allclose(old.route_mean.spread, fresh.spread, atol=1e-6)
+    write_npz(tmp_path / "bad.npz", arrays | {"route_spread": arrays["route_spread"][:-1]}, meta)
+    with pytest.raises(VprError, match=r"bad\.npz: map is inconsistent \(the references' mean") as e:
+        load_map(tmp_path / "bad.npz")
+    assert "\n" not in str(e.value) and meta_schema >= 4

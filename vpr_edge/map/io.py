@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.encoders import encoder_from_arrays
+from vpr_edge.encoders.standardise import RouteMean
 from vpr_edge.errors import VprError, warn
 from vpr_edge.features.registry import MAP_FRONT_ENDS
 from vpr_edge.features.resize import RESIZE
@@ -44,6 +45,8 @@ def save_map(place_map: PlaceMap, path: str | os.PathLike[str], storage: str = D
         meta["index"] = {"kind": "ivf", "lists": len(place_map.index.centroids)}
     else:
         meta.pop("index", None)
+    stats = m.route_mean   # of the rows as stored: what a query is compared with
+    arrays |= {"route_mean": stats.mean, "route_spread": stats.spread}
     if place_map.svm is not None:
         arrays |= {"svm_" + k: v for k, v in m.svm.weights.to_arrays().items()}
         arrays["svm_bias"] = place_map.svm.bias
@@ -150,4 +153,22 @@ def _assemble(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
             index = IvfIndex.from_arrays(arrays, len(names), stored.shape[1])
         except (ValueError, KeyError) as e:
             raise VprError(f"{path}: map's index is inconsistent ({e})") from None
-    return PlaceMap(stored, names, encoder, meta, svm, positions, drives, index)
+    return PlaceMap(stored, names, encoder, meta, svm, positions, drives, index, _route_mean(path, arrays, stored))
+
+
+def _route_mean(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], stored: Encodings) -> RouteMean | None:
+    """The references' statistics the file holds (``encoders.standardise``; None: a map written before
+    them), checked against the encodings."""
+    if "route_mean" not in arrays and "route_spread" not in arrays:
+        return None
+    try:
+        mean = np.asarray(arrays["route_mean"], np.float32)
+        spread = np.asarray(arrays["route_spread"], np.float32)
+    except KeyError as e:
+        raise VprError(f"{path}: map is inconsistent ({e.args[0]} missing beside its pair)") from None
+    r, d = stored.shape
+    if mean.shape != (d,) or spread.shape != (r,) or not (np.isfinite(mean).all() and np.isfinite(spread).all()) \
+            or (spread <= 0).any():
+        raise VprError(f"{path}: map is inconsistent (the references' mean {mean.shape} and spread "
+                       f"{spread.shape} do not fit {r} x {d} encodings)")
+    return RouteMean(mean, spread)

@@ -52,6 +52,7 @@ class PlaceMap:
     positions: Positions | None = None
     drives: Drives = None   # type: ignore[assignment]  # None -> one drive (set in __post_init__)
     index: IvfIndex | None = None   # whole-route candidates (``index.ivf``), on large maps
+    stored_mean: RouteMean | None = None   # the references' statistics as the map file holds them (None: not held)
 
     def __post_init__(self) -> None:
         if self.drives is None:
@@ -67,9 +68,9 @@ class PlaceMap:
 
     @cached_property
     def route_mean(self) -> RouteMean:
-        """The references' mean unit encoding and each one's distance from it (``encoders.standardise``): one
-        pass over the stored rows on first use."""
-        return RouteMean.of(self.stored.in_order)
+        """The references' mean unit encoding and each one's distance from it (``encoders.standardise``): as
+        the map file holds them (build-map writes them), else one pass over the stored rows on first use."""
+        return self.stored_mean if self.stored_mean is not None else RouteMean.of(self.stored.in_order)
 
     @property
     def features(self) -> dict:
