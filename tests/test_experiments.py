@@ -103,6 +103,9 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("front-end-cache", ["--streams", "{tmp}", "--out", "{tmp}/out"], "not a derived-streams folder (no ref"),
     ("front-end-cache", ["--streams", "{tmp}/a", "{tmp}/b/a", "--out", "{tmp}/out"], "names name the datasets"),
     ("front-end-lines", ["--cache", "{tmp}/none"], "none: not a folder"),
+    ("probability-targets", ["--cache", "{tmp}/none"], "none: not a folder"),
+    ("probability-targets", ["--cache", "{tmp}", "--modes", "nope"], "--modes: unknown matcher 'nope'"),
+    ("probability-targets", ["--cache", "{tmp}", "--target-precision", "1"], "must lie in (0, 1)"),
     ("front-end-lines", ["--cache", "{tmp}", "--modes", "stream,stream:confirm=maybe"], "'maybe' is not an int"),
     ("front-end-lines", ["--cache", "{tmp}", "--modes", "stream:nope=1"], "stream takes KEY=VALUE with KEY one of"),
     ("one-view-check", ["--streams", "{tmp}"], NOT_STREAMS),
@@ -678,3 +681,25 @@ def test_route_halves_cut_a_stream_as_plain_loops() -> None:
     whole = cut_stream(foreign, 30, 60)
     assert whole is not None and whole["sim"].shape == (70, 30)
     assert cut_stream(case, 0, 10) is None   # 10 frames of the half: fewer than 20
+
+
+def test_probability_targets_count_as_plain_loops() -> None:
+    """probability-targets' best line and ECE against plain loops over every line and every bin."""
+    from vpr_edge_bench.experiments.probability_targets import best_line_recall, ece
+
+    rng = np.random.default_rng(7)
+    p = rng.random(200)
+    right = rng.random(200) < p
+    for precision in (0.6, 0.8, 0.95):
+        best = 0.0
+        for t in np.unique(p):
+            given = p >= t
+            if given.any() and right[given].mean() >= precision:
+                best = max(best, (right & given).sum() / len(p))
+        assert best_line_recall(p, right, precision) == pytest.approx(best)
+    total = 0.0
+    for b in range(10):
+        sel = (np.minimum((p * 10).astype(int), 9)) == b
+        if sel.any():
+            total += abs(right[sel].mean() - p[sel].mean()) * sel.sum()
+    assert ece(p, right) == pytest.approx(total / len(p))

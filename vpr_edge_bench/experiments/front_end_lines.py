@@ -133,15 +133,21 @@ def cases(files: Sequence[Path], half: str | None) -> list[tuple[str, dict[str, 
     return out
 
 
-def _run(a: argparse.Namespace) -> int:
-    """The work of ``main``, the cache and the modes checked first."""
-    if not a.cache.is_dir():
-        raise VprError(f"{a.cache}: not a folder (front-end-cache writes it)")
+def check_cache(cache: Path, modes: str) -> None:
+    """VprError unless ``cache`` is a folder and each of the comma-separated ``modes`` names a matcher (with
+    parameters it has): checked before the work."""
+    if not cache.is_dir():
+        raise VprError(f"{cache}: not a folder (front-end-cache writes it)")
     try:
-        for mode in a.modes.split(","):
+        for mode in modes.split(","):
             matcher_of(mode)
     except ValueError as e:
         raise VprError(f"--modes: {e}") from None
+
+
+def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, the cache and the modes checked first."""
+    check_cache(a.cache, a.modes)
     datasets = sorted(d for d in a.cache.iterdir() if d.is_dir() and d.name != "models")
     fronts_of = {ds: [f for f in sorted(g.name for g in ds.iterdir() if g.is_dir())
                       if not a.fronts or f in a.fronts.split(",")] for ds in datasets}

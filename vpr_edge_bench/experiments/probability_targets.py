@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.matchers.constants import TARGET_PRECISION
-from vpr_edge_bench.experiments.front_end_lines import load, matcher_of
+from vpr_edge.errors import VprError
+from vpr_edge_bench.experiments.front_end_lines import check_cache, load, matcher_of
 from vpr_edge_bench.runner import parser, run_checked
 
 LINES = (0.90, 0.95, 0.98)   # the probability lines whose precision is read
@@ -117,6 +118,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run(a: argparse.Namespace) -> int:
+    """The work of ``main``, the cache, the modes and the line checked first."""
+    check_cache(a.cache, a.modes)
+    if not 0.0 < a.target_precision < 1.0:
+        raise VprError(f"--target-precision {a.target_precision}: must lie in (0, 1)")
     fronts = None if a.fronts is None else set(a.fronts.split(","))
     head = " | ".join(f"p>={line:.2f}" for line in LINES)
     for mode in a.modes.split(","):
