@@ -98,8 +98,8 @@ class Localizer:
     None: onnxruntime's default, BLAS untouched). ``coarse``: a local-search matcher's whole-route frames use
     ``coarse.CoarseSearch`` (signs, exact values for the best candidates); None = on maps of at least
     ``COARSE_MIN_REFS`` references. ``standardise``: compare standardised encodings (``encoders.standardise``:
-    each traversal's own mean taken away; ``reset`` forgets the stream's mean too). Construction is thread-safe (nothing global but the
-    BLAS limit); ``push`` may be called from any thread, one frame at a time (a lock orders them). Each frame
+    each traversal's own mean taken away; ``reset`` forgets the stream's mean too). Construction is
+    thread-safe (nothing global but the BLAS limit); ``push`` may be called from any thread, one frame at a time (a lock orders them). Each frame
     is matched with its motion cue (its encoding's likeness to the last frame that moved, against the stream's
     typical moving step: ``matchers.MotionCue``),
     so frames of one stream must be pushed in order; ``reset`` starts a new stream.

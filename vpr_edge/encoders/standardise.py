@@ -79,27 +79,25 @@ class StreamMean:
         """The current mean (D,) float64."""
         return self._sum / self._weight
 
-    def centre(self, encoding: np.ndarray, counts: bool = True) -> np.ndarray:
-        """One encoding (D,) -> ``unit(encoding) - mean`` (D,) float32; the encoding then joins the mean if it
-        ``counts`` (a standing camera's frames do not: its one view would become the stream's mean; nor does
-        an all-zero encoding)."""
+    def centre(self, encoding: np.ndarray) -> np.ndarray:
+        """One encoding (D,) -> ``unit(encoding) - mean`` (D,) float32; the encoding then joins the mean (an
+        all-zero encoding does not)."""
         u = _unit(np.asarray(encoding, np.float64)[None])[0]
         out = (u - self.mean).astype(np.float32)
-        if counts and np.any(u):
+        if np.any(u):
             self._sum = self._sum * self.keep + u
             self._weight = self._weight * self.keep + 1.0
         return out
 
 
-def centred_stream(encodings: np.ndarray, prior: np.ndarray, counts: np.ndarray | None = None,
-                   prior_frames: float = PRIOR_FRAMES, horizon: float = HORIZON) -> np.ndarray:
+def centred_stream(encodings: np.ndarray, prior: np.ndarray, prior_frames: float = PRIOR_FRAMES,
+                   horizon: float = HORIZON) -> np.ndarray:
     """A stream's encodings (Q, D) in order -> each centred on the running mean before it (Q, D) float32
-    (``StreamMean`` frame by frame); ``counts`` (Q,) bool: the frames that join the mean (None: all)."""
+    (``StreamMean`` frame by frame)."""
     mean = StreamMean(prior, prior_frames, horizon)
-    enc = np.asarray(encodings)
-    if not len(enc):
+    if not len(encodings):
         return np.zeros((0, len(prior)), np.float32)
-    return np.stack([mean.centre(e, True if counts is None else bool(counts[i])) for i, e in enumerate(enc)])
+    return np.stack([mean.centre(e) for e in np.asarray(encodings)])
 
 
 def _unit(x: np.ndarray) -> np.ndarray:

@@ -71,7 +71,7 @@ class FrameSearch:
             self.query.scores(self._enc[None], self.kind, refs)
         if self.mean is None:
             return dots[0]
-        return self.query.map.route_mean.scores(dots, self._enc[None], None if refs is None else refs)[0]
+        return self.query.map.route_mean.scores(dots, self._enc[None], refs)[0]
 
     def candidates(self) -> Callable[[], np.ndarray] | None:
         """What ``matchers.step`` asks the index, for this frame (None: the map has no index)."""
