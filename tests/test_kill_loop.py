@@ -5,8 +5,9 @@ map, over an old one, ``--append``), ``localize`` with each output kind (CSV, JS
 recording) and ``evaluate --save-calibration``. After each kill: a map loads and is the old one or the whole
 new one; a calibration file is absent, the old one or a whole new one; a log's lines are whole (the last one
 may be cut short in ``NAME.part``, which the next run cuts); a recording's part reads back with its own
-reader. The next run to each output recovers what the killed one left, and a last run that ends leaves
-nothing stray (no ``.part``, ``.tmp`` or lock file)."""
+reader, and ``NAME`` (a killed run's part the next run finalised) reads whole. The next run to each output
+recovers what the killed one left, and a last run that ends leaves nothing stray (no ``.part``, ``.tmp`` or
+lock file)."""
 from __future__ import annotations
 
 import json
@@ -116,6 +117,26 @@ def _readable_recording(part: Path) -> None:
             pass
 
 
+def _whole_recording(out: Path) -> None:
+    """``NAME``, when there, reads back whole with its own reader: an MCAP file with its summary (a killed
+    run's part finalised by the next run), a recording to its end."""
+    if not out.exists():
+        return
+    if out.suffix == ".mcap":
+        from mcap.reader import make_reader
+
+        with open(out, "rb") as f:
+            reader = make_reader(f)
+            assert reader.get_summary() is not None, out
+            frames = [json.loads(m.data)["frame_index"] for _, c, m in reader.iter_messages()
+                      if c.topic == "/vpr/answer"]
+        assert frames == list(range(len(frames))) and frames, out
+    else:
+        from rerun.chunk import RrdReader
+
+        assert sum(1 for _ in RrdReader(out).stream()) > 0, out
+
+
 OUTS = {"build-new": "m.npz", "build-over": "m.npz", "build-append": "m.npz", "evaluate": "cal.json",
         "csv": "run.csv", "jsonl": "run.jsonl", "mcap": "run.mcap", "rrd": "run.rrd"}
 
@@ -152,6 +173,7 @@ def _check(kind: str, out: Path) -> None:
         _whole_lines(Path(f"{out}.part"), last_may_be_cut=True)
     else:
         _readable_recording(Path(f"{out}.part"))
+        _whole_recording(out)
 
 
 def _kind(ws: Path, kind: str, seed: int) -> tuple[int, int]:

@@ -449,7 +449,7 @@ def test_an_mcap_file_survives_a_sigkill(ws: Path, tmp_path: Path) -> None:
             pass
     frames = [json.loads(m.data)["frame_index"] for m in answers]
     assert frames == list(range(len(frames))) and len(frames) >= 2
-    assert answers[-1].publish_time >= killed - 1_500_000_000, (killed - answers[-1].publish_time) / 1e9
+    assert answers[-1].publish_time >= killed - 1_000_000_000, (killed - answers[-1].publish_time) / 1e9
     kept = tmp_path / "kept.mcap"
     assert recover(part_path(out), kept).endswith(f"messages finalised as {kept}")
     with open(kept, "rb") as f:
@@ -481,15 +481,16 @@ def test_a_rerun_recording_survives_a_sigkill(ws: Path, tmp_path: Path) -> None:
             rows += pa.table(cols).to_pylist()
     frames = sorted(r["frame"] for r in rows)
     assert frames == list(range(len(frames))) and len(frames) >= 2
-    assert max(r["log_time"] for r in rows) >= killed - 1_500_000_000
+    assert max(r["log_time"] for r in rows) >= killed - 1_000_000_000, (killed - max(r["log_time"] for r in rows)) / 1e9
     proc = _run("localize", "-m", ws / "map.npz", "-s", ws / "long", "--rerun", out, "--max-frames", "3")
     assert proc.returncode == 0 and f"made {out} as it is" in proc.stderr, proc.stderr
     assert not part_path(out).exists() and out.exists()
 
 
 def test_a_map_beside_a_dead_writers_files_is_said(ws: Path, tmp_path: Path) -> None:
-    """A map opened beside the lock and temporary file of a build-map that died: one warning line (what, and
-    that the next build removes them); beside a lock a live writer holds, or nothing: no word."""
+    """A map opened beside the lock and temporary file of a build-map that died (by info, by localize): one
+    warning line (what, and that the next build removes them); beside a lock a live writer holds, or nothing:
+    no word."""
     import fcntl
     import shutil
 
@@ -505,6 +506,9 @@ def test_a_map_beside_a_dead_writers_files_is_said(ws: Path, tmp_path: Path) -> 
     lines = [ln for ln in said.stderr.splitlines() if ln.startswith("vpr-edge: warning:")]
     assert said.returncode == 0 and len(lines) == 1, said.stderr
     assert f"{out}: 2 file(s) beside it left by a build-map that died" in lines[0] and "next build-map" in lines[0]
+    ran = _run("localize", "-m", out, "-s", ws / "long", "--max-frames", "2", "-o", tmp_path / "run.csv")
+    assert ran.returncode == 0 and [ln for ln in ran.stderr.splitlines() if "left by a build-map" in ln] == \
+        lines, ran.stderr
     with open(lock) as held:                                           # a live writer's lock: not a leftover
         fcntl.flock(held.fileno(), fcntl.LOCK_EX)
         assert "1 file(s) beside it" in _run("info", out).stderr

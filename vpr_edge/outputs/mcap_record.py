@@ -13,9 +13,10 @@ at the frame's own time (``Match.stamp``: a bag's header stamps, a video's prese
 timestamps file's times), so that it lines up with the drive's recording; a frame without a time is logged at
 the time its answer was made (arrival), as is the publish time of every message.
 
-The file is written as the stream goes (``part``): into ``NAME.part``, in chunks handed to the system at least
-once a second (``FLUSH_INTERVAL_S``), so that after a kill mcap's own reader reads every answer but the last
-second's (``mcap.reader.NonSeekingReader``, ``iter_messages(log_time_order=False)``: the file has no summary).
+The file is written as the stream goes (``part``): into ``NAME.part``, in chunks handed to the system within a
+second of their answers, frames or none (``Flusher``, ``FLUSH_INTERVAL_S``), so that after a kill mcap's own
+reader reads every answer but the last second's (``mcap.reader.NonSeekingReader``,
+``iter_messages(log_time_order=False)``: the file has no summary).
 ``NAME.part`` becomes ``NAME`` when the stream ends or is stopped, with its summary; after a failure it stays,
 beside an older ``NAME``. The next run to ``NAME`` finalises a killed run's part into ``NAME`` (``recover``)."""
 from __future__ import annotations
@@ -33,7 +34,7 @@ from vpr_edge.errors import VprError, warn
 from vpr_edge.files.atomic import atomic_output
 from vpr_edge.frames.frame import Frame
 from vpr_edge.map import PlaceMap
-from vpr_edge.outputs.part import FLUSH_INTERVAL_S, finish, open_output, writing
+from vpr_edge.outputs.part import Flusher, finish, open_output, writing
 
 ANSWER, LOCATION, POSE = "/vpr/answer", "/vpr/location", "/vpr/pose"
 FRAME_ID = "map"
@@ -183,9 +184,10 @@ class McapSink:
             self.writer.add_metadata("vpr-edge", {"version": __version__, "results_schema": str(RESULTS_SCHEMA),
                                                   **(meta or {})})
             self.writer.flush()
+            self._flusher = Flusher(self.writer.flush)
+            self._stack.callback(self._flusher.stop)
             undo.pop_all()
         self._sequence = 0
-        self._flushed = time.monotonic()
 
     def _channel(self, topic: str, schema: dict) -> int:
         sid = self.writer.register_schema(schema["title"], "jsonschema", json.dumps(schema).encode())
@@ -195,8 +197,10 @@ class McapSink:
         self.writer.add_message(self._channels[topic], log_ns, json.dumps(msg).encode(), publish_ns, self._sequence)
 
     def write(self, match: Match, frame: Frame | None) -> None:
-        with writing(str(self.part)):
+        with writing(str(self.part)), self._flusher.lock:
+            self._flusher.check()
             self._write(match)
+            self._flusher.wrote()
 
     def _write(self, match: Match) -> None:
         m = match
@@ -216,17 +220,15 @@ class McapSink:
         elif not m.lost and m.x is not None and POSE in self._channels:
             self._add(POSE, pose_in_frame(m, ns), ns, arrival)
         self._sequence += 1
-        now = time.monotonic()
-        if now - self._flushed >= FLUSH_INTERVAL_S:
-            self.writer.flush()
-            self._flushed = now
 
     def close(self, complete: bool, failed: bool = False) -> None:
         """End the file with its summary and make it ``NAME``; after a failure (best effort: the disk may be
         full) it stays ``NAME.part`` beside an older ``NAME``, and a warning says so."""
+        self._flusher.stop()
         try:
             try:
                 with writing(str(self.part)):
+                    self._flusher.check()
                     self.writer.finish()
                     self._file.flush()
                     if not failed:

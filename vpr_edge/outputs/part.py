@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from vpr_edge.files.atomic import adopt_mode
 from vpr_edge.files.checks import output_target
 
 PART_SUFFIX = ".part"     # NAME.part: the output while its stream runs
-FLUSH_INTERVAL_S = 1.0    # a recording hands what it holds to the system at least this often, seconds
+FLUSH_INTERVAL_S = 1.0    # a recording hands each record to the system within this, seconds, frames or none
 
 # part, target -> what became of the dead run's output (said in a warning), or None when nothing was kept
 Recover = Callable[[Path, Path], "str | None"]
@@ -108,3 +109,44 @@ def finish(part: Path, target: Path, was: os.stat_result | None) -> None:
         os.fsync(f.fd)
     adopt_mode(part, was)
     os.replace(part, target)
+
+
+class Flusher:
+    """Hands a recording's records to the system (``flush``) within ``FLUSH_INTERVAL_S`` of their writing,
+    while frames come or not (a stalled camera): a thread flushes every half interval when ``wrote`` was
+    called since, holding ``lock`` (a writer that is not thread-safe holds it too); a failed flush is kept in
+    ``error`` for the next write to raise (``check``)."""
+
+    def __init__(self, flush: Callable[[], None], period: float = FLUSH_INTERVAL_S / 2) -> None:
+        self.lock = threading.Lock()
+        self.error: OSError | None = None
+        self._flush, self._period = flush, period
+        self._dirty = False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="vpr-edge-flush", daemon=True)
+        self._thread.start()
+
+    def check(self) -> None:
+        """Raise a failed flush's error (under ``lock``)."""
+        if self.error is not None:
+            raise self.error
+
+    def wrote(self) -> None:
+        """Records were written (under ``lock``): flushed at the next tick."""
+        self._dirty = True
+
+    def _run(self) -> None:
+        while not self._stop.wait(self._period):
+            with self.lock:
+                if self._dirty and self.error is None:
+                    self._dirty = False
+                    try:
+                        self._flush()
+                    except OSError as e:
+                        self.error = e
+
+    def stop(self) -> None:
+        """End the thread (its flush in progress first). Idempotent."""
+        self._stop.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join()

@@ -24,14 +24,14 @@ Timelines: ``frame`` (the frame's index in the stream) and, for frames with a ti
 ``log_time``, when the answer was logged.
 
 The ``.rrd`` file is written as the stream goes (``part``): Rerun's file sink streams into ``NAME.part``,
-flushed at least once a second (``FLUSH_INTERVAL_S``), so that after a kill ``RrdReader(...).stream()`` reads
-every frame but the last second's. ``NAME.part`` becomes ``NAME`` when the stream ends or is stopped; after a
-failure it stays, beside an older ``NAME``; the next run to ``NAME`` makes a killed run's part ``NAME``."""
+flushed within a second of each frame, frames or none (``Flusher``, ``FLUSH_INTERVAL_S``), so that after a
+kill ``RrdReader(...).stream()`` reads every frame but the last second's. ``NAME.part`` becomes ``NAME`` when
+the stream ends or is stopped; after a failure it stays, beside an older ``NAME``; the next run to ``NAME``
+makes a killed run's part ``NAME``."""
 from __future__ import annotations
 
 import contextlib
 import os
-import time
 import uuid
 from pathlib import Path
 
@@ -41,7 +41,7 @@ from vpr_edge.api import FIELDS, Match
 from vpr_edge.errors import warn
 from vpr_edge.frames.frame import Frame
 from vpr_edge.map import PlaceMap
-from vpr_edge.outputs.part import FLUSH_INTERVAL_S, finish, open_output
+from vpr_edge.outputs.part import Flusher, finish, open_output
 from vpr_edge.outputs.pictures import ReferencePictures, card, jpeg
 from vpr_edge.positions import EARTH_RADIUS_M
 
@@ -117,8 +117,9 @@ class RerunSink:
                 sinks.append(rr.FileSink(str(self.part)))
             self.rec = rr.RecordingStream(APP_ID, recording_id=str(uuid.uuid4()))
             self.rec.set_sinks(*sinks, default_blueprint=self._blueprint(Path(map_path).name, stream))
+            self._flusher = Flusher(self.rec.flush)     # the SDK's logging is thread-safe: no lock taken
+            self._stack.callback(self._flusher.stop)
             undo.pop_all()
-        self._flushed = time.monotonic()
         self._last: np.ndarray | None = None
         self._state: str | None = "start"     # the last status said: None answering, else why lost
         self._cards: dict[str, bytes] = {}
@@ -204,14 +205,12 @@ class RerunSink:
             elif self._state != "start":
                 rec.log("status", rr.TextLog(f"frame {m.frame_index}: answering again", level="INFO"))
             self._state = state
-        now = time.monotonic()
-        if now - self._flushed >= FLUSH_INTERVAL_S:
-            rec.flush()
-            self._flushed = now
+        self._flusher.wrote()
 
     def close(self, complete: bool, failed: bool = False) -> None:
         """End the recording and make it ``NAME``; after a failure it stays ``NAME.part`` beside an older
         ``NAME``, and a warning says so."""
+        self._flusher.stop()
         try:
             if not complete:
                 self.rec.log("status", self.rr.TextLog("the stream stopped early", level="WARN"))
