@@ -6,7 +6,7 @@ import sys
 
 import typer
 
-from vpr_edge.cli import bench, build_map, evaluate, info, localize, sample  # noqa: F401 - each registers its command
+from vpr_edge.cli import adapt, bench, build_map, evaluate, info, localize, sample  # noqa: F401 - each registers its command
 from vpr_edge.cli.common import app
 from vpr_edge.errors import Terminated, os_error_line, terminate_cleanly
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.encoders import encoder_from_arrays
+from vpr_edge.encoders.adapt import Adaptation
 from vpr_edge.encoders.standardise import RouteMean
 from vpr_edge.errors import VprError, warn
 from vpr_edge.features.registry import MAP_FRONT_ENDS
@@ -21,8 +22,8 @@ from vpr_edge.map.drives import Drives
 from vpr_edge.map.model import PlaceMap, Svm
 from vpr_edge.positions import Positions
 
-MAP_SCHEMA = 4          # 4: drives; 3: front end ("features") and encoder ("encoding", arrays encoder_*); SVM
-READS_SCHEMAS = (1, 2, 3, 4)  # 2: IFV only, int8/float16/float32 encodings; 1: IFV, float32
+MAP_SCHEMA = 5          # 5: adaptation (adapt_*, "adapted"); 4: drives; 3: front end ("features"), encoder ("encoding")
+READS_SCHEMAS = (1, 2, 3, 4, 5)  # 2: IFV only, int8/float16/float32 encodings; 1: IFV, float32
 
 
 def save_map(place_map: PlaceMap, path: str | os.PathLike[str], storage: str = DEFAULT_STORAGE) -> None:
@@ -45,6 +46,11 @@ def save_map(place_map: PlaceMap, path: str | os.PathLike[str], storage: str = D
         meta["index"] = {"kind": "ivf", "lists": len(place_map.index.centroids)}
     else:
         meta.pop("index", None)
+    if place_map.adaptation is not None:
+        arrays |= place_map.adaptation.to_arrays()
+        meta["adapted"] = place_map.meta.get("adapted") or {}
+    else:
+        meta.pop("adapted", None)
     stats = m.route_mean   # of the rows as stored: what a query is compared with
     arrays |= {"route_mean": stats.mean, "route_spread": stats.spread}
     if place_map.svm is not None:
@@ -60,7 +66,7 @@ _FIELDS: dict[str, tuple[type, ...]] = {
     "descriptor_dim": (int,), "features": (dict,), "features_fingerprint": (str,), "encoding": (dict,),
     "model": (dict,), "model_file": (str,), "model_path": (str,), "model_sha256": (str,), "codebook": (dict,),
     "svm": (dict,), "appended": (list,), "refs_folder": (str,), "alpha": (int, float), "positions": (dict,),
-    "drives": (list,), "index": (dict,),
+    "drives": (list,), "index": (dict,), "adapted": (dict,),
 }
 
 
@@ -153,7 +159,27 @@ def _assemble(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta:
             index = IvfIndex.from_arrays(arrays, len(names), stored.shape[1])
         except (ValueError, KeyError) as e:
             raise VprError(f"{path}: map's index is inconsistent ({e})") from None
-    return PlaceMap(stored, names, encoder, meta, svm, positions, drives, index, _route_mean(path, arrays, stored))
+    return PlaceMap(stored, names, encoder, meta, svm, positions, drives, index, _route_mean(path, arrays, stored),
+                    _adaptation(path, arrays, meta, stored.shape[1]))
+
+
+def _adaptation(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], meta: dict, dim: int
+                ) -> Adaptation | None:
+    """The map's learned adaptation (``encoders.adapt``; None: not adapted), checked against the encodings
+    and the metadata that says what it was learned on."""
+    held = [k for k in ("adapt_basis", "adapt_keep") if k in arrays]
+    if not held and meta.get("adapted") is None:
+        return None
+    if len(held) < 2 or meta.get("adapted") is None:
+        raise VprError(f"{path}: map is inconsistent (its adaptation needs adapt_basis, adapt_keep and the "
+                       "'adapted' metadata together)")
+    drives = meta["adapted"].get("drives", [])
+    if not isinstance(drives, list) or not all(isinstance(d, dict) for d in drives):
+        raise VprError(f"{path}: map metadata field 'adapted' needs a list of drives (objects)")
+    try:
+        return Adaptation.from_arrays(arrays, dim)
+    except ValueError as e:
+        raise VprError(f"{path}: map's adaptation is inconsistent ({e})") from None
 
 
 def _route_mean(path: str | os.PathLike[str], arrays: dict[str, np.ndarray], stored: Encodings) -> RouteMean | None:

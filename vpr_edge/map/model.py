@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.encoders import Encoder
+from vpr_edge.encoders.adapt import Adaptation
 from vpr_edge.encoders.standardise import RouteMean
 from vpr_edge.errors import InputError, Message, VprError, warn
 from vpr_edge.index.encodings import Encodings
@@ -41,8 +42,9 @@ class PlaceMap:
     encoder (``vpr_edge.encoders``), metadata (``features``: the front end's record; ``model_*`` for cnn;
     how the codebook was made), when built with ``--svm`` the per-place classifiers, when built with
     ``--positions`` where each reference place is (``positions.Positions``), and its ``drives``
-    (``map.drives.Drives``; not given: the references are one drive, named after their folder), and on large
-    maps an index of whole-route candidates (``index.ivf.IvfIndex``)."""
+    (``map.drives.Drives``; not given: the references are one drive, named after their folder), on large
+    maps an index of whole-route candidates (``index.ivf.IvfIndex``), and once adapted (``vpr-edge adapt``)
+    the learned ``adaptation``: the stored rows are mapped by it, and ``encode`` maps each query."""
 
     stored: Encodings
     names: list[str]
@@ -53,6 +55,7 @@ class PlaceMap:
     drives: Drives = None   # type: ignore[assignment]  # None -> one drive (set in __post_init__)
     index: IvfIndex | None = None   # whole-route candidates (``index.ivf``), on large maps
     stored_mean: RouteMean | None = None   # the references' statistics as the map file holds them (None: not held)
+    adaptation: Adaptation | None = None   # learned from labelled drives (``encoders.adapt``): rows stored mapped
 
     def __post_init__(self) -> None:
         if self.drives is None:
@@ -108,13 +111,14 @@ class PlaceMap:
 
         svm = None if self.svm is None else Svm(packed(self.svm.weights), self.svm.bias, self.svm.meta)
         return PlaceMap(packed(self.stored), self.names, self.encoder, self.meta, svm, self.positions, self.drives,
-                        self.index)
+                        self.index, adaptation=self.adaptation)
 
     def extended(self, more: "PlaceMap") -> "PlaceMap":
         """This map with ``more``'s drives after its own (``more`` encoded with this map's front end, encoder
         and model; VprError otherwise, or for a drive name the map has already). The result is in this map's
         storage: its stored rows are copied as they are (into RAM, never expanded to float32). An SVM is not
-        carried over (its classifiers would need retraining on the whole route)."""
+        carried over (its classifiers would need retraining on the whole route). On an adapted map ``more``'s
+        rows are mapped by the map's adaptation (``more`` itself must not be adapted)."""
         if not self.encoder.same_as(more.encoder) or more.meta.get("features_fingerprint") != self.fingerprint:
             raise VprError("appended drives must be described and encoded with the map's own front end, "
                            "model and codebook")
@@ -128,9 +132,13 @@ class PlaceMap:
             warn(Message("the map's SVM is dropped by {opt.append} (rebuild with {opt.svm} to train it on the "
                          "whole route)"))
         meta = {k: v for k, v in self.meta.items() if k != "svm"}
-        return PlaceMap(self.stored.concat(more.stored), self.names + more.names, self.encoder,
+        if more.adaptation is not None:
+            raise VprError("appended drives must be plain encodings, not an adapted map's")
+        rows = more.stored if self.adaptation is None else \
+            Encodings.pack(self.adaptation.apply(more.stored.dense()), self.stored.storage)
+        return PlaceMap(self.stored.concat(rows), self.names + more.names, self.encoder,
                         meta | {"vpr_edge_version": more.meta.get("vpr_edge_version")}, positions=positions,
-                        drives=drives)
+                        drives=drives, adaptation=self.adaptation)
 
     def labels(self) -> dict[str, int]:
         """Each place's label (``DRIVE/NAME``; in a map of one drive its ``NAME`` too) -> its index, for ground
@@ -151,5 +159,7 @@ class PlaceMap:
         return str(self.meta.get("features_fingerprint") or self.meta.get("model_sha256"))
 
     def encode(self, local: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-        """Local descriptors (B, N, K) (mask (B, N) or None) -> query encodings (B, D) for this map."""
-        return self.encoder.transform(local, mask)
+        """Local descriptors (B, N, K) (mask (B, N) or None) -> query encodings (B, D) for this map (mapped by
+        its adaptation, if adapted)."""
+        encodings = self.encoder.transform(local, mask)
+        return encodings if self.adaptation is None else self.adaptation.apply(encodings)
