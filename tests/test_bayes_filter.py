@@ -19,7 +19,7 @@ def config(**overrides) -> FilterConfig:
 
 def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=None):
     """The filter written as plain loops over (speed, place) and the off-map state (no hub means)."""
-    n_v, n_r = cfg.vmax + 1, rows.shape[1]
+    n_v, n_r = int(round(cfg.vmax / cfg.speed_step)) + 1, rows.shape[1]
     b = np.full((n_v, n_r), (1 - START_OFF) / (n_v * n_r))
     off = START_OFF
     scale_s = scale_w = 0.0
@@ -42,12 +42,15 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
         moved = np.zeros_like(b)
         ran = 0.0
         for v in range(n_v):
-            for p in range(n_r):
-                q = p + v
-                if q >= n_r or seq_of[q] != seq_of[p]:
-                    ran += mixed[v, p]
-                else:
-                    moved[v, q] += mixed[v, p]
+            s = v * cfg.speed_step   # places a frame: the whole places either side, each as near as it lies
+            lo = int(np.floor(s + 1e-9))
+            for d, share in ((lo, 1 - (s - lo)), (lo + 1, s - lo)):
+                for p in range(n_r):
+                    q = p + d
+                    if q >= n_r or seq_of[q] != seq_of[p]:
+                        ran += share * mixed[v, p]
+                    else:
+                        moved[v, q] += share * mixed[v, p]
         for sources, targets in graph.junctions:
             for v in range(n_v):
                 share = sum(moved[v, s] for s in sources) * JOIN
@@ -77,17 +80,18 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
     return np.array(answers), np.array(confs), b, off
 
 
+@pytest.mark.parametrize("step", [1.0, 0.5])
 @pytest.mark.parametrize("graph_of", [
     lambda r: RouteGraph.line(r),
     lambda r: RouteGraph(r, np.array([0, 9])),
     lambda r: RouteGraph(r, np.array([0, 8]), ((np.array([5]), np.array([12])),)),
 ])
-def test_filter_equals_a_plain_loop_forward_algorithm(graph_of):
+def test_filter_equals_a_plain_loop_forward_algorithm(graph_of, step):
     rng = np.random.default_rng(3)
     rows = rng.random((25, 17))
     rows[np.arange(10), np.arange(10)] += 1.5   # a trajectory to follow
     cues = [None if i % 5 == 0 else float(c) for i, c in enumerate(rng.random(25))]
-    cfg = config(hub_memory=0.0, vmax=3)
+    cfg = config(hub_memory=0.0, vmax=3, speed_step=step)
     graph = graph_of(17)
     f = BayesFilter(17, cfg, graph)
     got = [f.update(row, None, cue) for row, cue in zip(rows, cues)]

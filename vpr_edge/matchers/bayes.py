@@ -35,74 +35,31 @@ of the true place. A frame is lost below the line (``--target-precision``); ``wh
 missing mass: ``off-map`` (the off-map state), ``ambiguous`` (another stretch of the route) or ``settling``
 (spread thinly: not converged yet).
 
-State: (``vmax`` + 1, R) float64, the hub means and ``HUB_DELAY`` z-score rows, whatever the stream's
-length; a frame costs O(vmax² R). Every frame reads every place (no local search, no index).
+On a route of more than ``4 * window`` places a firm answer (confidence at least ``hold``) lets the next
+frame read only the places within ``window`` of it (``filter_window``: the rest of the on-map mass held as
+one number, its likelihood that of the off-map state), its row's median and spread read on a fixed ``probe``
+sample; ``span`` frames in every ``check`` read the whole route, as ``stream``'s local search does.
+
+State: (``vmax`` + 1, R) float64 (a window's columns while local), the hub means and ``HUB_DELAY`` z-score
+rows, whatever the stream's length; a frame costs O(vmax² R), O(vmax² window) while local.
 """
 from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, fields, replace
+from dataclasses import replace
 
 import numpy as np
 
 from vpr_edge.matchers.base import AMBIGUOUS, OFF_MAP, SETTLING
-from vpr_edge.matchers.constants import (CUE_FLOOR, HUB_DELAY, JOIN, MIN_SPREAD, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
+from vpr_edge.matchers.constants import (CUE_FLOOR, HUB_DELAY, MIN_SPREAD, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
                                          START_OFF)
+from vpr_edge.matchers.filter_config import FilterConfig
+from vpr_edge.matchers.filter_motion import Transitions, Window, regather
 from vpr_edge.matchers.motion import stands
 from vpr_edge.matchers.route import RouteGraph, places
+from vpr_edge.matchers.search_policy import local_next
 
-
-
-@dataclass(frozen=True)
-class FilterConfig:
-    """The filter's parameters (``params.STREAM_FILTER``: their defaults and meanings). ``still_memory`` and
-    ``seek_frames`` are read where the motion cue and the index query are made."""
-
-    vmax: int
-    speed_change: float
-    leave: float
-    enter: float
-    jump: float
-    temper: float
-    hub_memory: float
-    scale_memory: float
-    tolerance: int
-    rival_window: int
-    still: float
-    still_memory: int
-
-    def __post_init__(self) -> None:
-        for name in ("speed_change", "leave", "enter", "jump"):
-            if not 0.0 <= getattr(self, name) < 0.5:
-                raise ValueError(f"{name} must lie in [0, 0.5), got {getattr(self, name)}")
-        if self.vmax < 0 or self.tolerance < 0 or self.rival_window < 0:
-            raise ValueError(f"need vmax, tolerance and rival_window >= 0 (got {self.vmax}, {self.tolerance}, "
-                             f"{self.rival_window})")
-        if not 0.0 < self.temper <= 4.0:
-            raise ValueError(f"temper must lie in (0, 4], got {self.temper}")
-        if self.hub_memory < 0 or self.scale_memory < 1:
-            raise ValueError(f"need hub_memory >= 0 (0: off) and scale_memory >= 1 (got {self.hub_memory}, "
-                             f"{self.scale_memory})")
-        if not 0.0 <= self.still <= 1.0:
-            raise ValueError(f"still must be in [0, 1] (0: no motion cue), got {self.still}")
-
-    @classmethod
-    def of(cls, params: dict) -> "FilterConfig":
-        """The configuration from a parameter dict; keys it does not hold are ignored."""
-        names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in params.items() if k in names})
-
-
-def speed_kernel(n_speeds: int, change: float) -> np.ndarray:
-    """(V, V) row-stochastic: from speed v to v' (one step either way with probability ``change``; at the
-    ends the step that would leave the range stays)."""
-    k = np.zeros((n_speeds, n_speeds))
-    for v in range(n_speeds):
-        for w in (v - 1, v + 1):
-            k[v, min(max(w, 0), n_speeds - 1)] += change
-        k[v, v] += 1.0 - 2.0 * change
-    return k
 
 
 def robust_z(row: np.ndarray, sample: np.ndarray | None = None) -> np.ndarray:
@@ -123,55 +80,10 @@ def likelihood(z: np.ndarray, beta: float) -> tuple[np.ndarray, float]:
     return np.exp(ll - top), math.exp(-top)
 
 
-class Transitions:
-    """The motion model on a route graph: ``predict(b, off)`` moves the on-map mass ``b`` (V, R) and the
-    off-map mass one frame on (module docstring, step 1)."""
-
-    def __init__(self, graph: RouteGraph, config: FilterConfig) -> None:
-        self.graph, self.config = graph, config
-        self.n_speeds = config.vmax + 1
-        self.kernel = speed_kernel(self.n_speeds, config.speed_change)
-        self.cut = graph.cuts(1, self.n_speeds)   # (v, place): came from another drive
-        self.ends = graph.ends
-
-    def entry(self) -> np.ndarray:
-        """Where mass coming onto the map lands: (V, R), every place and speed alike, summing to 1."""
-        return np.full((self.n_speeds, self.graph.n_refs), 1.0 / (self.n_speeds * self.graph.n_refs))
-
-    def predict(self, b: np.ndarray, off: float) -> tuple[np.ndarray, float]:
-        """(V, R) on-map mass and the off-map mass -> the same one frame on (sums kept)."""
-        c = self.config
-        b = self.kernel.T @ b
-        ran = 0.0
-        moved = np.empty_like(b)
-        moved[0] = b[0]
-        r = b.shape[1]
-        for v in range(1, self.n_speeds):
-            if v >= r:
-                moved[v] = 0.0
-                ran += float(b[v].sum())
-                continue
-            moved[v, v:] = b[v, :-v]
-            moved[v, :v] = 0.0
-            ran += float(b[v, r - v:].sum())
-        cv, cc = self.cut
-        if len(cc):
-            ran += float(moved[cv, cc].sum())
-            moved[cv, cc] = 0.0
-        for sources, targets in self.graph.junctions:
-            share = moved[:, sources].sum(axis=1) * JOIN
-            moved[:, sources] *= 1.0 - JOIN
-            moved[:, targets] += (share / len(targets))[:, None]
-        on = float(moved.sum())
-        out = moved * (1.0 - c.leave - c.jump)
-        out += (c.jump * on + c.enter * off) * self.entry()
-        return out, off * (1.0 - c.enter) + c.leave * on + ran
-
-
 class BayesFilter:
     """The online ``stream-filter`` matcher (module docstring) over ``n_refs`` places of ``graph``'s route."""
 
-    searches_locally = False
+    searches_locally = True
 
     def __init__(self, n_refs: int, config: FilterConfig, graph: RouteGraph | None = None,
                  route: np.ndarray | None = None) -> None:
@@ -183,22 +95,33 @@ class BayesFilter:
             raise ValueError(f"route graph of {self.graph.n_refs} references for {n_refs}")
         self.route = None if route is None else np.asarray(route, bool)
         self.moves = Transitions(self.graph, config)
+        self.local = bool(config.window) and n_refs > 4 * config.window
+        rng = np.random.default_rng(0)
+        self._probe = np.sort(rng.choice(n_refs, min(n_refs, config.probe), replace=False)) if self.local else None
         self.reset()
 
     def reset(self) -> None:
         """Forget the stream: the prior (``START_OFF`` off the map, the rest anywhere on it)."""
         self.b = self.moves.entry() * (1.0 - START_OFF)
         self.off = START_OFF
+        self.cols: np.ndarray | None = None   # the window's places while local (None: every place)
+        self.elsewhere = 0.0                  # on-map mass outside the window
+        self._window: Window | None = None
+        self._held = 0                        # frames in a row with a firm answer
         self._hub = np.zeros(self.n_refs)
         self._seen = 0.0                      # moving frames in the hub means (an exponential count)
-        self._delay: deque[np.ndarray] = deque()   # the last HUB_DELAY frames' z-scores, not in the means yet
+        self._delay: deque[tuple[np.ndarray | None, np.ndarray]] = deque()   # last HUB_DELAY frames' z-scores
         self._scale = [0.0, 0.0]              # confidence-weighted sum of the answer's z, and of the weights
         self._mode, self._conf, self._why = 0, 0.0, SETTLING
-        self._marginal = self.b.sum(axis=0)
+        self._rank = self.b.sum(axis=0)
+        self._ranked: np.ndarray | None = None   # the places of ``_rank`` set last while local
 
     # --- the contract (``base.OnlineMatcher``) --------------------------------------------------------------
-    def wanted(self) -> None:
-        return None
+    def wanted(self) -> np.ndarray | None:
+        """The places the next ``update`` reads, then the probe (None: every place)."""
+        if self.cols is None:
+            return None
+        return np.concatenate([self.cols, self._probe])
 
     def position(self) -> None:
         return None
@@ -212,8 +135,8 @@ class BayesFilter:
         return self._why
 
     def ranking(self) -> np.ndarray:
-        """The posterior probability of each place (R,), summed over speeds."""
-        return self._marginal
+        """The posterior probability of each place (R,), summed over speeds (0 outside a window)."""
+        return self._rank
 
     @property
     def off_map(self) -> float:
@@ -229,30 +152,61 @@ class BayesFilter:
 
     def update(self, sim_row: np.ndarray, refs: np.ndarray | None = None,
                still: float | None = None) -> tuple[int, float]:
-        """The frame's similarities to every place (R,) and its motion cue -> (answer, confidence)."""
+        """The frame's similarities -> (answer, confidence): to every place (R,), or with ``refs`` exactly to
+        the places ``wanted()`` named; ``still``: the frame's motion cue."""
         s = np.asarray(sim_row, np.float64)
-        if refs is not None or s.shape != (self.n_refs,):
-            raise ValueError(f"similarity row must have shape ({self.n_refs},), got {s.shape}")
+        part, sample = self._split(s, refs)
         new = self._novelty(still)
-        z = self._evidence(s, new)
-        self.b, self.off = self.moves.predict(self.b, self.off)
+        z = self._evidence(part, sample, new)
+        self._predict()
         if still is not None and self.config.still:   # the cue observes the speed: 0 where the view is the same
-            self.b[0] *= max(1.0 - new, CUE_FLOOR)
-            self.b[1:] *= max(new, CUE_FLOOR)
-            self.off *= max(new, CUE_FLOOR) * (1.0 - 1.0 / self.moves.n_speeds) + max(1.0 - new, CUE_FLOOR) / self.moves.n_speeds
+            moving, standing = max(new, CUE_FLOOR), max(1.0 - new, CUE_FLOOR)
+            self.b[0] *= standing
+            self.b[1:] *= moving
+            share = moving * (1.0 - 1.0 / self.moves.n_speeds) + standing / self.moves.n_speeds
+            self.off *= share
+            self.elsewhere *= share
         lr, off_lr = likelihood(z, new * self.beta)
         self.b *= lr[None, :]
         self.off *= off_lr
-        total = float(self.b.sum()) + self.off
+        self.elsewhere *= off_lr   # places not read: on average as likely as off the map (E[lr] = 1)
+        total = float(self.b.sum()) + self.off + self.elsewhere
         if not math.isfinite(total) or total <= 0.0:
             raise FloatingPointError("the filter's posterior vanished")
         self.b /= total
         self.off /= total
-        self._read()
-        self._learn_scale(float(z[self._mode]))
+        self.elsewhere /= total
+        at = self._read()
+        self._learn_scale(float(z[at]))
+        self._follow()
         return self._mode, self._conf
 
     # --- steps ----------------------------------------------------------------------------------------------
+    def _split(self, s: np.ndarray, refs: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """A frame's similarities -> (those of the places held, the sample its median and spread are read
+        on; None: the row itself)."""
+        if self.cols is None:
+            if refs is not None or s.shape != (self.n_refs,):
+                raise ValueError(f"similarity row must have shape ({self.n_refs},), got {s.shape}")
+            return s, None
+        n = len(self.cols)
+        if refs is not None:
+            if len(refs) != n + len(self._probe) or len(s) != len(refs):
+                raise ValueError("similarities must cover the references wanted() named")
+            return s[:n], s[n:]
+        if s.shape != (self.n_refs,):
+            raise ValueError(f"similarity row must have shape ({self.n_refs},), got {s.shape}")
+        return s[self.cols], s[self._probe]
+
+    def _predict(self) -> None:
+        """The motion model, on the whole route or the window."""
+        if self.cols is None:
+            self.b, self.off = self.moves.predict(self.b, self.off)
+            return
+        c = self.config
+        self.b, self.off, self.elsewhere = self._window.predict(self.b, self.off, self.elsewhere, c.leave, c.jump,
+                                                                c.enter, self.moves.kernel)
+
     def _novelty(self, still: float | None) -> float:
         """How new a frame's view is, in [0, 1]: 1 for a moving camera (cue below ``still``, or no cue); for
         one the cue reads as standing, 1 - cue (0: its view again). The frame moves the state that share of
@@ -265,31 +219,46 @@ class BayesFilter:
             return 1.0
         return float(min(max(1.0 - still, 0.0), 1.0))
 
-    def _evidence(self, s: np.ndarray, new: float = 1.0) -> np.ndarray:
-        """The frame's robust z-scores less each place's running mean over the stream's moving frames (the
-        hubs). A frame joins the means ``HUB_DELAY`` frames late: as the camera passes a place its view
-        stands out for a few frames, and those are no hub (counted at once, they would lower the places just
-        passed against those ahead and push the answer ahead)."""
-        z = robust_z(s)
+    def _evidence(self, s: np.ndarray, sample: np.ndarray | None = None, new: float = 1.0) -> np.ndarray:
+        """The frame's robust z-scores (at the places held; median and spread from ``sample``, None: ``s``)
+        less each place's running mean over the stream's moving frames (the hubs). A frame joins the means
+        ``HUB_DELAY`` frames late: as the camera passes a place its view stands out for a few frames, and
+        those are no hub (counted at once, they would lower the places just passed against those ahead and
+        push the answer ahead)."""
+        z = robust_z(s, sample)
         m = self.config.hub_memory
         if not m:
             return z
-        out = z - self._hub
+        cols = self.cols
+        out = z - (self._hub if cols is None else self._hub[cols])
         if new < 1.0:   # a camera that may stand: its view again teaches no hub
             return out
-        self._delay.append(z.astype(np.float32))
+        self._delay.append((cols, z.astype(np.float32)))
         if len(self._delay) > HUB_DELAY:
             self._seen = self._seen * (1.0 - 1.0 / m) + 1.0
-            self._hub += (self._delay.popleft() - self._hub) / min(self._seen, m)
+            where, old = self._delay.popleft()
+            rate = 1.0 / min(self._seen, m)
+            if where is None:
+                self._hub += (old - self._hub) * rate
+            else:
+                self._hub[where] += (old - self._hub[where]) * rate
         return out
 
-    def _read(self) -> None:
-        """The answer, its confidence and the reason for doubt, from the posterior."""
+    def _mass_near(self, m: np.ndarray, intervals: list[tuple[int, int]]) -> float:
+        """The mass of ``m`` (one value per place held) at the places of ``intervals``."""
+        if self.cols is None:
+            return float(sum(m[lo:hi].sum() for lo, hi in intervals))
+        return float(sum(m[np.searchsorted(self.cols, lo):np.searchsorted(self.cols, hi)].sum()
+                         for lo, hi in intervals))
+
+    def _read(self) -> int:
+        """The answer, its confidence and the reason for doubt, from the posterior; returns the answer's
+        column among the places held."""
         m = self.b.sum(axis=0)
-        self._marginal = m
-        mode = int(np.argmax(m))
-        near = self.graph.near(mode, self.config.tolerance)
-        conf = float(sum(m[lo:hi].sum() for lo, hi in near))
+        self._set_rank(m)
+        at = int(np.argmax(m))
+        mode = at if self.cols is None else int(self.cols[at])
+        conf = self._mass_near(m, self.graph.near(mode, self.config.tolerance))
         self._mode, self._conf = mode, min(conf, 1.0)
         rest = max(1.0 - conf, 0.0)
         if self.off >= 0.5 * rest:
@@ -297,10 +266,44 @@ class BayesFilter:
         else:
             far = self.graph.near(mode, max(self.config.rival_window, 2 * self.config.tolerance + 1))
             outside = m.copy()
-            outside[places(far)] = 0.0
+            held = places(far) if self.cols is None else self._window.positions(places(far))
+            outside[held if self.cols is None else held[0][held[1]]] = 0.0
             window = 2 * self.config.tolerance + 1
             rival = float(np.convolve(outside, np.ones(window), "same").max()) if len(outside) else 0.0
             self._why = AMBIGUOUS if rival >= 0.5 * rest else SETTLING
+        return at
+
+    def _set_rank(self, m: np.ndarray) -> None:
+        """``ranking()``'s array from the marginal ``m`` of the places held."""
+        if self.cols is None:
+            self._rank, self._ranked = m, None
+            return
+        if self._ranked is None or len(self._rank) != self.n_refs or self._rank is m:
+            self._rank = np.zeros(self.n_refs)
+        else:
+            self._rank[self._ranked] = 0.0
+        self._rank[self.cols] = m
+        self._ranked = self.cols
+
+    def _follow(self) -> None:
+        """Choose the places the next frame reads (module docstring): the window around a firm answer, or
+        every place; the mass moves with the choice."""
+        if not self.local:
+            return
+        self._held = self._held + 1 if self._conf >= self.config.hold else 0
+        if local_next(self._held, self.config.check, self.config.span):
+            new = places(self.graph.near(self._mode, self.config.window))
+        else:
+            new = None
+        if new is None and self.cols is None:
+            return
+        cols = self.cols if self.cols is not None else np.arange(self.n_refs)
+        target = new if new is not None else np.arange(self.n_refs)
+        self.b, self.elsewhere = regather(self.b, cols, self.elsewhere, target, self.n_refs)
+        if new is None:
+            self.elsewhere = 0.0
+        self.cols = new
+        self._window = None if new is None else Window(self.graph, new, self.moves.steps)
 
     def _learn_scale(self, z_answer: float) -> None:
         """Add the answered place's z-score to the scale's mean, weighted by the answer's confidence."""

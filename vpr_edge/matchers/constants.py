@@ -42,3 +42,6 @@ JOIN = 0.5               # the share of a junction's source places' mass that cr
 SCALE_PRIOR, SCALE_PRIOR_FRAMES, SCALE_BOUNDS = 2.0, 10.0, (0.5, 8.0)
 HUB_DELAY = 8            # frames a frame's z-scores wait before they join the hub means (the passing place's view)
 CUE_FLOOR = 0.05        # the motion cue's weight of the speed it contradicts (the cue may be wrong)
+# the stream filter's window (``filter_motion.Window``): a column's predecessor lies in another drive (no mass
+# comes in) or outside the window (its share of the mass held elsewhere comes in)
+FROM_ANOTHER_DRIVE, FROM_ELSEWHERE = -1, -2

@@ -87,6 +87,8 @@ STREAM: dict[str, Param] = {
 # on nordland-dev, reported on Corridor (docs/decisions.md, "The stream filter's parameters")
 STREAM_FILTER: dict[str, Param] = {
     "vmax": Param(4, "fastest speed followed, in places per frame (speeds 0..vmax)"),
+    "speed_step": Param(1.0, "the speeds followed are multiples of this many places per frame (0.5: a camera at "
+                             "half or one and a half times the mapping drive's speed is followed too)"),
     "speed_change": Param(0.03, "probability a frame's speed is one place a frame faster (and the same slower)"),
     "leave": Param(0.01, "probability a frame leaves the map (a detour, a road the map does not hold)"),
     "enter": Param(0.05, "probability a frame off the map comes back onto it, at any place"),
@@ -106,6 +108,9 @@ STREAM_FILTER: dict[str, Param] = {
                         "and believes it that much less (1 - cue); 0 = no cue"),
     "still_memory": Param(MEMORY, "motion cue: moving frames whose median step (1 - cosine of encodings) is the "
                                   "stream's typical moving step"),
+    "window": STREAM["window"], "probe": STREAM["probe"], "check": STREAM["check"], "span": STREAM["span"],
+    "hold": Param(0.9, "local search: an answer is firm (the next frame may read its window only) at this "
+                       "confidence"),
 }
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),

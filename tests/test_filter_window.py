@@ -1,0 +1,88 @@
+"""The stream filter's local search (``matchers.filter_motion.Window``): on a window of every place it is the
+whole-route motion model; on a part it keeps the mass; the filter that reads windows answers as the one that
+reads every place, reading far fewer similarities."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vpr_edge.matchers.base import run_online
+from vpr_edge.matchers.bayes import BayesFilter, FilterConfig
+from vpr_edge.matchers.filter_motion import Transitions, Window, regather
+from vpr_edge.matchers.params import STREAM_FILTER
+from vpr_edge.matchers.route import RouteGraph
+
+
+def config(**overrides) -> FilterConfig:
+    return FilterConfig.of({k: p.default for k, p in STREAM_FILTER.items()} | overrides)
+
+
+def graph() -> RouteGraph:
+    """Three drives of 30, 25 and 35 places; the first's last places join the third's first."""
+    return RouteGraph(90, np.array([0, 30, 55]), ((np.array([28, 29]), np.array([55, 56])),))
+
+
+@pytest.mark.parametrize("step", [1.0, 0.5])
+def test_a_window_of_every_place_is_the_whole_route_model(step: float) -> None:
+    rng = np.random.default_rng(1)
+    g, cfg = graph(), config(jump=0.01, leave=0.02, enter=0.1, speed_step=step)
+    whole = Transitions(g, cfg)
+    b = rng.random((len(Transitions(g, cfg).steps), g.n_refs))
+    b /= b.sum() * 1.25
+    want_b, want_off = whole.predict(b, 0.2)
+    got_b, got_off, got_else = Window(g, np.arange(g.n_refs), whole.steps).predict(
+        b, 0.2, 0.0, cfg.leave, cfg.jump, cfg.enter, whole.kernel)
+    np.testing.assert_allclose(got_b, want_b, atol=1e-15)
+    assert abs(got_off - want_off) < 1e-12 and got_else == 0.0
+
+
+@pytest.mark.parametrize("step", [1.0, 0.5])
+def test_a_window_keeps_the_mass_and_matches_the_whole_route_inside(step: float) -> None:
+    """Mass held only inside the window: after one step the window's columns are the whole-route model's,
+    save the share carried in from elsewhere, and window + elsewhere + off-map sum to what they did."""
+    rng = np.random.default_rng(2)
+    g, cfg = graph(), config(jump=0.0, leave=0.0, enter=0.0, speed_step=step)
+    cols = np.arange(10, 40)
+    n_v = len(Transitions(g, cfg).steps)
+    b = np.zeros((n_v, g.n_refs))
+    b[:, 20:26] = rng.random((n_v, 6))
+    b /= b.sum() * 1.25
+    whole = Transitions(g, cfg)
+    want_b, want_off = whole.predict(b, 0.2)
+    got_b, got_off, got_else = Window(g, cols, whole.steps).predict(b[:, cols], 0.2, 0.0, 0.0, 0.0, 0.0,
+                                                                     whole.kernel)
+    np.testing.assert_allclose(got_b, want_b[:, cols], atol=1e-15)
+    assert abs(got_b.sum() + got_off + got_else - 1.0) < 1e-12
+    assert abs(got_off - want_off) < 1e-12
+
+
+def test_regather_moves_mass_between_windows() -> None:
+    rng = np.random.default_rng(3)
+    b = rng.random((5, 20))
+    cols, new = np.arange(100, 120), np.arange(110, 140)
+    out, elsewhere = regather(b, cols, 0.3, new, 1000)
+    assert out.shape == (5, 30)
+    np.testing.assert_array_equal(out[:, :10], b[:, 10:])
+    assert abs(out.sum() + elsewhere - (b.sum() + 0.3)) < 1e-12
+
+
+def test_the_filter_reading_windows_answers_as_the_whole_route_filter() -> None:
+    """A long route (2,000 places, a window of 40): a noisy drive at one place a frame. The local filter reads
+    the window and probe on most frames and gives the whole-route filter's answers."""
+    rng = np.random.default_rng(4)
+    n, q = 2000, 300
+    truth = 500 + np.arange(q)
+    sim = rng.normal(0.0, 0.05, (q, n))
+    sim[np.arange(q), truth] += 0.25
+    sim[np.arange(q), truth + 1] += 0.12
+    local = BayesFilter(n, config(window=40, probe=256))
+    whole = BayesFilter(n, config(window=0))
+    read, answers = [], []
+    for row in sim:
+        want = local.wanted()
+        read.append(n if want is None else len(want))
+        answers.append(local.update(row if want is None else row[want], want)[0])
+    ref = run_online(whole, sim, k=1).refs
+    assert np.mean(np.array(read) < n) > 0.8
+    assert np.mean(np.array(answers) == np.asarray(ref)) > 0.98
+    assert np.mean(np.abs(np.array(answers) - truth)[50:] <= 1) > 0.98
