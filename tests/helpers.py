@@ -516,3 +516,21 @@ def driven_encodings(n_refs: int, frames: int, noise: float, seed: int) -> tuple
         queries.append(refs[int(pos)] + noise * rng.normal(size=64) / 8)
     q = np.asarray(queries, np.float32)
     return refs, q / np.linalg.norm(q, axis=1, keepdims=True), np.asarray(truth)
+
+
+def mcap_answer_frames(path) -> list[int]:
+    """The frame indices of the ``/vpr/answer`` messages mcap's own reader finds in a recording that may be
+    cut short (a kill, a full disk: the file has no summary); reading stops where the file ends."""
+    import json
+
+    from mcap.reader import NonSeekingReader
+
+    frames = []
+    with open(path, "rb") as f:
+        try:
+            for _, channel, message in NonSeekingReader(f).iter_messages(log_time_order=False):
+                if channel.topic == "/vpr/answer":
+                    frames.append(json.loads(message.data)["frame_index"])
+        except Exception:   # noqa: BLE001 - the file ends where the writer stopped
+            pass
+    return frames

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import pytest
 
+from helpers import mcap_answer_frames
+
 from vpr_edge.files.temps import dead_writers_files
 from vpr_edge.map import load_map
 from vpr_edge.resources import sample_folder
@@ -94,16 +96,7 @@ def _readable_recording(part: Path) -> None:
     if not part.exists():
         return
     if part.name.startswith("run.mcap"):
-        from mcap.reader import NonSeekingReader
-
-        frames = []
-        with open(part, "rb") as f:
-            try:
-                for _, channel, message in NonSeekingReader(f).iter_messages(log_time_order=False):
-                    if channel.topic == "/vpr/answer":
-                        frames.append(json.loads(message.data)["frame_index"])
-            except Exception:   # noqa: BLE001 - cut where the kill came
-                pass
+        frames = mcap_answer_frames(part)
         assert frames == list(range(len(frames))), part
     else:
         from rerun.chunk import RrdReader

@@ -3,7 +3,6 @@ camera that stalls): what a kill then finds in ``NAME.part``, read with mcap's a
 the writer still runs. The cost of that flushing per frame: ``bench-outputs`` runs and prints its ratios."""
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import time
@@ -11,6 +10,8 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
+
+from helpers import mcap_answer_frames
 
 from vpr_edge.api import Match
 from vpr_edge.map.drives import Drives
@@ -29,17 +30,7 @@ def _answers(n: int) -> list[Match]:
 
 def _mcap_frames(part: Path) -> list[int]:
     """The answers' frame indices that mcap's reader finds in a recording still being written."""
-    from mcap.reader import NonSeekingReader
-
-    frames = []
-    with open(part, "rb") as f:
-        try:
-            for _, channel, message in NonSeekingReader(f).iter_messages(log_time_order=False):
-                if channel.topic == "/vpr/answer":
-                    frames.append(json.loads(message.data)["frame_index"])
-        except Exception:   # noqa: BLE001 - the file ends where the writer is
-            pass
-    return frames
+    return mcap_answer_frames(part)
 
 
 def _rrd_frames(part: Path) -> list[int]:

@@ -2,7 +2,6 @@
 ``NAME.part``, read back with mcap's own reader, in order from the first frame (a small tmpfs: root only)."""
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import subprocess
@@ -11,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from helpers import mcap_answer_frames
+
 CLI = [sys.executable, "-m", "vpr_edge"]
 
 
@@ -18,7 +19,6 @@ CLI = [sys.executable, "-m", "vpr_edge"]
 def test_a_full_disk_keeps_the_older_mcap_and_the_answers_in_its_part(tmp_path: Path, small_refs: Path,
                                                                        small_queries: Path) -> None:
     pytest.importorskip("mcap")
-    from mcap.reader import NonSeekingReader
 
     proc = subprocess.run([*CLI, "build-map", small_refs, "-o", tmp_path / "m.npz", "--components", "4"],
                           capture_output=True, text=True, timeout=300)
@@ -44,14 +44,7 @@ def test_a_full_disk_keeps_the_older_mcap_and_the_answers_in_its_part(tmp_path: 
         assert len(errors) == 1 and "No space left on device" in errors[0] and f"{out}.part" in errors[0]
         assert f"{out}.part: the recording of a run that failed; {out} left as it was" in proc.stderr
         assert out.read_bytes() == older
-        frames = []
-        with open(f"{out}.part", "rb") as f:
-            try:
-                for _, channel, message in NonSeekingReader(f).iter_messages(log_time_order=False):
-                    if channel.topic == "/vpr/answer":
-                        frames.append(json.loads(message.data)["frame_index"])
-            except Exception:   # noqa: BLE001 - the file ends where the disk filled
-                pass
+        frames = mcap_answer_frames(f"{out}.part")
         assert frames == list(range(len(frames))) and len(frames) > 10, frames
     finally:
         subprocess.run(["umount", str(disk)], check=True)
