@@ -14,6 +14,7 @@ import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -387,40 +388,31 @@ def test_full_disk_behind_stdout(ws: Path) -> None:
 
 
 @pytest.mark.parametrize("suffix", [".csv", ".jsonl", ".mcap"])
-def test_full_disk_keeps_the_older_log_and_the_new_lines(ws: Path, tmp_path: Path, suffix: str) -> None:
+def test_full_disk_keeps_the_older_log_and_the_new_lines(ws: Path, tmp_path: Path, suffix: str,
+                                                         full_disk: Callable[[str, bytes], Path]) -> None:
     """A disk that fills mid-stream: exit 2 in one line, the older log byte for byte, the lines in NAME.part."""
-    disk = tmp_path / "disk"
-    disk.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)],
-                                           capture_output=True).returncode != 0:
-        pytest.skip("a small tmpfs needs root (mount)")
-    try:
-        out = disk / f"results{suffix}"
-        older = b"an older, complete log\n" * 600                          # 13.8 kB
-        out.write_bytes(older)
-        (disk / "filler").write_bytes(b"x" * (64 * 1024 - len(older) - 8 * 1024))
-        queries = tmp_path / "queries"                                       # a stream longer than the room
-        queries.mkdir()
-        frames = sorted((ws / "queries").iterdir()) * 4
-        for i, f in enumerate(frames):
-            shutil.copy(f, queries / f"{i:07d}{f.suffix}")
-        proc = subprocess.run([sys.executable, "-m", "vpr_edge", "localize", "-m", str(ws / "good.npz"), "-s",
-                               str(queries), "-o", str(out)], capture_output=True, text=True, timeout=300)
-        assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
-        errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("vpr-edge: error:")]
-        assert len(errors) == 1 and "No space left on device" in errors[0], proc.stderr
-        assert out.read_bytes() == older
-        if suffix == ".mcap":
-            assert f"{out}.part: the recording of a run that failed; {out} left as it was" in proc.stderr
-            assert Path(f"{out}.part").stat().st_size > 0
-            return
-        assert f"kept in {out}.part (the run failed); {out} left as it was" in proc.stderr, proc.stderr
-        text = Path(f"{out}.part").read_text()
-        assert text.endswith("\n") and len(text.splitlines()) > 10
-        if suffix == ".jsonl":
-            assert [json.loads(ln)["frame_index"] for ln in text.splitlines()] == list(range(len(text.splitlines())))
-    finally:
-        subprocess.run(["umount", str(disk)], check=True)
+    older = b"an older, complete log\n" * 600                              # 13.8 kB
+    out = full_disk(f"results{suffix}", older)
+    queries = tmp_path / "queries"                                       # a stream longer than the room
+    queries.mkdir()
+    frames = sorted((ws / "queries").iterdir()) * 4
+    for i, f in enumerate(frames):
+        shutil.copy(f, queries / f"{i:07d}{f.suffix}")
+    proc = subprocess.run([sys.executable, "-m", "vpr_edge", "localize", "-m", str(ws / "good.npz"), "-s",
+                           str(queries), "-o", str(out)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("vpr-edge: error:")]
+    assert len(errors) == 1 and "No space left on device" in errors[0], proc.stderr
+    assert out.read_bytes() == older
+    if suffix == ".mcap":
+        assert f"{out}.part: the recording of a run that failed; {out} left as it was" in proc.stderr
+        assert Path(f"{out}.part").stat().st_size > 0
+        return
+    assert f"kept in {out}.part (the run failed); {out} left as it was" in proc.stderr, proc.stderr
+    text = Path(f"{out}.part").read_text()
+    assert text.endswith("\n") and len(text.splitlines()) > 10
+    if suffix == ".jsonl":
+        assert [json.loads(ln)["frame_index"] for ln in text.splitlines()] == list(range(len(text.splitlines())))
 
 
 def test_warnings_for_ignored_input(ws: Path, tmp_path: Path) -> None:

@@ -30,7 +30,7 @@ from vpr_edge.map.io import load_map, save_map
 from vpr_edge.map.model import PlaceMap
 from vpr_edge.matchers import get_matcher
 from vpr_edge.threads import use_threads
-from vpr_edge_bench.route_halves import half_bounds
+from vpr_edge_bench.route_halves import half_bounds, other_half
 from vpr_edge_bench.runner import parser, run_checked
 
 TOLERANCES = (0, 1, 2)
@@ -70,44 +70,67 @@ def main(argv: Sequence[str] | None = None) -> int:
     return run_checked(__name__, lambda: _run(a))
 
 
-def _run(a: argparse.Namespace) -> int:
-    frames = list_images(a.streams / "aligned")
-    source_map = a.streams / "map.npz"
-    full = load_map(source_map)
-    n = len(full.names)
-    if len(frames) != n:
-        raise VprError(f"{a.streams}/aligned: {len(frames)} frames, but the map has {n} places")
-    test_half = "second" if a.learn_half == "first" else "first"
-    (llo, lhi), (tlo, thi) = half_bounds(n, a.learn_half), half_bounds(n, test_half)
-    a.work.mkdir(parents=True, exist_ok=True)
-    link_frames(frames[llo:lhi], a.work / "learn")
-    write_ground_truth(a.work / "learn.csv", [[i] for i in range(llo, lhi)])
-    link_frames(frames[tlo:thi], a.work / "test")
-    write_ground_truth(a.work / "test.csv", [[i] for i in range(thi - tlo)])
-    adapted = a.work / "adapted.npz"
-    extra = [] if a.rank is None else ["--rank", str(a.rank)]
-    print("$ vpr-edge adapt " + " ".join([str(source_map), str(a.work / "learn"), "--gt", str(a.work / "learn.csv"),
-                                           "-o", str(adapted)] + extra))
-    kw = {} if a.rank is None else {"rank": a.rank}
-    print(adapt_map(source_map, [LabelledDrive(str(a.work / "learn"), str(a.work / "learn.csv"))], adapted,
-                    ort_threads=use_threads(a.threads), **kw))
+def split_halves(places: int, learn_half: str) -> tuple[tuple[int, int], tuple[int, int]]:
+    """The places [lo, hi) learned from (``learn_half``) and those scored (the other half) of a route of
+    ``places``: they share none."""
+    return half_bounds(places, learn_half), half_bounds(places, other_half(learn_half))
+
+
+Scores = dict[tuple[str, bool, int], tuple[float, float, float]]
+
+
+def adapt_and_score(source_map: Path, learn: LabelledDrive, test: Path, test_gt: Path,
+                    halves: tuple[tuple[int, int], tuple[int, int]], work: Path, rank: int | None = None,
+                    threads: int = 1, test_name: str = "test") -> Scores:
+    """Adapt ``source_map`` on the drive ``learn`` (WORK/adapted.npz), cut the plain and adapted maps to the
+    scored places of ``halves`` (``split_halves``; WORK/test.plain.npz, WORK/test.adapted.npz, one drive
+    ``test_name``) and score the frames ``test`` (labelled by ``test_gt`` against the cut maps) on each; prints
+    the commands run and the table -> (map kind, standardised, tolerance) -> (single R@1, stream R@1, stream
+    mapped right)."""
+    (llo, lhi), (tlo, thi) = halves
+    adapted = work / "adapted.npz"
+    extra = [] if rank is None else ["--rank", str(rank)]
+    print("$ vpr-edge adapt " + " ".join([str(source_map), learn.frames, "--gt", learn.truth, "-o", str(adapted)]
+                                         + extra))
+    kw = {} if rank is None else {"rank": rank}
+    print(adapt_map(source_map, [learn], adapted, ort_threads=use_threads(threads), **kw))
+    storage = load_map(source_map).stored.storage
     maps = {}
     for kind, path in (("plain", source_map), ("adapted", adapted)):
-        maps[kind] = a.work / f"test.{kind}.npz"
-        save_map(cut_map(load_map(path), tlo, thi, f"{test_half}-half"), maps[kind], storage=full.stored.storage)
+        maps[kind] = work / f"test.{kind}.npz"
+        save_map(cut_map(load_map(path), tlo, thi, test_name), maps[kind], storage=storage)
     print(f"learned on places {llo}-{lhi - 1} ({lhi - llo} frames); tested on places {tlo}-{thi - 1} "
           f"({thi - tlo} frames, maps cut to them)")
     matchers = {m: get_matcher(m) for m in ("single", "stream")}
     print("| map | cosines | tolerance | single R@1 | stream R@1 | stream mapped right |")
     print("|---|---|---|---|---|---|")
+    scores: Scores = {}
     for kind, path in maps.items():
         for std in (False, True):
-            print(f"$ vpr-edge evaluate -m {path} -q {a.work / 'test'} --gt {a.work / 'test.csv'} --modes "
+            print(f"$ vpr-edge evaluate -m {path} -q {test} --gt {test_gt} --modes "
                   f"single,stream --tolerance T{' --standardise' if std else ''}")
             for tol in TOLERANCES:
-                ev = evaluate(Source(map=path, queries=a.work / "test", threads=a.threads, standardise=std),
-                              Truth(gt=a.work / "test.csv"), matchers, tol)
+                ev = evaluate(Source(map=path, queries=test, threads=threads, standardise=std), Truth(gt=test_gt),
+                              matchers, tol)
                 s, st = ev.reports["single"], ev.reports["stream"]
+                scores[kind, std, tol] = (s.recall[1], st.recall[1], st.mapped_right)
                 print(f"| {kind} | {'standardised' if std else 'raw'} | {tol} | {s.recall[1]:.3f} | "
                       f"{st.recall[1]:.3f} | {st.mapped_right:.3f} |")
+    return scores
+
+
+def _run(a: argparse.Namespace) -> int:
+    frames = list_images(a.streams / "aligned")
+    source_map = a.streams / "map.npz"
+    n = len(load_map(source_map).names)
+    if len(frames) != n:
+        raise VprError(f"{a.streams}/aligned: {len(frames)} frames, but the map has {n} places")
+    halves = (llo, lhi), (tlo, thi) = split_halves(n, a.learn_half)
+    a.work.mkdir(parents=True, exist_ok=True)
+    link_frames(frames[llo:lhi], a.work / "learn")
+    write_ground_truth(a.work / "learn.csv", [[i] for i in range(llo, lhi)])
+    link_frames(frames[tlo:thi], a.work / "test")
+    write_ground_truth(a.work / "test.csv", [[i] for i in range(thi - tlo)])
+    adapt_and_score(source_map, LabelledDrive(str(a.work / "learn"), str(a.work / "learn.csv")), a.work / "test",
+                    a.work / "test.csv", halves, a.work, a.rank, a.threads, f"{other_half(a.learn_half)}-half")
     return 0
