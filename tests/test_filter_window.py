@@ -86,3 +86,36 @@ def test_the_filter_reading_windows_answers_as_the_whole_route_filter() -> None:
     assert np.mean(np.array(read) < n) > 0.8
     assert np.mean(np.array(answers) == np.asarray(ref)) > 0.98
     assert np.mean(np.abs(np.array(answers) - truth)[50:] <= 1) > 0.98
+
+
+def test_on_a_map_with_an_index_the_state_never_spans_the_route() -> None:
+    """The same long route with an index (``step`` with candidates): a frame that would read the whole route
+    reads around the index's candidates and the places held. The answers are the whole-route filter's, no
+    frame reads every place, and a re-entry far along the route is found through the candidates."""
+    from vpr_edge.matchers.base import step
+
+    rng = np.random.default_rng(5)
+    n, q = 2000, 300
+    truth = np.r_[500 + np.arange(150), 1500 + np.arange(150)]   # a jump far along the route at frame 150
+    sim = rng.normal(0.0, 0.05, (q, n))
+    sim[np.arange(q), truth] += 0.25
+    sim[np.arange(q), truth + 1] += 0.12
+    local = BayesFilter(n, config(window=40, probe=256))
+    whole = BayesFilter(n, config(window=0))
+    read, answers = [], []
+    for i, row in enumerate(sim):
+        decoys = rng.integers(0, n, 5)
+        candidates = lambda: np.r_[truth[i] + rng.integers(-2, 3), decoys]   # an index: right among decoys
+        got = {}
+
+        def rows(refs, row=row):
+            got["n"] = n if refs is None else len(refs)
+            return row if refs is None else row[refs]
+
+        answers.append(step(local, rows, None, candidates)[0])
+        read.append(got["n"])
+        assert local.cols is not None and len(local.cols) < n
+    ref = run_online(whole, sim, k=1).refs
+    assert max(read) < n
+    assert np.mean(np.array(answers) == np.asarray(ref)) > 0.95
+    assert np.mean(np.abs(np.array(answers) - truth)[np.r_[20:150, 170:300]] <= 1) > 0.98

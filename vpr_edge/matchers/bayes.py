@@ -36,12 +36,15 @@ missing mass: ``off-map`` (the off-map state), ``ambiguous`` (another stretch of
 (spread thinly: not converged yet).
 
 On a route of more than ``4 * window`` places a firm answer (confidence at least ``hold``) lets the next
-frame read only the places within ``window`` of it (``filter_window``: the rest of the on-map mass held as
-one number, its likelihood that of the off-map state), its row's median and spread read on a fixed ``probe``
-sample; ``span`` frames in every ``check`` read the whole route, as ``stream``'s local search does.
+frame read only the places within ``window`` of it (``filter_motion.Window``: the rest of the on-map mass
+held as one number, *elsewhere*, its likelihood that of the off-map state), its row's median and spread read
+on a fixed ``probe`` sample; ``span`` frames in every ``check`` read the whole route, as ``stream``'s local
+search does. On such a route with an index, a frame that would read the whole route reads instead the places
+within ``seek`` of the index's candidates and within ``max(seek, window / 4)`` of the ``peaks`` most probable
+places held (``around``): the state never spans the whole route.
 
-State: (``vmax`` + 1, R) float64 (a window's columns while local), the hub means and ``HUB_DELAY`` z-score
-rows, whatever the stream's length; a frame costs O(vmax² R), O(vmax² window) while local.
+State: (``vmax`` + 1, R) float64 (the columns held while local), the hub means and ``HUB_DELAY`` z-score
+rows, whatever the stream's length; a frame costs O(vmax² R), O(vmax² W) over W places held.
 """
 from __future__ import annotations
 
@@ -58,7 +61,7 @@ from vpr_edge.matchers.filter_config import FilterConfig
 from vpr_edge.matchers.filter_motion import Transitions, Window, regather
 from vpr_edge.matchers.motion import stands
 from vpr_edge.matchers.route import RouteGraph, places
-from vpr_edge.matchers.search_policy import local_next
+from vpr_edge.matchers.search_policy import around_candidates, best_hypotheses, local_next
 
 
 
@@ -101,26 +104,49 @@ class BayesFilter:
         self.reset()
 
     def reset(self) -> None:
-        """Forget the stream: the prior (``START_OFF`` off the map, the rest anywhere on it)."""
-        self.b = self.moves.entry() * (1.0 - START_OFF)
+        """Forget the stream: the prior (``START_OFF`` off the map, the rest anywhere on it; on a long route
+        held as *elsewhere*, no place yet)."""
         self.off = START_OFF
-        self.cols: np.ndarray | None = None   # the window's places while local (None: every place)
-        self.elsewhere = 0.0                  # on-map mass outside the window
+        self.cols: np.ndarray | None = None   # the places held while local (None: every place)
+        self.elsewhere = 0.0                  # on-map mass outside the places held
         self._window: Window | None = None
+        self._whole = True                    # the next frame reads the whole route (or around candidates)
+        if self.local:
+            self.b, self.cols = np.zeros((self.moves.n_speeds, 0)), np.zeros(0, np.int64)
+            self.elsewhere = 1.0 - START_OFF
+        else:
+            self.b = self.moves.entry() * (1.0 - START_OFF)
         self._held = 0                        # frames in a row with a firm answer
         self._hub = np.zeros(self.n_refs)
         self._seen = 0.0                      # moving frames in the hub means (an exponential count)
         self._delay: deque[tuple[np.ndarray | None, np.ndarray]] = deque()   # last HUB_DELAY frames' z-scores
         self._scale = [0.0, 0.0]              # confidence-weighted sum of the answer's z, and of the weights
         self._mode, self._conf, self._why = 0, 0.0, SETTLING
-        self._rank = self.b.sum(axis=0)
+        self._rank = self.b.sum(axis=0) if self.cols is None else np.zeros(self.n_refs)
         self._ranked: np.ndarray | None = None   # the places of ``_rank`` set last while local
 
     # --- the contract (``base.OnlineMatcher``) --------------------------------------------------------------
     def wanted(self) -> np.ndarray | None:
-        """The places the next ``update`` reads, then the probe (None: every place)."""
-        if self.cols is None:
+        """The places the next ``update`` reads, then the probe (None: every place, or ``around`` an index's
+        candidates)."""
+        if self.cols is None or self._whole:
             return None
+        return np.concatenate([self.cols, self._probe])
+
+    def around(self, candidates: np.ndarray) -> np.ndarray | None:
+        """What the next ``update`` reads when ``wanted()`` asked for the whole route and an index answered
+        with ``candidates`` (places): on a long route the places within ``seek`` of each candidate and within
+        ``max(seek, window / 4)`` of the ``peaks`` most probable places held, then the probe; the mass moves
+        there (the rest is *elsewhere*). On a short route: None, every place."""
+        if not self.local:
+            return None
+        c = self.config
+        reach = max(c.seek, c.window // 4)
+        held = best_hypotheses(self.b.sum(axis=0), self.cols, c.peaks, reach) if self.b.size else []
+        target = places(around_candidates(self.graph, candidates, c.seek, held, reach, 1))
+        if not len(target):
+            return None
+        self._move(target)
         return np.concatenate([self.cols, self._probe])
 
     def position(self) -> None:
@@ -184,7 +210,10 @@ class BayesFilter:
     # --- steps ----------------------------------------------------------------------------------------------
     def _split(self, s: np.ndarray, refs: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
         """A frame's similarities -> (those of the places held, the sample its median and spread are read
-        on; None: the row itself)."""
+        on; None: the row itself). A whole row where the whole route was wanted brings the mass onto every
+        place first."""
+        if self._whole and refs is None and self.cols is not None:
+            self._move(None)
         if self.cols is None:
             if refs is not None or s.shape != (self.n_refs,):
                 raise ValueError(f"similarity row must have shape ({self.n_refs},), got {s.shape}")
@@ -291,12 +320,13 @@ class BayesFilter:
         if not self.local:
             return
         self._held = self._held + 1 if self._conf >= self.config.hold else 0
-        if local_next(self._held, self.config.check, self.config.span):
-            new = places(self.graph.near(self._mode, self.config.window))
-        else:
-            new = None
-        if new is None and self.cols is None:
-            return
+        self._whole = not local_next(self._held, self.config.check, self.config.span)
+        if not self._whole:
+            self._move(places(self.graph.near(self._mode, self.config.window)))
+
+    def _move(self, new: np.ndarray | None) -> None:
+        """Hold the places ``new`` (sorted; None: every place): the mass of places no longer held joins
+        *elsewhere*, places newly held take their even share of it."""
         cols = self.cols if self.cols is not None else np.arange(self.n_refs)
         target = new if new is not None else np.arange(self.n_refs)
         self.b, self.elsewhere = regather(self.b, cols, self.elsewhere, target, self.n_refs)
@@ -304,6 +334,7 @@ class BayesFilter:
             self.elsewhere = 0.0
         self.cols = new
         self._window = None if new is None else Window(self.graph, new, self.moves.steps)
+        self._whole = self._whole and new is None
 
     def _learn_scale(self, z_answer: float) -> None:
         """Add the answered place's z-score to the scale's mean, weighted by the answer's confidence."""

@@ -28,6 +28,8 @@ class FilterConfig:
     check: int
     span: int
     hold: float
+    seek: int
+    peaks: int
 
     def __post_init__(self) -> None:
         for name in ("speed_change", "leave", "enter", "jump"):
@@ -48,6 +50,8 @@ class FilterConfig:
         if self.window < 0 or self.probe < 1 or self.check < 1 or not 0 <= self.span <= self.check:
             raise ValueError(f"need window >= 0, probe >= 1, check >= 1 and 0 <= span <= check (got {self.window}, "
                              f"{self.probe}, {self.check}, {self.span})")
+        if self.seek < 0 or self.peaks < 1:
+            raise ValueError(f"need seek >= 0 and peaks >= 1 (got {self.seek}, {self.peaks})")
         if not 0.0 < self.hold <= 1.0:
             raise ValueError(f"hold must lie in (0, 1], got {self.hold}")
 

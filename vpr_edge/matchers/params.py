@@ -111,6 +111,7 @@ STREAM_FILTER: dict[str, Param] = {
     "window": STREAM["window"], "probe": STREAM["probe"], "check": STREAM["check"], "span": STREAM["span"],
     "hold": Param(0.9, "local search: an answer is firm (the next frame may read its window only) at this "
                        "confidence"),
+    "seek": STREAM["seek"], "peaks": STREAM["peaks"], "seek_frames": STREAM["seek_frames"],
 }
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),
