@@ -85,8 +85,8 @@ def test_a_half_under_fifty_frames_is_refused_in_one_line(tmp_path: Path) -> Non
     proc = bench("adapt-halves", "--streams", streams_of(tmp_path / "s", 60), "--work", tmp_path / "w")
     errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("adapt-halves: error:")]
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and len(errors) == 1, proc.stderr
-    assert "30 labelled frames, too short to learn from (at least 50)" in errors[0]
-    assert not (tmp_path / "w" / "adapted.npz").exists()
+    assert "a half of 30 frames, too short to learn from (at least 50)" in errors[0]
+    assert not (tmp_path / "w").exists()   # refused before anything is written
 
 
 def test_it_runs_on_real_frames_learning_and_testing_apart(tmp_path: Path) -> None:

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.errors import VprError
+from vpr_edge.encoders.adapt import MIN_PAIRS
 from vpr_edge.evaluation import Source, Truth, evaluate
 from vpr_edge.evaluation.truth import write_ground_truth
 from vpr_edge.frames.images import list_images
@@ -126,6 +127,9 @@ def _run(a: argparse.Namespace) -> int:
     if len(frames) != n:
         raise VprError(f"{a.streams}/aligned: {len(frames)} frames, but the map has {n} places")
     halves = (llo, lhi), (tlo, thi) = split_halves(n, a.learn_half)
+    if lhi - llo < MIN_PAIRS:   # checked before anything is written
+        raise VprError(f"{a.streams}/aligned: a half of {lhi - llo} frames, too short to learn from "
+                       f"(at least {MIN_PAIRS})")
     a.work.mkdir(parents=True, exist_ok=True)
     link_frames(frames[llo:lhi], a.work / "learn")
     write_ground_truth(a.work / "learn.csv", [[i] for i in range(llo, lhi)])
