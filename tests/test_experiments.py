@@ -165,7 +165,7 @@ def test_bench_frame_reports_each_stage(tmp_path: Path, small_refs: Path, small_
     out = tool("bench-frame", "--map", str(m), "--frames", str(small_queries), "--threads", "1", "--repeat", "1")
     row = out.splitlines()[-1].split()
     assert row[0] == "1" and len(row) == 6 and all(float(v) > 0 for v in row[1:])
-    assert abs(sum(float(v) for v in row[1:5]) - float(row[5])) < 0.02   # the stages add up to the total
+    assert abs(sum(float(v) for v in row[1:5]) - float(row[5])) <= 0.025 + 1e-9   # stages add up (5 values to 0.01)
 
 
 @pytest.mark.slow

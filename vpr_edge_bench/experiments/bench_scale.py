@@ -16,6 +16,11 @@ the second re-entering far away, a long stop of new exposures; a frame alone rig
 5. the localize output scored against the ground truth: R@1 within +-2 over mapped frames, answers given
    right, mapped frames answered right, off-map frames reported lost, frames from leaving the map to the first
    lost one and from each re-entry to the first right answer.
+
+--standardise on runs steps 2, 3 and 5 with standardised encodings (``encoders.standardise``, localize's
+--standardise); both runs them plain and standardised side by side: step 2 once each a round (--rounds; the
+order turned each round; wall time the rounds' median, peak RSS their max), step 3 two Localizers over the
+same frames, blocks of ``BLOCK`` frames each, the order turned each block; then prints the ratios.
 """
 from __future__ import annotations
 
@@ -37,6 +42,10 @@ from vpr_edge.evaluation.truth import load_csv
 from vpr_edge_bench.runner import parser, run_checked
 from vpr_edge_bench.synthetic import plan_stream, write_route, write_stream
 from vpr_edge_bench.yardstick import yardstick_ms
+
+VARIANTS = {"off": (False,), "on": (True,), "both": (False, True)}   # --standardise: the Localizers compared
+LABELS = {False: "plain", True: "standardised"}
+BLOCK = 100   # frames one Localizer runs before the other takes its turn (--standardise both, step 3)
 
 
 def status_mb(pid: int | str, field: str) -> float:
@@ -83,22 +92,27 @@ def run_command(args: list[str]) -> dict:
             "anon_last_mb": anon[-1], "file_max_mb": max(file)}
 
 
-def per_frame(map_path: Path, queries: Path, checkpoints: list[int]) -> tuple[np.ndarray, list[tuple]]:
-    """Each frame of ``queries`` through ``Localizer.push_encoding`` (one thread): (ms a frame (Q,), [(frame,
-    RssAnon MB, RssFile MB) at each checkpoint])."""
+def per_frame(map_path: Path, queries: Path, checkpoints: list[int],
+              standardise: Sequence[bool] = (False,)) -> tuple[np.ndarray, list[tuple]]:
+    """Each frame of ``queries`` through ``Localizer.push_encoding`` (one thread), a Localizer for each of
+    ``standardise`` (plain, standardised) taking turns ``BLOCK`` frames at a time, the order turned each block:
+    (ms a frame (V, Q), [(frame, this process's RssAnon MB, RssFile MB) at each checkpoint])."""
     from vpr_edge.api import Localizer
 
-    loc = Localizer(map_path, threads=1)
+    locs = [Localizer(map_path, threads=1, standardise=v) for v in standardise]
     q = np.load(queries, mmap_mode="r", allow_pickle=False)
-    ms = np.empty(len(q))
+    ms = np.empty((len(locs), len(q)))
     marks = []
-    for t in range(len(q)):
-        enc = np.asarray(q[t], np.float32)
-        t0 = time.perf_counter()
-        loc.push_encoding(enc)
-        ms[t] = 1e3 * (time.perf_counter() - t0)
-        if t + 1 in checkpoints:
-            marks.append((t + 1, status_mb("self", "RssAnon"), status_mb("self", "RssFile")))
+    for lo in range(0, len(q), BLOCK):
+        order = list(range(len(locs)))[::1 if lo // BLOCK % 2 == 0 else -1]
+        for k in order:
+            for t in range(lo, min(lo + BLOCK, len(q))):
+                enc = np.asarray(q[t], np.float32)
+                t0 = time.perf_counter()
+                locs[k].push_encoding(enc)
+                ms[k, t] = 1e3 * (time.perf_counter() - t0)
+                if k == order[-1] and t + 1 in checkpoints:
+                    marks.append((t + 1, status_mb("self", "RssAnon"), status_mb("self", "RssFile")))
     return ms, marks
 
 
@@ -133,20 +147,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoints", default="1000,5000,10000,50000,100000")
     p.add_argument("--skip-build", action="store_true", help="use the map already in --work")
+    p.add_argument("--standardise", choices=tuple(VARIANTS), default="off",
+                   help="standardised encodings (localize --standardise): off, on, or both side by side")
+    p.add_argument("--rounds", type=int, default=1, help="localize commands of each variant (step 2)")
     a = p.parse_args(argv)
     return run_checked(__name__, lambda: _run(a))
 
 
 def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, its options checked first."""
-    if a.places < 10 or a.frames < 100 or a.dim < 2 or not a.noise >= 0:
-        raise VprError("need --places >= 10, --frames >= 100, --dim >= 2, --noise >= 0")
+    if a.places < 10 or a.frames < 100 or a.dim < 2 or not a.noise >= 0 or a.rounds < 1:
+        raise VprError("need --places >= 10, --frames >= 100, --dim >= 2, --noise >= 0, --rounds >= 1")
     a.work.mkdir(parents=True, exist_ok=True)
     route = a.work / f"route_{a.places}x{a.dim}_s{a.seed}.npy"
     queries = a.work / f"stream_{a.places}x{a.dim}_{a.frames}_n{a.noise:g}_s{a.seed}.npy"
     truth = queries.with_suffix(".csv")
     map_path = route.with_suffix(".map.npz")
-    out = queries.with_suffix(".results.csv")
     if not route.exists():
         t0 = time.perf_counter()
         write_route(route, a.places, a.dim, seed=a.seed)
@@ -160,37 +176,68 @@ def _run(a: argparse.Namespace) -> int:
                  ("`build-map` peak RSS / RssAnon max",
                   f"{built['peak_rss_mb']:,.0f} MB / {built['anon_max_mb']:,.0f} MB "
                   f"(a {map_path.stat().st_size / 1e6:,.0f} MB map)", "bounded (never the float32 matrix)")]
-    located = run_command(["localize", "--map", str(map_path), "--stream", str(queries), "--threads", "1",
-                           "-o", str(out)])
+    variants = VARIANTS[a.standardise]
+    outs = {v: queries.with_suffix(".std.results.csv" if v else ".results.csv") for v in variants}
+    runs: dict[bool, list[dict]] = {v: [] for v in variants}
+    for r in range(a.rounds):
+        for v in variants[::1 if r % 2 == 0 else -1]:
+            runs[v].append(run_command(["localize", "--map", str(map_path), "--stream", str(queries), "--threads",
+                                        "1", "-o", str(outs[v]), *(["--standardise"] if v else [])]))
     checkpoints = sorted(int(c) for c in a.checkpoints.split(","))
-    ms, marks = per_frame(map_path, queries, checkpoints)
+    ms, marks = per_frame(map_path, queries, checkpoints, variants)
     yard = yardstick_ms()
-    cmd_ms = 1e3 * located["wall_s"] / a.frames
-    p50, p99, top = np.percentile(ms, 50), np.percentile(ms, 99), ms.max()
-    warm = ms[10:].max() if len(ms) > 10 else float("nan")   # past the first reads of a cold page cache
-    s = score(out, truth)
-    rows += [
-        ("yardstick: one fp32 inference, 320x240, one thread", f"{yard:.2f} ms", ""),
-        (f"`localize --threads 1` over the {a.frames:,} frames, whole command (start-up included)",
-         f"{located['wall_s']:.1f} s: {cmd_ms:.2f} ms a frame, {cmd_ms / yard:.2f}x the yardstick", "<= 0.35x"),
-        ("`localize` RssAnon max / last; RssFile max (sampled every 0.2 s); peak RSS",
-         f"{located['anon_max_mb']:.0f} / {located['anon_last_mb']:.0f} MB; {located['file_max_mb']:.0f} MB; "
-         f"{located['peak_rss_mb']:,.0f} MB", "RssAnon <= 250 MB"),
-        ("a frame's match (`push_encoding`), mean / p50 / p99 / max; max after the first 10 frames",
-         f"{ms.mean():.2f} / {p50:.2f} / {p99:.2f} / {top:.1f} ms (frame {int(ms.argmax())}: {top / yard:.2f}x the "
-         f"yardstick); {warm:.1f} ms ({warm / yard:.2f}x)", "no frame over 3x"),
-        ("RssAnon in process after " + " / ".join(f"{f:,}" for f, _, _ in marks) + " frames",
-         " / ".join(f"{anon:.0f}" for _, anon, _ in marks) + " MB", "flat"),
-        ("R@1 +-2 over mapped frames; answers given right; mapped frames answered right",
-         f"{s['r_at_1']:.3f}; {s['answered_right']:.3f}; {s['mapped_right']:.3f}", ">= 0.95"),
-        ("off-map frames reported lost; first lost frame after leaving",
-         f"{s['offmap_lost']:.3f}; " + " and ".join(f"{x:.0f}" for x in s["exit_frames"]) + " frames", ">= 0.90"),
-        ("first right answer after the cold start / each re-entry",
-         " / ".join(f"{x:.0f}" for x in s["relock_frames"]) + " frames", "re-lock <= 10"),
-    ]
-    print(f"route of {a.places:,} places x {a.dim} dims, stream of {a.frames:,} frames, noise {a.noise:g}\n")
+    rows.append(("yardstick: one fp32 inference, 320x240, one thread", f"{yard:.2f} ms", ""))
+    both = len(variants) > 1
+    located = {}
+    for k, v in enumerate(variants):
+        located[v] = {"wall_s": float(np.median([x["wall_s"] for x in runs[v]]))} | \
+            {key: max(x[key] for x in runs[v]) for key in ("peak_rss_mb", "anon_max_mb", "file_max_mb")} | \
+            {"anon_last_mb": runs[v][-1]["anon_last_mb"]}
+        rows += variant_rows(located[v], ms[k], score(outs[v], truth), yard, a.frames,
+                             f" [{LABELS[v]}]" if both else "", a.rounds)
+    rows.append(("RssAnon in process after " + " / ".join(f"{f:,}" for f, _, _ in marks) + " frames"
+                 + (" (both Localizers)" if both else ""), " / ".join(f"{anon:.0f}" for _, anon, _ in marks) + " MB",
+                 "flat"))
+    if both:
+        plain, std = located[False], located[True]
+        rows += [
+            ("standardised / plain: `localize` ms a frame (whole command); peak RSS; RssAnon max",
+             f"{std['wall_s'] / plain['wall_s']:.3f}; {std['peak_rss_mb'] / plain['peak_rss_mb']:.3f}; "
+             f"{std['anon_max_mb'] / plain['anon_max_mb']:.3f}", ""),
+            ("standardised / plain: a frame's match (`push_encoding`), mean / p50 / p99",
+             " / ".join(f"{f(ms[1]) / f(ms[0]):.3f}" for f in (np.mean, np.median, lambda x: np.percentile(x, 99))),
+             "")]
+    print(f"route of {a.places:,} places x {a.dim} dims, stream of {a.frames:,} frames, noise {a.noise:g}, "
+          f"standardise {a.standardise}\n")
     print("| | measured | target |\n|---|---|---|")
     for what, measured, target in rows:
         print(f"| {what} | {measured} | {target} |")
     return 0
 
+
+
+def variant_rows(located: dict, ms: np.ndarray, s: dict, yard: float, frames: int, label: str,
+                 rounds: int) -> list[tuple[str, str, str]]:
+    """The table's rows of one variant (plain or standardised, named by ``label``): its localize command
+    (``run_command``'s figures; wall the median of ``rounds``), its frames' match ms (Q,) and its scores
+    (``score``), times beside the yardstick's ``yard`` ms."""
+    cmd_ms = 1e3 * located["wall_s"] / frames
+    p50, p99, top = np.percentile(ms, 50), np.percentile(ms, 99), ms.max()
+    warm = ms[10:].max() if len(ms) > 10 else float("nan")   # past the first reads of a cold page cache
+    median = f", median of {rounds}" if rounds > 1 else ""
+    return [
+        (f"`localize --threads 1` over the {frames:,} frames, whole command (start-up included){median}{label}",
+         f"{located['wall_s']:.1f} s: {cmd_ms:.2f} ms a frame, {cmd_ms / yard:.2f}x the yardstick", "<= 0.35x"),
+        (f"`localize` RssAnon max / last; RssFile max (sampled every 0.2 s); peak RSS{label}",
+         f"{located['anon_max_mb']:.0f} / {located['anon_last_mb']:.0f} MB; {located['file_max_mb']:.0f} MB; "
+         f"{located['peak_rss_mb']:,.0f} MB", "RssAnon <= 250 MB"),
+        (f"a frame's match (`push_encoding`), mean / p50 / p99 / max; max after the first 10 frames{label}",
+         f"{ms.mean():.2f} / {p50:.2f} / {p99:.2f} / {top:.1f} ms (frame {int(ms.argmax())}: {top / yard:.2f}x the "
+         f"yardstick); {warm:.1f} ms ({warm / yard:.2f}x)", "no frame over 3x"),
+        (f"R@1 +-2 over mapped frames; answers given right; mapped frames answered right{label}",
+         f"{s['r_at_1']:.3f}; {s['answered_right']:.3f}; {s['mapped_right']:.3f}", ">= 0.95"),
+        (f"off-map frames reported lost; first lost frame after leaving{label}",
+         f"{s['offmap_lost']:.3f}; " + " and ".join(f"{x:.0f}" for x in s["exit_frames"]) + " frames", ">= 0.90"),
+        (f"first right answer after the cold start / each re-entry{label}",
+         " / ".join(f"{x:.0f}" for x in s["relock_frames"]) + " frames", "re-lock <= 10"),
+    ]
