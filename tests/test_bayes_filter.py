@@ -33,8 +33,11 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
         beta = cfg.temper * min(max(mean, SCALE_BOUNDS[0]), SCALE_BOUNDS[1]) * new
         # speeds
         mixed = np.zeros_like(b)
+        whole = int(round(1 / cfg.speed_step))   # one place a frame, in steps
+        changes = [(d, cfg.speed_change) for d in sorted({1, whole})]
         for v in range(n_v):
-            for w, pr in ((v - 1, cfg.speed_change), (v + 1, cfg.speed_change), (v, 1 - 2 * cfg.speed_change)):
+            stay = 1 - 2 * len(changes) * cfg.speed_change
+            for w, pr in [(v - d, c) for d, c in changes] + [(v + d, c) for d, c in changes] + [(v, stay)]:
                 w = min(max(w, 0), n_v - 1)
                 for p in range(n_r):
                     mixed[w, p] += pr * b[v, p]

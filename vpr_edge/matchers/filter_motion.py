@@ -42,14 +42,18 @@ def speed_steps(n_speeds: int, step: float) -> Steps:
     return out
 
 
-def speed_kernel(n_speeds: int, change: float) -> np.ndarray:
-    """(V, V) row-stochastic: from speed v to v' (one step either way with probability ``change``; at the
-    ends the step that would leave the range stays)."""
+def speed_kernel(n_speeds: int, change: float, step: float = 1.0) -> np.ndarray:
+    """(V, V) row-stochastic: from speed v to v'. A speed changes by one ``step`` either way with
+    probability ``change``; with steps under a place, also by one whole place a frame either way with
+    probability ``change`` (a vehicle that stops or starts is not slowed by the finer steps). At the ends a
+    change that would leave the range stays."""
+    moves = sorted({1, int(round(1.0 / step))})
     k = np.zeros((n_speeds, n_speeds))
     for v in range(n_speeds):
-        for w in (v - 1, v + 1):
-            k[v, min(max(w, 0), n_speeds - 1)] += change
-        k[v, v] += 1.0 - 2.0 * change
+        for m in moves:
+            for w in (v - m, v + m):
+                k[v, min(max(w, 0), n_speeds - 1)] += change
+        k[v, v] += 1.0 - 2.0 * len(moves) * change
     return k
 
 
@@ -61,7 +65,7 @@ class Transitions:
         self.graph, self.config = graph, config
         self.n_speeds = speed_count(config.vmax, config.speed_step)
         self.steps = speed_steps(self.n_speeds, config.speed_step)
-        self.kernel = speed_kernel(self.n_speeds, config.speed_change)
+        self.kernel = speed_kernel(self.n_speeds, config.speed_change, config.speed_step)
         later = [(int(s), int(e) + 1) for s, e in zip(graph.starts[1:], graph.ends[1:])]
         self.cut = {d: np.concatenate([np.arange(s, min(s + d, e)) for s, e in later]).astype(np.int64)
                     if later else np.zeros(0, np.int64) for d in range(1, int(math.ceil(config.vmax)) + 2)}
