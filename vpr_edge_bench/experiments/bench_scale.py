@@ -39,6 +39,7 @@ import numpy as np
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation.metrics import answered_shares, transition_delays
 from vpr_edge.evaluation.truth import load_csv
+from vpr_edge.matchers import DEFAULT_MATCHER, MATCHERS, get_matcher
 from vpr_edge_bench.runner import parser, run_checked
 from vpr_edge_bench.synthetic import plan_stream, write_route, write_stream
 from vpr_edge_bench.yardstick import yardstick_ms
@@ -93,13 +94,13 @@ def run_command(args: list[str]) -> dict:
 
 
 def per_frame(map_path: Path, queries: Path, checkpoints: list[int],
-              standardise: Sequence[bool] = (False,)) -> tuple[np.ndarray, list[tuple]]:
+              standardise: Sequence[bool] = (False,), mode: str = DEFAULT_MATCHER) -> tuple[np.ndarray, list[tuple]]:
     """Each frame of ``queries`` through ``Localizer.push_encoding`` (one thread), a Localizer for each of
-    ``standardise`` (plain, standardised) taking turns ``BLOCK`` frames at a time, the order turned each block:
+    ``standardise`` (plain, standardised), matching with ``mode``, taking turns ``BLOCK`` frames at a time, the order turned each block:
     (ms a frame (V, Q), [(frame, this process's RssAnon MB, RssFile MB) at each checkpoint])."""
     from vpr_edge.api import Localizer
 
-    locs = [Localizer(map_path, threads=1, standardise=v) for v in standardise]
+    locs = [Localizer(map_path, threads=1, standardise=v, mode=mode) for v in standardise]
     q = np.load(queries, mmap_mode="r", allow_pickle=False)
     ms = np.empty((len(locs), len(q)))
     marks = []
@@ -147,6 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--checkpoints", default="1000,5000,10000,50000,100000")
     p.add_argument("--skip-build", action="store_true", help="use the map already in --work")
+    p.add_argument("--mode", default=DEFAULT_MATCHER, help="the online matcher localize runs (localize --mode)")
     p.add_argument("--standardise", choices=tuple(VARIANTS), default="off",
                    help="standardised encodings (localize --standardise): off, on, or both side by side")
     p.add_argument("--rounds", type=int, default=1, help="localize commands of each variant (step 2)")
@@ -158,6 +160,9 @@ def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, its options checked first."""
     if a.places < 10 or a.frames < 100 or a.dim < 2 or not a.noise >= 0 or a.rounds < 1:
         raise VprError("need --places >= 10, --frames >= 100, --dim >= 2, --noise >= 0, --rounds >= 1")
+    if a.mode not in MATCHERS or not get_matcher(a.mode).online:
+        raise VprError(f"--mode {a.mode}: not an online matcher (one of "
+                       f"{', '.join(m for m in MATCHERS if get_matcher(m).online)})")
     a.work.mkdir(parents=True, exist_ok=True)
     route = a.work / f"route_{a.places}x{a.dim}_s{a.seed}.npy"
     queries = a.work / f"stream_{a.places}x{a.dim}_{a.frames}_n{a.noise:g}_s{a.seed}.npy"
@@ -177,14 +182,15 @@ def _run(a: argparse.Namespace) -> int:
                   f"{built['peak_rss_mb']:,.0f} MB / {built['anon_max_mb']:,.0f} MB "
                   f"(a {map_path.stat().st_size / 1e6:,.0f} MB map)", "bounded (never the float32 matrix)")]
     variants = VARIANTS[a.standardise]
-    outs = {v: queries.with_suffix(".std.results.csv" if v else ".results.csv") for v in variants}
+    tag = "" if a.mode == DEFAULT_MATCHER else f".{a.mode}"
+    outs = {v: queries.with_suffix(f"{tag}.std.results.csv" if v else f"{tag}.results.csv") for v in variants}
     runs: dict[bool, list[dict]] = {v: [] for v in variants}
     for r in range(a.rounds):
         for v in variants[::1 if r % 2 == 0 else -1]:
             runs[v].append(run_command(["localize", "--map", str(map_path), "--stream", str(queries), "--threads",
-                                        "1", "-o", str(outs[v]), *(["--standardise"] if v else [])]))
+                                        "1", "-o", str(outs[v]), "--mode", a.mode, *(["--standardise"] if v else [])]))
     checkpoints = sorted(int(c) for c in a.checkpoints.split(","))
-    ms, marks = per_frame(map_path, queries, checkpoints, variants)
+    ms, marks = per_frame(map_path, queries, checkpoints, variants, a.mode)
     yard = yardstick_ms()
     rows.append(("yardstick: one fp32 inference, 320x240, one thread", f"{yard:.2f} ms", ""))
     both = len(variants) > 1
@@ -208,7 +214,7 @@ def _run(a: argparse.Namespace) -> int:
              " / ".join(f"{f(ms[1]) / f(ms[0]):.3f}" for f in (np.mean, np.median, lambda x: np.percentile(x, 99))),
              "")]
     print(f"route of {a.places:,} places x {a.dim} dims, stream of {a.frames:,} frames, noise {a.noise:g}, "
-          f"standardise {a.standardise}\n")
+          f"standardise {a.standardise}, mode {a.mode}\n")
     print("| | measured | target |\n|---|---|---|")
     for what, measured, target in rows:
         print(f"| {what} | {measured} | {target} |")
