@@ -30,9 +30,7 @@ from vpr_edge.features.choice import DEFAULT_PRECISION
 from vpr_edge.frames.images import MIN_SIDE, Frame
 from vpr_edge.map import MapQuery, PlaceMap
 from vpr_edge.map.search import FrameSearch, coarse_search, uses_coarse
-from vpr_edge.matchers import DEFAULT_MATCHER, Matcher, MotionCue, get_matcher, is_lost, lost_why, stands, step
-from vpr_edge.matchers.constants import MEMORY
-from vpr_edge.matchers.params import STREAM
+from vpr_edge.matchers import DEFAULT_MATCHER, Matcher, get_matcher, is_lost, lost_why, step
 from vpr_edge.matchers.route import RouteGraph
 from vpr_edge.threads import use_threads
 
@@ -143,8 +141,6 @@ class Localizer:
         self._lock = threading.Lock()
         self._count = 0
         self._cue = self.matcher.motion_cue()   # each frame's likeness to the last that moved
-        # the stream's mean counts moving frames only, by the default cue (as ``evaluate``'s, whatever the mode)
-        self._mean_cue = MotionCue(STREAM["still"].default, MEMORY) if standardise else None
 
     @property
     def map(self) -> PlaceMap:
@@ -184,9 +180,7 @@ class Localizer:
         frame reads the signs and the best candidates; on a map with an index, a whole-route frame searches
         around the index's candidates instead, ``index.ivf``)."""
         self.query.check_unchanged()   # a memory-mapped map rewritten under us: stop before reading it
-        mean_cue = self._mean_cue
-        self._search.push(enc, count=1.0 if mean_cue is None or not stands(mean_cue(enc), mean_cue.threshold)
-                          else 0.0)
+        self._search.push(enc)
         ref, score = step(self._online, self._search.rows, self._cue(enc), self._search.candidates())
         return ref, score, self._online.position(), self._online.why(), self._online.probability()
 
@@ -263,6 +257,4 @@ class Localizer:
                 self._online.reset()
             self._count = 0
             self._cue.reset()
-            if self._mean_cue is not None:
-                self._mean_cue.reset()
             self._search.reset()

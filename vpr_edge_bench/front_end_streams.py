@@ -15,7 +15,6 @@ from pathlib import Path
 import numpy as np
 
 from vpr_edge.encoders.standardise import RouteMean, centred_stream
-from vpr_edge.evaluation.sources import mean_counts
 from vpr_edge.evaluation import sources
 from vpr_edge.evaluation.run import check_truth_fits, map_same_view
 from vpr_edge.evaluation.scoring import evaluate_mode
@@ -126,7 +125,7 @@ def standardised(encodings: np.ndarray, references: list[np.ndarray]) -> np.ndar
     """A stream's encodings (Q, D) against the map's stored rows in route order (blocks, any positive row
     scale) -> the cosines of the standardised pairs (Q, R) float32, as ``vpr-edge evaluate --standardise``."""
     route = RouteMean.of(lambda: iter(references))
-    centred = centred_stream(encodings, route.mean, counts=mean_counts(encodings))
+    centred = centred_stream(encodings, route.mean)
     refs = unit(np.concatenate([np.asarray(b, np.float32) for b in references]))
     return route.scores(centred @ refs.T, centred)
 

@@ -5,8 +5,7 @@ and makes places look alike. Taking away the references' mean from each referenc
 the query stream from each query, leaves what tells places apart (Schubert, Neubert and Protzel, ICRA 2020).
 The stream's mean starts from the references' mean, weighted as ``PRIOR_FRAMES`` frames, so the first frame
 already works; frames then count with an exponential memory of ``HORIZON`` frames, which follows a drive from
-day into dusk. Like the references' mean it is a mean over places, not time: a frame the motion cue reads as
-standing does not count (the caller says, ``count``), so a stop does not pull the mean to its own view.
+day into dusk.
 
 The map keeps its encodings as they are: the cosine of the standardised pair is computed from the stored
 rows, the references' mean (D,) and each reference's distance from it (R,):
@@ -80,26 +79,25 @@ class StreamMean:
         """The current mean (D,) float64."""
         return self._sum / self._weight
 
-    def centre(self, encoding: np.ndarray, count: float = 1.0) -> np.ndarray:
-        """One encoding (D,) -> ``unit(encoding) - mean`` (D,) float32; the encoding then joins the mean with
-        weight ``count`` (0: a standing camera's frame, not at all; an all-zero encoding never does)."""
+    def centre(self, encoding: np.ndarray) -> np.ndarray:
+        """One encoding (D,) -> ``unit(encoding) - mean`` (D,) float32; the encoding then joins the mean (an
+        all-zero encoding does not)."""
         u = _unit(np.asarray(encoding, np.float64)[None])[0]
         out = (u - self.mean).astype(np.float32)
-        if np.any(u) and count > 0:
-            self._sum = self._sum * self.keep + count * u
-            self._weight = self._weight * self.keep + count
+        if np.any(u):
+            self._sum = self._sum * self.keep + u
+            self._weight = self._weight * self.keep + 1.0
         return out
 
 
 def centred_stream(encodings: np.ndarray, prior: np.ndarray, prior_frames: float = PRIOR_FRAMES,
-                   horizon: float = HORIZON, counts: np.ndarray | None = None) -> np.ndarray:
+                   horizon: float = HORIZON) -> np.ndarray:
     """A stream's encodings (Q, D) in order -> each centred on the running mean before it (Q, D) float32
-    (``StreamMean`` frame by frame); ``counts`` (Q,): each frame's weight in the mean (None: 1 each)."""
+    (``StreamMean`` frame by frame)."""
     mean = StreamMean(prior, prior_frames, horizon)
     if not len(encodings):
         return np.zeros((0, len(prior)), np.float32)
-    w = np.ones(len(encodings)) if counts is None else np.asarray(counts, np.float64)
-    return np.stack([mean.centre(e, float(c)) for e, c in zip(np.asarray(encodings), w)])
+    return np.stack([mean.centre(e) for e in np.asarray(encodings)])
 
 
 def _unit(x: np.ndarray) -> np.ndarray:

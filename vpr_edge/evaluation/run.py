@@ -162,7 +162,7 @@ def stream_search(query: MapQuery | None, matcher: Matcher, encodings: np.ndarra
     search = FrameSearch(query, matcher.scores, matcher.params.get("seek_frames", 1), rows, standardise)
     if search.index is None and search.coarse is None:
         return None
-    return StreamSearch(search, encodings, sim, sources.mean_counts(encodings) if standardise else None)
+    return StreamSearch(search, encodings, sim)
 
 
 def evaluate(source: Source, truth: Truth, matchers: dict[str, Matcher] | None = None, tolerance: int = 1,

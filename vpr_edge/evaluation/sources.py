@@ -14,9 +14,6 @@ from vpr_edge.errors import VprError
 from vpr_edge.frames.images import Frame, list_images, load_image, open_stream
 from vpr_edge.index.encodings import Encodings
 from vpr_edge.map.query import MapQuery
-from vpr_edge.matchers.constants import MEMORY
-from vpr_edge.matchers.motion import moving
-from vpr_edge.matchers.params import STREAM
 from vpr_edge.positions import Positions
 
 OnSkip = Callable[[Frame], None]
@@ -129,15 +126,9 @@ def from_map(query: MapQuery, queries: str | os.PathLike[str], n_truth: int, tru
                    encodings=stacked, references=query.map.stored)
 
 
-def mean_counts(encodings: np.ndarray) -> np.ndarray:
-    """A stream's encodings (Q, D) -> each frame's weight (Q,) in the stream's mean: 0 where the default
-    ``stream`` motion cue reads the camera as standing (``Localizer`` counts the same)."""
-    return moving(encodings, STREAM["still"].default, MEMORY)
-
-
 def standardised(query: MapQuery, encodings: np.ndarray) -> np.ndarray:
     """A stream's encodings (Q, D) in order -> the cosines of the standardised pairs (Q, R) float32
     (``encoders.standardise``: each frame centred on the running mean of the frames before it)."""
     route = query.map.route_mean
-    centred = centred_stream(encodings, route.mean, counts=mean_counts(encodings))
+    centred = centred_stream(encodings, route.mean)
     return route.scores(query.scores(centred), centred)

@@ -54,12 +54,11 @@ class FrameSearch:
         self._enc: np.ndarray | None = None
         self._exact: Rows | None = None
 
-    def push(self, encoding: np.ndarray, exact: Rows | None = None, count: float = 1.0) -> None:
+    def push(self, encoding: np.ndarray, exact: Rows | None = None) -> None:
         """The next frame's encoding (D,); ``exact``: its exact rows if already computed (a whole stream's
-        similarity matrix, ``evaluate``, standardised as here; None: computed from the map when asked);
-        ``count``: its weight in the stream's mean (0: the camera stood, ``motion.moving``)."""
+        similarity matrix, ``evaluate``, standardised as here; None: computed from the map when asked)."""
         enc = np.asarray(encoding, np.float32)
-        self._enc = enc if self.mean is None else self.mean.centre(enc, count)
+        self._enc = enc if self.mean is None else self.mean.centre(enc)
         self._exact = exact
         self._seq.push(self._enc)
 
@@ -92,10 +91,8 @@ class StreamSearch:
     """``FrameSearch`` over a whole stream: the query ``encodings`` (Q, D) and their exact rows ``sim`` (Q, R),
     frame ``i``'s rows and candidates on demand, in order (``matchers.run_rows``)."""
 
-    def __init__(self, search: FrameSearch, encodings: np.ndarray, sim: np.ndarray,
-                 counts: np.ndarray | None = None) -> None:
+    def __init__(self, search: FrameSearch, encodings: np.ndarray, sim: np.ndarray) -> None:
         self.search, self.encodings, self.sim = search, encodings, sim
-        self.counts = np.ones(len(encodings)) if counts is None else counts   # each frame's weight in the mean
         self._at = -1
 
     def _frame(self, i: int) -> None:
@@ -103,8 +100,7 @@ class StreamSearch:
             if i != self._at + 1:
                 raise ValueError(f"frames are searched in order: frame {i} after {self._at}")
             sim = self.sim[i]
-            self.search.push(self.encodings[i], lambda refs: sim if refs is None else sim[refs],
-                             float(self.counts[i]))
+            self.search.push(self.encodings[i], lambda refs: sim if refs is None else sim[refs])
             self._at = i
 
     def rows(self, i: int, refs: np.ndarray | None) -> np.ndarray:

@@ -135,12 +135,6 @@ def stillness(encodings: Iterable[np.ndarray], threshold: float | None = None, m
     return np.array([np.nan if (c := cue(e)) is None else c for e in encodings], np.float64)
 
 
-def moving(encodings: Iterable[np.ndarray], threshold: float, memory: int = MEMORY) -> np.ndarray:
-    """Encodings (Q, D) of consecutive frames -> (Q,) float64: 1.0 where a frame moves by the motion cue
-    (``stillness``; no cue: it moves), 0.0 where it stands: each frame's weight in a mean over places."""
-    return np.array([0.0 if stands(c, threshold) else 1.0 for c in stillness(encodings, threshold, memory)])
-
-
 def route_stands(blocks: Iterable[np.ndarray], threshold: float, memory: int = MEMORY) -> np.ndarray:
     """The map's references in route order, as consecutive blocks (n, D) -> (R,) bool: True where a reference
     stands by the motion cue (``MotionCue`` over the references: it shows the view of the last one that
