@@ -188,3 +188,24 @@ def test_a_standing_camera_keeps_its_place():
 def test_bad_parameters_are_refused(bad):
     with pytest.raises(ValueError):
         config(**bad)
+
+
+def test_robust_z_reads_the_upper_tail_where_unrelated_places_stand_out():
+    """On a normal row the spread is the bulk's (z of the row's own values ~ their standard scores); where a
+    tenth of the places stand out (an aliased front end) it is the upper tail's, so a high value reads lower."""
+    from statistics import NormalDist
+
+    from vpr_edge.matchers.constants import TAIL_QUANTILE
+
+    rng = np.random.default_rng(7)
+    row = rng.normal(0.5, 0.02, 4000)
+    z = robust_z(np.r_[row, 0.6])
+    assert z[-1] == pytest.approx((0.6 - np.median(row)) / 0.02, rel=0.06)
+    aliased = row.copy()
+    aliased[:400] += 0.06
+    whole = np.r_[aliased, 0.6]
+    za = robust_z(whole)
+    q75, qt = np.percentile(whole, (75, TAIL_QUANTILE))
+    tail = (qt - q75) / (NormalDist().inv_cdf(TAIL_QUANTILE / 100) - NormalDist().inv_cdf(0.75))
+    assert za[-1] == pytest.approx((0.6 - np.median(whole)) / tail, rel=1e-9)
+    assert za[-1] < 0.7 * z[-1]

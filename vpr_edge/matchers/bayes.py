@@ -10,7 +10,8 @@ frame (0..``vmax``), or that it is somewhere the map does not hold (*off-map*). 
    place anywhere on the map (a re-localisation), and ``enter`` of the off-map mass comes back onto the map
    at any place.
 2. **Correct** (the likelihood of the frame's similarity row). The row is read on its own scale: robust
-   z-scores ``z = (s - median) / spread`` (spread from the inter-quartile range), less each place's running
+   z-scores ``z = (s - median) / spread`` (``robust_z``: the bulk's or the upper tail's spread, the larger;
+   a front end whose unrelated places often stand out reads lower), less each place's running
    mean over this stream's moving frames (``hub_memory``: a place that looks like every frame is no
    evidence; a frame joins those means ``HUB_DELAY`` frames late). The likelihood ratio of "the camera is
    at place p" against "off the map" is
@@ -51,26 +52,34 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import replace
+from statistics import NormalDist
 
 import numpy as np
 
 from vpr_edge.matchers.base import AMBIGUOUS, OFF_MAP, SETTLING
 from vpr_edge.matchers.constants import (CUE_FLOOR, HUB_DELAY, MIN_SPREAD, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
-                                         START_OFF)
+                                         START_OFF, TAIL_QUANTILE)
 from vpr_edge.matchers.filter_config import FilterConfig
 from vpr_edge.matchers.filter_motion import Transitions, Window, regather
 from vpr_edge.matchers.motion import stands
 from vpr_edge.matchers.route import RouteGraph, places
 from vpr_edge.matchers.search_policy import around_candidates, best_hypotheses, local_next
 
+_Z75 = NormalDist().inv_cdf(0.75)                     # a standard normal's 75th percentile (0.674)
+_Z_TAIL = NormalDist().inv_cdf(TAIL_QUANTILE / 100.0)  # ... and its TAIL_QUANTILE-th
+
 
 
 def robust_z(row: np.ndarray, sample: np.ndarray | None = None) -> np.ndarray:
-    """A similarity row (n,) -> its robust z-scores: less the median, over the spread (inter-quartile range /
-    1.349, the standard deviation of a normal bulk), both read on ``sample`` (values; None: the row)."""
+    """A similarity row (n,) -> its robust z-scores: less the median, over the spread, all read on ``sample``
+    (values; None: the row). The spread is the larger of the bulk's (inter-quartile range / 1.349) and the
+    upper tail's (the 75th to the ``TAIL_QUANTILE``-th percentile over the same span of a standard normal):
+    on a front end whose unrelated places often stand out (aliasing), a high similarity is worth less."""
     ref = row if sample is None else sample
-    q25, q50, q75 = np.percentile(ref, (25, 50, 75))
-    return (row - q50) / max((q75 - q25) / 1.349, MIN_SPREAD)
+    q25, q50, q75, qt = np.percentile(ref, (25, 50, 75, TAIL_QUANTILE))
+    bulk = (q75 - q25) / (2.0 * _Z75)
+    tail = (qt - q75) / (_Z_TAIL - _Z75)
+    return (row - q50) / max(bulk, tail, MIN_SPREAD)
 
 
 def likelihood(z: np.ndarray, beta: float) -> tuple[np.ndarray, float]:

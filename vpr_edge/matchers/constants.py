@@ -40,6 +40,9 @@ JOIN = 0.5               # the share of a junction's source places' mass that cr
 # the likelihood's scale (the mean z-score of the true place): its prior and the prior's weight in frames, and
 # the range it is kept in (a sanity bound, not a fit)
 SCALE_PRIOR, SCALE_PRIOR_FRAMES, SCALE_BOUNDS = 2.0, 10.0, (0.5, 8.0)
+# the percentile the upper tail of a frame's similarities is read to (``bayes.robust_z``): chosen on nordland-dev
+# against 90 and 97.5 (docs/decisions.md, "The stream filter's parameters")
+TAIL_QUANTILE = 95.0
 HUB_DELAY = 8            # frames a frame's z-scores wait before they join the hub means (the passing place's view)
 CUE_FLOOR = 0.05        # the motion cue's weight of the speed it contradicts (the cue may be wrong)
 # the stream filter's window (``filter_motion.Window``): a column's predecessor lies in another drive (no mass

@@ -93,7 +93,7 @@ STREAM_FILTER: dict[str, Param] = {
     "leave": Param(0.01, "probability a frame leaves the map (a detour, a road the map does not hold)"),
     "enter": Param(0.05, "probability a frame off the map comes back onto it, at any place"),
     "jump": Param(0.001, "probability a frame's place jumps anywhere on the map (a re-localisation)"),
-    "temper": Param(0.3, "the share of a frame's evidence counted: neighbouring frames and places look alike, "
+    "temper": Param(0.45, "the share of a frame's evidence counted: neighbouring frames and places look alike, "
                          "so a frame is worth less than an independent observation (1: all of it)"),
     "hub_memory": Param(50.0, "frames in each place's running mean similarity, subtracted so that a place "
                               "that looks like every frame is no evidence (0: off)"),
