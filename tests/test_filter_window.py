@@ -66,17 +66,21 @@ def test_regather_moves_mass_between_windows() -> None:
     assert abs(out.sum() + elsewhere - (b.sum() + 0.3)) < 1e-12
 
 
+def long_route(rng, n: int, truth: np.ndarray) -> tuple[np.ndarray, BayesFilter, BayesFilter]:
+    """A noisy similarity matrix (frames, n) whose frame i shows place ``truth[i]`` (and a little the next),
+    with a filter reading a window of 40 places and one reading every place."""
+    sim = rng.normal(0.0, 0.05, (len(truth), n))
+    sim[np.arange(len(truth)), truth] += 0.25
+    sim[np.arange(len(truth)), truth + 1] += 0.12
+    return sim, BayesFilter(n, config(window=40, probe=256)), BayesFilter(n, config(window=0))
+
+
 def test_the_filter_reading_windows_answers_as_the_whole_route_filter() -> None:
     """A long route (2,000 places, a window of 40): a noisy drive at one place a frame. The local filter reads
     the window and probe on most frames and gives the whole-route filter's answers."""
     rng = np.random.default_rng(4)
-    n, q = 2000, 300
-    truth = 500 + np.arange(q)
-    sim = rng.normal(0.0, 0.05, (q, n))
-    sim[np.arange(q), truth] += 0.25
-    sim[np.arange(q), truth + 1] += 0.12
-    local = BayesFilter(n, config(window=40, probe=256))
-    whole = BayesFilter(n, config(window=0))
+    n, truth = 2000, 500 + np.arange(300)
+    sim, local, whole = long_route(rng, n, truth)
     read, answers = [], []
     for row in sim:
         want = local.wanted()
@@ -95,13 +99,8 @@ def test_on_a_map_with_an_index_the_state_never_spans_the_route() -> None:
     from vpr_edge.matchers.base import step
 
     rng = np.random.default_rng(5)
-    n, q = 2000, 300
-    truth = np.r_[500 + np.arange(150), 1500 + np.arange(150)]   # a jump far along the route at frame 150
-    sim = rng.normal(0.0, 0.05, (q, n))
-    sim[np.arange(q), truth] += 0.25
-    sim[np.arange(q), truth + 1] += 0.12
-    local = BayesFilter(n, config(window=40, probe=256))
-    whole = BayesFilter(n, config(window=0))
+    n, truth = 2000, np.r_[500 + np.arange(150), 1500 + np.arange(150)]   # a jump far along the route at 150
+    sim, local, whole = long_route(rng, n, truth)
     read, answers = [], []
     for i, row in enumerate(sim):
         decoys = rng.integers(0, n, 5)
