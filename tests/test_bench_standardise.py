@@ -59,6 +59,17 @@ def test_bench_scale_refuses_no_rounds(tmp_path: Path) -> None:
     assert proc.returncode == 2 and "--rounds >= 1" in proc.stderr
 
 
+def test_bench_scale_runs_the_stream_filter_and_refuses_an_offline_mode(tmp_path: Path) -> None:
+    out = tool("bench-scale", "--work", str(tmp_path), "--places", "500", "--frames", "100", "--dim", "16",
+               "--noise", "0.5", "--checkpoints", "100", "--mode", "stream-filter")
+    assert "mode stream-filter" in out
+    assert (tmp_path / "stream_500x16_100_n0.5_s0.stream-filter.results.csv").is_file()
+    proc = bench_run("bench-scale", "--work", str(tmp_path / "w"), "--mode", "seqslam")
+    errors = [ln for ln in proc.stderr.splitlines() if "error" in ln]
+    assert proc.returncode == 2 and len(errors) == 1 and "--mode seqslam: not an online matcher" in errors[0]
+    assert not (tmp_path / "w").exists()   # refused before the work
+
+
 def test_bench_frame_compares_plain_and_standardised(tmp_path: Path, small_refs: Path) -> None:
     refs = tmp_path / "ref"
     refs.mkdir()
