@@ -95,9 +95,10 @@ def run_command(args: list[str]) -> dict:
 
 def per_frame(map_path: Path, queries: Path, checkpoints: list[int],
               standardise: Sequence[bool] = (False,), mode: str = DEFAULT_MATCHER) -> tuple[np.ndarray, list[tuple]]:
-    """Each frame of ``queries`` through ``Localizer.push_encoding`` (one thread), a Localizer for each of
-    ``standardise`` (plain, standardised), matching with ``mode``, taking turns ``BLOCK`` frames at a time, the order turned each block:
-    (ms a frame (V, Q), [(frame, this process's RssAnon MB, RssFile MB) at each checkpoint])."""
+    """Each frame of ``queries`` through ``Localizer.push_encoding`` (one thread, matching with ``mode``), a
+    Localizer for each of ``standardise`` (plain, standardised) taking turns ``BLOCK`` frames at a time, the
+    order turned each block: (ms a frame (V, Q), [(frame, this process's RssAnon MB, RssFile MB) at each
+    checkpoint])."""
     from vpr_edge.api import Localizer
 
     locs = [Localizer(map_path, threads=1, standardise=v, mode=mode) for v in standardise]
