@@ -123,7 +123,8 @@ def test_build_map_indexes_and_localize_uses_it(tmp_path: Path) -> None:
     assert code == 2 and err.count("\n") == 1 and "--index hnsw" in err and not (tmp_path / "x.npz").exists()
 
 
-@pytest.mark.parametrize("mode, search", [("stream", "index"), ("stream", "coarse")])
+@pytest.mark.parametrize("mode, search", [("stream", "index"), ("stream", "coarse"), ("stream-filter", "index"),
+                                          ("stream-filter", "coarse")])
 def test_evaluate_answers_as_localize(tmp_path: Path, mode: str, search: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """``evaluate`` runs the per-frame search ``localize`` runs (``map.search``): on a map with an index its
     whole-route frames go through the index's candidates, on a long map (here: the length made short) through
