@@ -7,7 +7,7 @@ import pytest
 
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.bayes import BayesFilter, FilterConfig, robust_z
-from vpr_edge.matchers.constants import (CUE_FLOOR, JOIN, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
+from vpr_edge.matchers.constants import (CUE_FLOOR, GO_BLIND, JOIN, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
                                          START_OFF)
 from vpr_edge.matchers.params import STREAM_FILTER
 from vpr_edge.matchers.route import RouteGraph
@@ -35,9 +35,13 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
         mixed = np.zeros_like(b)
         whole = int(round(1 / cfg.speed_step))   # one place a frame, in steps
         changes = [(d, cfg.speed_change) for d in sorted({1, whole})]
+        blind = cue is None or not cfg.still   # no motion cue: a stopped camera may start again
         for v in range(n_v):
             stay = 1 - 2 * len(changes) * cfg.speed_change
-            for w, pr in [(v - d, c) for d, c in changes] + [(v + d, c) for d, c in changes] + [(v, stay)]:
+            moves = [(v - d, c) for d, c in changes] + [(v + d, c) for d, c in changes] + [(v, stay)]
+            if blind and v == 0:
+                moves = [(w, pr * (1 - GO_BLIND)) for w, pr in moves] + [(whole, GO_BLIND)]
+            for w, pr in moves:
                 w = min(max(w, 0), n_v - 1)
                 for p in range(n_r):
                     mixed[w, p] += pr * b[v, p]
@@ -209,3 +213,23 @@ def test_robust_z_reads_the_upper_tail_where_unrelated_places_stand_out():
     tail = (qt - q75) / (NormalDist().inv_cdf(TAIL_QUANTILE / 100) - NormalDist().inv_cdf(0.75))
     assert za[-1] == pytest.approx((0.6 - np.median(whole)) / tail, rel=1e-9)
     assert za[-1] < 0.7 * z[-1]
+
+
+
+def test_without_a_cue_a_stopped_filter_starts_again():
+    """With no motion cue nothing tells the filter a camera moves on but the evidence, which a broad or
+    blank view gives little of: the blind kernel lets a stopped camera start again (``GO_BLIND``), so an
+    answer held at speed 0 moves on once the evidence stops holding it; the cued kernel is the plain one."""
+    from vpr_edge.matchers.filter_motion import blind, speed_kernel
+
+    plain = speed_kernel(5, 0.03)
+    k = blind(plain)
+    np.testing.assert_allclose(k.sum(axis=1), 1.0)
+    assert k[0, 1] == pytest.approx(plain[0, 1] * (1 - GO_BLIND) + GO_BLIND)
+    np.testing.assert_array_equal(k[1:], plain[1:])
+    rng = np.random.default_rng(9)
+    places = np.r_[np.arange(20), np.full(30, 19)]
+    rows = np.r_[planted(len(places), 100, places, 1.0, rng), np.full((15, 100), 0.5)]   # then a blank view
+    f = BayesFilter(100, config())
+    answers = [f.update(row)[0] for row in rows]
+    assert abs(answers[49] - 19) <= 1 and answers[-1] >= answers[49] + 5

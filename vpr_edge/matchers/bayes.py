@@ -193,7 +193,7 @@ class BayesFilter:
         part, sample = self._split(s, refs)
         new = self._novelty(still)
         z = self._evidence(part, sample, new)
-        self._predict()
+        self._predict(still is not None and bool(self.config.still))
         if still is not None and self.config.still:   # the cue observes the speed: 0 where the view is the same
             moving, standing = max(new, CUE_FLOOR), max(1.0 - new, CUE_FLOOR)
             self.b[0] *= standing
@@ -236,14 +236,16 @@ class BayesFilter:
             raise ValueError(f"similarity row must have shape ({self.n_refs},), got {s.shape}")
         return s[self.cols], s[self._probe]
 
-    def _predict(self) -> None:
-        """The motion model, on the whole route or the window."""
+    def _predict(self, cued: bool) -> None:
+        """The motion model, on the whole route or the window; a frame with no motion cue (``cued`` False)
+        moves its speeds by the blind kernel (``filter_motion.blind``)."""
+        kernel = self.moves.kernel if cued else self.moves.blind_kernel
         if self.cols is None:
-            self.b, self.off = self.moves.predict(self.b, self.off)
+            self.b, self.off = self.moves.predict(self.b, self.off, kernel)
             return
         c = self.config
         self.b, self.off, self.elsewhere = self._window.predict(self.b, self.off, self.elsewhere, c.leave, c.jump,
-                                                                c.enter, self.moves.kernel)
+                                                                c.enter, kernel)
 
     def _novelty(self, still: float | None) -> float:
         """How new a frame's view is, in [0, 1]: 1 for a moving camera (cue below ``still``, or no cue); for

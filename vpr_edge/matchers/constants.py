@@ -44,6 +44,9 @@ SCALE_PRIOR, SCALE_PRIOR_FRAMES, SCALE_BOUNDS = 2.0, 10.0, (0.5, 8.0)
 # against 90 and 97.5 (docs/decisions.md, "The stream filter's parameters")
 TAIL_QUANTILE = 95.0
 HUB_DELAY = 8            # frames a frame's z-scores wait before they join the hub means (the passing place's view)
+# without a motion cue (``filter_motion.blind``): a stopped camera starts again at one place a frame with this
+# probability a frame; chosen on nordland-dev's pixels (docs/decisions.md, "The stream filter's parameters")
+GO_BLIND = 0.1
 CUE_FLOOR = 0.05        # the motion cue's weight of the speed it contradicts (the cue may be wrong)
 # the stream filter's window (``filter_motion.Window``): a column's predecessor lies in another drive (no mass
 # comes in) or outside the window (its share of the mass held elsewhere comes in)

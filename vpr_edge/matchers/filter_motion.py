@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from vpr_edge.matchers.constants import FROM_ANOTHER_DRIVE, FROM_ELSEWHERE, JOIN
+from vpr_edge.matchers.constants import FROM_ANOTHER_DRIVE, FROM_ELSEWHERE, GO_BLIND, JOIN
 from vpr_edge.matchers.filter_config import FilterConfig
 from vpr_edge.matchers.route import RouteGraph
 
@@ -57,6 +57,17 @@ def speed_kernel(n_speeds: int, change: float, step: float = 1.0) -> np.ndarray:
     return k
 
 
+def blind(kernel: np.ndarray, step: float = 1.0) -> np.ndarray:
+    """A speed kernel (V, V) for frames with no motion cue: a stopped camera also starts again at one place
+    a frame with probability ``GO_BLIND``. With a cue, each moving frame tells the filter it moves; without
+    one, broad evidence (neighbouring places alike) could hold it at speed 0 while the camera drives on."""
+    k = kernel.copy()
+    one = min(int(round(1.0 / step)), len(k) - 1)
+    k[0] *= 1.0 - GO_BLIND
+    k[0, one] += GO_BLIND
+    return k
+
+
 class Transitions:
     """The motion model on a route graph: ``predict(b, off)`` moves the on-map mass ``b`` (V, R) and the
     off-map mass one frame on (``bayes`` module docstring, step 1)."""
@@ -66,6 +77,7 @@ class Transitions:
         self.n_speeds = speed_count(config.vmax, config.speed_step)
         self.steps = speed_steps(self.n_speeds, config.speed_step)
         self.kernel = speed_kernel(self.n_speeds, config.speed_change, config.speed_step)
+        self.blind_kernel = blind(self.kernel, config.speed_step)   # frames with no motion cue
         later = [(int(s), int(e) + 1) for s, e in zip(graph.starts[1:], graph.ends[1:])]
         self.cut = {d: np.concatenate([np.arange(s, min(s + d, e)) for s, e in later]).astype(np.int64)
                     if later else np.zeros(0, np.int64) for d in range(1, int(math.ceil(config.vmax)) + 2)}
@@ -74,10 +86,11 @@ class Transitions:
         """Where mass coming onto the map lands: (V, R), every place and speed alike, summing to 1."""
         return np.full((self.n_speeds, self.graph.n_refs), 1.0 / (self.n_speeds * self.graph.n_refs))
 
-    def predict(self, b: np.ndarray, off: float) -> tuple[np.ndarray, float]:
-        """(V, R) on-map mass and the off-map mass -> the same one frame on (sums kept)."""
+    def predict(self, b: np.ndarray, off: float, kernel: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+        """(V, R) on-map mass and the off-map mass -> the same one frame on (sums kept); ``kernel``: the
+        speeds' (None: ``kernel``)."""
         c = self.config
-        b = self.kernel.T @ b
+        b = (self.kernel if kernel is None else kernel).T @ b
         r = b.shape[1]
         ran = 0.0
         moved = np.zeros_like(b)
