@@ -3,8 +3,9 @@
 The hidden state of a frame is where the camera is on the map and how fast it moves along it, in places a
 frame (0..``vmax``), or that it is somewhere the map does not hold (*off-map*). Each frame:
 
-1. **Predict** (the motion model). A speed changes by one step with probability ``speed_change`` each way;
-   then the camera moves on by its speed. Mass that runs past a drive's last place leaves the map; a drive
+1. **Predict** (the motion model). A speed changes by one step with probability ``speed_change`` each way
+   (``filter_motion.speed_kernel``; on a frame with no motion cue a stopped camera also starts again,
+   ``filter_motion.blind``); then the camera moves on by its speed. Mass that runs past a drive's last place leaves the map; a drive
    joined to another (``route.RouteGraph``'s junctions) passes a share ``JOIN`` of its junction places' mass
    on to the other drive. Every frame, ``leave`` of the on-map mass moves off the map, ``jump`` of it to a
    place anywhere on the map (a re-localisation), and ``enter`` of the off-map mass comes back onto the map
