@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vpr_edge.encoders.base import unit_rows
+
 RANK = 20           # directions of within-place change whitened (chosen on an inner split of nordland-dev's first half)
 SHRINK = 0.1        # their variances shrunk towards this share of the mean (0: whitened fully)
 MIN_PAIRS = 50      # labelled frames a drive (or drives) must give to learn from
@@ -83,7 +85,7 @@ def fit_within_place(queries: np.ndarray, refs: np.ndarray, rank: int = RANK, sh
     """Labelled frames' encodings ``queries`` (N, D) and their places' references ``refs`` (N, D), row by row
     (any positive scale: each row is made unit) -> the within-place whitening (module docstring) of the
     ``rank_for(N, rank)`` strongest directions. ValueError for no pairs or ``shrink`` <= 0."""
-    q, r = _unit(queries), _unit(refs)
+    q, r = unit_rows(queries), unit_rows(refs)
     if q.shape != r.shape or not len(q):
         raise ValueError(f"need matching pairs, got {q.shape} and {r.shape}")
     if shrink <= 0:
@@ -95,10 +97,3 @@ def fit_within_place(queries: np.ndarray, refs: np.ndarray, rank: int = RANK, sh
     floor = shrink * float(var.mean()) if var.any() else 1.0
     keep = np.sqrt(floor / (var[:m] + floor))
     return Adaptation(vt[:m].astype(np.float32), keep.astype(np.float32))
-
-
-def _unit(x: np.ndarray) -> np.ndarray:
-    """Rows (n, D) -> unit rows float64 (an all-zero row stays zero)."""
-    x = np.asarray(x, np.float64)
-    norm = np.linalg.norm(x, axis=1, keepdims=True)
-    return np.divide(x, norm, out=np.zeros_like(x), where=norm > 0)

@@ -88,6 +88,13 @@ def power_l2(v: np.ndarray, alpha: float = 1.0) -> np.ndarray:
     return (v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)).astype(np.float32)
 
 
+def unit_rows(x: np.ndarray) -> np.ndarray:
+    """Rows (n, D) -> unit rows float64 (an all-zero row stays zero)."""
+    x = np.asarray(x, np.float64)
+    norm = np.linalg.norm(x, axis=1, keepdims=True)
+    return np.divide(x, norm, out=np.zeros_like(x), where=norm > 0)
+
+
 def weights_of(x: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
     """(B, N) float64 weights: 1 for real descriptors, 0 for padding."""
     return np.ones(x.shape[:2]) if mask is None else np.asarray(mask, np.float64)

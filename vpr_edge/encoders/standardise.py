@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vpr_edge.encoders.base import unit_rows
+
 STANDARDISE = False   # localize, Localizer and evaluate: raw cosines unless told to standardise (--standardise)
 PRIOR_FRAMES = 10.0   # the references' mean counts as this many of the stream's frames
 HORIZON = 1000.0      # frames of the stream's running mean (an exponential memory)
@@ -41,13 +43,13 @@ class RouteMean:
         of any positive scale (each is made unit first); read twice, never held whole."""
         total, n = None, 0
         for b in blocks():
-            u = _unit(b)
+            u = unit_rows(b)
             total = u.sum(axis=0) if total is None else total + u.sum(axis=0)
             n += len(u)
         if total is None or n == 0:
             raise ValueError("no references to take a mean over")
         mean = total / n
-        spread = np.concatenate([np.linalg.norm(_unit(b) - mean, axis=1) for b in blocks()])
+        spread = np.concatenate([np.linalg.norm(unit_rows(b) - mean, axis=1) for b in blocks()])
         return cls(mean.astype(np.float32), np.maximum(spread, MIN_SPREAD).astype(np.float32))
 
     def scores(self, dots: np.ndarray, centred: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
@@ -82,7 +84,7 @@ class StreamMean:
     def centre(self, encoding: np.ndarray) -> np.ndarray:
         """One encoding (D,) -> ``unit(encoding) - mean`` (D,) float32; the encoding then joins the mean (an
         all-zero encoding does not)."""
-        u = _unit(np.asarray(encoding, np.float64)[None])[0]
+        u = unit_rows(np.asarray(encoding, np.float64)[None])[0]
         out = (u - self.mean).astype(np.float32)
         if np.any(u):
             self._sum = self._sum * self.keep + u
@@ -98,10 +100,3 @@ def centred_stream(encodings: np.ndarray, prior: np.ndarray, prior_frames: float
     if not len(encodings):
         return np.zeros((0, len(prior)), np.float32)
     return np.stack([mean.centre(e) for e in np.asarray(encodings)])
-
-
-def _unit(x: np.ndarray) -> np.ndarray:
-    """Rows (n, D) -> unit rows float64 (an all-zero row stays zero)."""
-    x = np.asarray(x, np.float64)
-    norm = np.linalg.norm(x, axis=1, keepdims=True)
-    return np.divide(x, norm, out=np.zeros_like(x), where=norm > 0)
