@@ -194,8 +194,9 @@ class BayesFilter:
         part, sample = self._split(s, refs)
         new = self._novelty(still)
         z = self._evidence(part, sample, new)
-        self._predict(still is not None and bool(self.config.still))
-        if still is not None and self.config.still:   # the cue observes the speed: 0 where the view is the same
+        cued = still is not None and bool(self.config.still)
+        self._predict(cued)
+        if cued:   # the cue observes the speed: 0 where the view is the same
             moving, standing = max(new, CUE_FLOOR), max(1.0 - new, CUE_FLOOR)
             self.b[0] *= standing
             self.b[1:] *= moving
