@@ -89,6 +89,7 @@ def test_a_half_under_fifty_frames_is_refused_in_one_line(tmp_path: Path) -> Non
     assert not (tmp_path / "w").exists()   # refused before anything is written
 
 
+@pytest.mark.slow   # adapt-halves fits four maps on real frames: minutes under arm64 emulation
 def test_it_runs_on_real_frames_learning_and_testing_apart(tmp_path: Path) -> None:
     streams = streams_of(tmp_path / "s", 100)
     proc = bench("adapt-halves", "--streams", streams, "--work", tmp_path / "w")
