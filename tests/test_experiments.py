@@ -516,7 +516,7 @@ def test_front_end_cache_then_lines(every_stream: Path, tmp_path: Path) -> None:
     assert again.count("exists") == 2 * 2 * (len(KINDS) + 1)
     lines = tool("front-end-lines", "--cache", str(cache), "--modes", "stream,stream-filter")
     rows = [line.split("|")[1:-1] for line in lines.splitlines() if line.startswith("| corridor | ifv |")]
-    per_stream = [r for r in rows if len(r) == 13 and r[3].strip() in (*KINDS, "foreign")]
+    per_stream = [r for r in rows if len(r) == 14 and r[3].strip() in (*KINDS, "foreign")]
     assert {(r[2].strip(), r[3].strip()) for r in per_stream} == {(m, k) for m in ("stream", "stream-filter")
                                                                    for k in (*KINDS, "foreign")}
     assert any(r[2].strip() == "`stream`" for r in rows)        # the ranges' table

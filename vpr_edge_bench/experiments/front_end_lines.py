@@ -9,7 +9,8 @@ wrote, scored by the library's ``scoring.evaluate_mode`` (what ``evaluate`` runs
 
 Per dataset and front end, one row per mode and stream: the front end alone (``single``'s R@1 at the cache's
 tolerance), the best answers' R@1 (lost ignored), the precision
-and recall the line delivers (answered right, mapped right), the best line's recall at the target precision
+and recall the line delivers (answered right, mapped right; distinct: over the frames whose truth is not where
+the map shows one view), the best line's recall at the target precision
 (the answers ranked by score), the line gap (the best line's recall at the delivered precision minus the
 delivered recall), and on the detour the unmapped frames lost and the first lost after leaving; foreign
 imagery (the other dataset's aligned frames against this map): the share of frames lost. Tolerance 2 (the
@@ -184,8 +185,8 @@ def _score_all(a: argparse.Namespace, fronts_of: dict[Path, list[str]], half: st
     print(f"tolerance {a.tolerance}, target precision {a.target_precision}")
     row = (lambda text: None) if a.ranges or a.counts else (lambda text: print(text, flush=True))   # per stream
     row("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
-        "best line @P | line gap | unmapped lost (first) | exact | signed error |")
-    row("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+        "distinct mapped right | best line @P | line gap | unmapped lost (first) | exact | signed error |")
+    row("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for ds, fronts in fronts_of.items():
         for front in fronts:
             drive = ds / front / f"{a.calibrate_on}.npz" if a.calibrate_on else None
@@ -245,9 +246,11 @@ def figures_row(key: tuple[str, str, str], fig: StreamFigures, r: ModeReport) ->
     """The per-stream table's row of ``fig`` (``r``'s figures) for (dataset, front end, mode) ``key``."""
     ds, front, mode = key
     if fig.stream == "foreign":
-        return f"| {ds} | {front} | {mode} | foreign | - | - | - | - | - | - | {r.lost_unmapped:.3f} | - | - |"
+        return f"| {ds} | {front} | {mode} | foreign | - | - | - | - | - | - | - | {r.lost_unmapped:.3f} | - | - |"
+    distinct = "-" if np.isnan(r.distinct_mapped_right) else f"{r.distinct_mapped_right:.3f}"
     return (f"| {ds} | {front} | {mode} | {fig.stream} | {fig.single:.3f} | {r.recall[1]:.3f} | "
-            f"{r.answered_right:.3f} | {r.mapped_right:.3f} | {r.best_line_recall:.3f} | {r.line_gap:.3f} | "
+            f"{r.answered_right:.3f} | {r.mapped_right:.3f} | {distinct} | {r.best_line_recall:.3f} | "
+            f"{r.line_gap:.3f} | "
             f"{unmapped(r.lost_unmapped, fig.first_exit)} | {r.exact:.3f} | {r.lead:+.2f} |")
 
 
