@@ -7,8 +7,8 @@ import pytest
 
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.bayes import BayesFilter, FilterConfig, robust_z
-from vpr_edge.matchers.constants import (CUE_FLOOR, GO_BLIND, JOIN, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
-                                         START_OFF)
+from vpr_edge.matchers.constants import (CUE_FLOOR, CUE_MOVING_SD, CUE_STANDING, GO_BLIND, JOIN, SCALE_BOUNDS,
+                                         SCALE_PRIOR, SCALE_PRIOR_FRAMES, START_OFF)
 from vpr_edge.matchers.params import STREAM_FILTER
 from vpr_edge.matchers.route import RouteGraph
 
@@ -68,10 +68,13 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
         on = moved.sum()
         nb = moved * (1 - cfg.leave - cfg.jump) + (cfg.jump * on + cfg.enter * off) / (n_v * n_r)
         noff = off * (1 - cfg.enter) + cfg.leave * on + ran
-        if cue is not None and cfg.still:
-            nb[0] *= max(1 - new, CUE_FLOOR)
-            nb[1:] *= max(new, CUE_FLOOR)
-            noff *= max(new, CUE_FLOOR) * (1 - 1 / n_v) + max(1 - new, CUE_FLOOR) / n_v
+        if cue is not None and cfg.still:   # the cue's densities, standing and moving, the larger 1
+            stand = np.exp(-0.5 * ((cue - CUE_STANDING[0]) / CUE_STANDING[1]) ** 2) / CUE_STANDING[1]
+            move = np.exp(-0.5 * (cue / CUE_MOVING_SD) ** 2) / CUE_MOVING_SD
+            w_stand, w_move = max(stand / max(stand, move), CUE_FLOOR), max(move / max(stand, move), CUE_FLOOR)
+            nb[0] *= w_stand
+            nb[1:] *= w_move
+            noff *= w_move * (1 - 1 / n_v) + w_stand / n_v
         lr = np.exp(beta * z - beta * beta / 2)
         for p in range(n_r):
             nb[:, p] *= lr[p]
@@ -233,3 +236,14 @@ def test_without_a_cue_a_stopped_filter_starts_again():
     f = BayesFilter(100, config())
     answers = [f.update(row)[0] for row in rows]
     assert abs(answers[49] - 19) <= 1 and answers[-1] >= answers[49] + 5
+
+
+def test_the_cue_weighs_standing_by_its_two_normals():
+    from vpr_edge.matchers.filter_motion import cue_weights
+    cues = np.linspace(-0.5, 1.0, 31)
+    ratio = [cue_weights(c)[1] / cue_weights(c)[0] for c in cues]   # standing over moving
+    assert all(b >= a for a, b in zip(ratio, ratio[1:]))              # the more alike the view, the more it stands
+    assert cue_weights(0.0) == (1.0, CUE_FLOOR)                         # a typical moving step
+    assert cue_weights(CUE_STANDING[0])[1] == 1.0 and cue_weights(CUE_STANDING[0])[0] < 0.2
+    assert cue_weights(1.0) == (CUE_FLOOR, 1.0)                         # the same view again
+    assert cue_weights(1.0, as_motion=True) == (1.0, CUE_FLOOR)         # where the map's drive stood too

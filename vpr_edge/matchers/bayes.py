@@ -26,10 +26,11 @@ frame (0..``vmax``), or that it is somewhere the map does not hold (*off-map*). 
    confidence (a prior of ``SCALE_PRIOR`` for ``SCALE_PRIOR_FRAMES`` frames), times ``temper`` (< 1:
    neighbouring frames and places see alike, so a frame is worth less than an independent observation).
    A front end whose cosines lie in 0.9-1.0 and one whose cosines spread over 0-1 are read alike.
-3. The **motion cue** (``motion.MotionCue``) observes the speed: a frame whose cue reaches ``still`` (its
-   view is nearly the last moving frame's) weighs speed 0 by the cue and the moving speeds by 1 - cue
-   (never below ``CUE_FLOOR``), and counts 1 - cue of its view's evidence (a view seen again says
-   nothing new). Where the map's own drive stood (``route``) the frame is read as motion.
+3. The **motion cue** (``motion.MotionCue``) observes the speed: speed 0 and the moving speeds are weighed
+   by how likely the frame's cue is for a standing camera (about 0.75) and a moving one (about 0)
+   (``filter_motion.cue_weights``). A frame whose cue reaches ``still`` (its view is nearly the last
+   moving frame's) counts 1 - cue of its view's evidence (a view seen again says nothing new). Where the
+   map's own drive stood (``route``) the frame is read as motion.
 
 The answer is the place of the posterior's mode (summed over speeds), its **confidence** the posterior mass
 within ``tolerance`` places of it along the route: the probability that the answer is within ``tolerance``
@@ -58,10 +59,10 @@ from statistics import NormalDist
 import numpy as np
 
 from vpr_edge.matchers.base import AMBIGUOUS, OFF_MAP, SETTLING
-from vpr_edge.matchers.constants import (CUE_FLOOR, HUB_DELAY, MIN_SPREAD, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
+from vpr_edge.matchers.constants import (HUB_DELAY, MIN_SPREAD, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
                                          START_OFF, TAIL_QUANTILE)
 from vpr_edge.matchers.filter_config import FilterConfig
-from vpr_edge.matchers.filter_motion import Transitions, Window, regather
+from vpr_edge.matchers.filter_motion import Transitions, Window, cue_weights, regather
 from vpr_edge.matchers.motion import stands
 from vpr_edge.matchers.route import RouteGraph, places
 from vpr_edge.matchers.search_policy import around_candidates, best_hypotheses, local_next
@@ -197,7 +198,7 @@ class BayesFilter:
         cued = still is not None and bool(self.config.still)
         self._predict(cued)
         if cued:   # the cue observes the speed: 0 where the view is the same
-            moving, standing = max(new, CUE_FLOOR), max(1.0 - new, CUE_FLOOR)
+            moving, standing = cue_weights(float(still), stands(still, self.config.still) and new >= 1.0)
             self.b[0] *= standing
             self.b[1:] *= moving
             share = moving * (1.0 - 1.0 / self.moves.n_speeds) + standing / self.moves.n_speeds

@@ -48,6 +48,11 @@ HUB_DELAY = 8            # frames a frame's z-scores wait before they join the h
 # probability a frame; chosen on nordland-dev's pixels (docs/decisions.md, "The stream filter's parameters")
 GO_BLIND = 0.1
 CUE_FLOOR = 0.05        # the motion cue's weight of the speed it contradicts (the cue may be wrong)
+# the stream filter reads the motion cue as a normal about CUE_STANDING[0] (sd CUE_STANDING[1]) where the camera
+# stands and about 0 (sd CUE_MOVING_SD) where it moves (``filter_motion.cue_weights``); chosen on nordland-dev
+# (docs/decisions.md, "The stream filter's parameters")
+CUE_STANDING = (0.75, 0.15)
+CUE_MOVING_SD = 0.3
 # the stream filter's window (``filter_motion.Window``): a column's predecessor lies in another drive (no mass
 # comes in) or outside the window (its share of the mass held elsewhere comes in)
 FROM_ANOTHER_DRIVE, FROM_ELSEWHERE = -1, -2

@@ -1,6 +1,6 @@
 """The stream filter's motion model (``bayes``, step 1): over the whole route (``Transitions``), or over a
 window of places around its answer on a long route (``Window``), the rest of the on-map mass held as one
-number spread evenly (*elsewhere*).
+number spread evenly (*elsewhere*); and what the motion cue says of the speed (``cue_weights``, step 3).
 
 Speeds are multiples of ``speed_step`` places a frame, 0 to ``vmax``. A speed between two whole places moves
 the camera by the nearer whole numbers of places, each as often as the speed lies near it (1.5: one place or
@@ -19,7 +19,8 @@ import math
 
 import numpy as np
 
-from vpr_edge.matchers.constants import FROM_ANOTHER_DRIVE, FROM_ELSEWHERE, GO_BLIND, JOIN
+from vpr_edge.matchers.constants import (CUE_FLOOR, CUE_MOVING_SD, CUE_STANDING, FROM_ANOTHER_DRIVE, FROM_ELSEWHERE,
+                                         GO_BLIND, JOIN)
 from vpr_edge.matchers.filter_config import FilterConfig
 from vpr_edge.matchers.route import RouteGraph
 
@@ -55,6 +56,21 @@ def speed_kernel(n_speeds: int, change: float, step: float = 1.0) -> np.ndarray:
                 k[v, min(max(w, 0), n_speeds - 1)] += change
         k[v, v] += 1.0 - 2.0 * len(moves) * change
     return k
+
+
+def cue_weights(cue: float, as_motion: bool = False) -> tuple[float, float]:
+    """A frame's motion cue (``motion.MotionCue``: 1 the same view again, 0 a typical moving step) -> the
+    weights (moving, standing) of the moving speeds and of speed 0: the cue's density where the camera moves
+    (normal about 0, sd ``CUE_MOVING_SD``) and where it stands (normal about ``CUE_STANDING``), the larger
+    scaled to 1 and neither below ``CUE_FLOOR``. ``as_motion``: the map's drive stood here too, so the frame
+    is read as motion (1, ``CUE_FLOOR``), as the map's references were."""
+    if as_motion:
+        return 1.0, CUE_FLOOR
+    mean, sd = CUE_STANDING
+    log_stand = -0.5 * ((cue - mean) / sd) ** 2 - math.log(sd)
+    log_move = -0.5 * (cue / CUE_MOVING_SD) ** 2 - math.log(CUE_MOVING_SD)
+    top = max(log_stand, log_move)
+    return max(math.exp(log_move - top), CUE_FLOOR), max(math.exp(log_stand - top), CUE_FLOOR)
 
 
 def blind(kernel: np.ndarray, step: float = 1.0) -> np.ndarray:
