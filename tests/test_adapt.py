@@ -46,7 +46,7 @@ def test_the_fit_is_a_plain_loops() -> None:
         scatter += np.outer(d, d) / len(refs)
     var, vec = np.linalg.eigh(scatter)
     var, vec = var[::-1], vec[:, ::-1]
-    floor = 0.2 * var.mean()
+    floor = 0.2 * var[:6].mean()
     np.testing.assert_allclose(got.keep, np.sqrt(floor / (var[:6] + floor)), rtol=1e-4)
     for i in range(6):   # each direction up to its sign
         assert abs(float(got.basis[i] @ vec[:, i])) > 0.999
@@ -60,7 +60,7 @@ def test_planted_conditions_are_found_and_suppressed() -> None:
     half = PLACES // 2
     ad = fit_within_place(queries[:half], refs[:half], rank=DIM - SIGNAL)
     assert np.linalg.norm(ad.basis[:, SIGNAL:], axis=1).min() > 0.95   # the condition dims, not the place's
-    assert (ad.keep < 0.25).all()
+    assert (ad.keep < 0.4).all()   # each shrunk to about sqrt(shrink / (1 + shrink)) of its length
     before, after = r1(queries[half:], refs[half:]), r1(ad.apply(queries[half:]), ad.apply(refs[half:]))
     assert after > before + 0.3 and after > 0.8, (before, after)   # places never learned from
 
@@ -68,7 +68,7 @@ def test_planted_conditions_are_found_and_suppressed() -> None:
 def test_each_frame_pairs_with_the_middle_of_its_truth() -> None:
     truth = np.array([[3, 1, 2], [7, -1, -1], [-1, -1, -1], [5, 4, -1]])
     assert middle_refs(truth).tolist() == [2, 7, -1, 4]
-    assert rank_for(30) == 7 and rank_for(400) == 20 and rank_for(2) == 1
+    assert rank_for(30) == 7 and rank_for(400) == 80 and rank_for(2) == 1
 
 
 def test_a_stored_adaptation_is_checked() -> None:

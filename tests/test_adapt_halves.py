@@ -99,6 +99,9 @@ def test_it_runs_on_real_frames_learning_and_testing_apart(tmp_path: Path) -> No
         (kind, cos, str(t)) for kind in ("plain", "adapted") for cos in ("raw", "standardised") for t in (0, 1, 2)]
     assert all(0 <= float(x.strip(" |")) <= 1 for r in rows for x in r[3:])
     assert "learned on places 0-49 (50 frames); tested on places 50-99 (50 frames" in proc.stdout
+    assert "codebook gains" in proc.stdout   # an IFV map: its gains are learned too
+    ad = load_map(tmp_path / "w" / "adapted.npz").adaptation
+    assert ad is not None and ad.gain_in is not None and ad.gain_out is not None
     aligned = sorted((streams / "aligned").iterdir())
     learned = [p.resolve() for p in sorted((tmp_path / "w" / "learn").iterdir())]
     tested = [p.resolve() for p in sorted((tmp_path / "w" / "test").iterdir())]

@@ -1,18 +1,25 @@
 """A map fitted to its route: a linear map of the encodings learned from labelled drives (``vpr-edge adapt``).
 
-Each labelled frame is paired with its place's reference. The differences within the pairs span what the
-drive's conditions change (snow, light, the camera) and not the place; the ``rank`` strongest directions of
-those differences are whitened, shrunk towards the rest (Ledoit-Wolf style, ``shrink``):
+Each labelled frame is paired with its place's reference. Three steps, each learned on the pairs:
 
-    y = unit(x - B^T ((1 - keep) * (B x))),   keep_i = sqrt(l / (e_i + l)),   l = shrink * mean(e)
+1. **Gains** (``adapt_gains``, IFV and VLAD maps): one gain a codebook entry, learned so that each frame's
+   cosines favour its own place's reference over the others' (the entries that describe snow or light weigh
+   less);
+2. **Within-place whitening**: the differences within the pairs span what the drive's conditions change and
+   not the place; their ``rank`` strongest directions are whitened, shrunk towards the rest (``shrink``);
+3. **Gains** again, learned on the pairs as steps 1-2 map them.
 
-with ``B`` (rank, D) the differences' principal directions and ``e`` their variances. The map is D -> D
-(identity outside ``B``), so the stored rows keep their size and storage. Keeping only the top directions of
-between-place scatter (a full LDA) lost on nordland-dev: 400 places are too few to estimate them
+    y = unit(g_out * W(g_in * x)),   W(v) = v - B^T ((1 - keep) * (B v)),
+    keep_i = sqrt(l / (e_i + l)),   l = shrink * mean(e_1 .. e_rank)
+
+with ``B`` (rank, D) the differences' principal directions and ``e`` their variances; ``g_in``, ``g_out``
+(D,) are 1 where the encoder has no codebook blocks (``Encoder.groups``). The map is D -> D (identity outside
+``B``), so the stored rows keep their size and storage. A full linear map (LDA, a ridge map of frames onto
+references, a whitening of the whole space) lost on nordland-dev: 400 places are too few to estimate it
 (docs/usage.md, "Fitting vpr-edge to your route").
 
 References are mapped once, when the map is adapted; each query encoding is mapped in ``PlaceMap.encode``,
-so ``localize``, ``evaluate`` and the index all see mapped encodings. NumPy only.
+so ``localize``, ``evaluate`` and the index all see mapped encodings.
 """
 from __future__ import annotations
 
@@ -22,8 +29,8 @@ import numpy as np
 
 from vpr_edge.encoders.base import unit_rows
 
-RANK = 20           # directions of within-place change whitened (chosen on an inner split of nordland-dev's first half)
-SHRINK = 0.1        # their variances shrunk towards this share of the mean (0: whitened fully)
+RANK = 80           # directions of within-place change whitened (chosen on an inner split of nordland-dev's first half)
+SHRINK = 0.1        # their variances shrunk towards this share of their mean (0: whitened fully)
 MIN_PAIRS = 50      # labelled frames a drive (or drives) must give to learn from
 PAIRS_PER_RANK = 4  # at least this many pairs a direction: fewer pairs learn fewer directions
 
@@ -31,10 +38,13 @@ PAIRS_PER_RANK = 4  # at least this many pairs a direction: fewer pairs learn fe
 @dataclass(frozen=True)
 class Adaptation:
     """The learned map (module docstring): ``basis`` (m, D) float32 orthonormal rows, ``keep`` (m,) float32 in
-    (0, 1], what each direction keeps of its length."""
+    (0, 1], what each direction keeps of its length; ``gain_in``, ``gain_out`` (D,) float32 > 0, the gains
+    before and after (None: 1 everywhere, as in a map adapted without them)."""
 
     basis: np.ndarray
     keep: np.ndarray
+    gain_in: np.ndarray | None = None
+    gain_out: np.ndarray | None = None
 
     @property
     def dim(self) -> int:
@@ -44,17 +54,26 @@ class Adaptation:
         """Encodings (B, D) of any positive scale -> mapped unit encodings (B, D) float32 (a zero row stays
         zero)."""
         x = np.atleast_2d(np.asarray(x, np.float32))
+        if self.gain_in is not None:
+            x = x * self.gain_in
         y = x - ((x @ self.basis.T) * (1.0 - self.keep)) @ self.basis
+        if self.gain_out is not None:
+            y *= self.gain_out
         norm = np.linalg.norm(y, axis=1, keepdims=True)
         return np.divide(y, norm, out=np.zeros_like(y), where=norm > 0).astype(np.float32)
 
     def to_arrays(self) -> dict[str, np.ndarray]:
-        return {"adapt_basis": self.basis.astype(np.float32), "adapt_keep": self.keep.astype(np.float32)}
+        out = {"adapt_basis": self.basis.astype(np.float32), "adapt_keep": self.keep.astype(np.float32)}
+        for name in ("gain_in", "gain_out"):
+            if getattr(self, name) is not None:
+                out["adapt_" + name] = getattr(self, name).astype(np.float32)
+        return out
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], dim: int) -> "Adaptation":
-        """From a map's ``adapt_basis`` and ``adapt_keep``; ValueError unless they fit ``dim`` dims, are finite,
-        the rows orthonormal and ``keep`` in (0, 1]."""
+        """From a map's ``adapt_basis``, ``adapt_keep`` and, where held, ``adapt_gain_in`` / ``adapt_gain_out``;
+        ValueError unless they fit ``dim`` dims, are finite, the rows orthonormal, ``keep`` in (0, 1] and the
+        gains positive."""
         basis = np.array(arrays["adapt_basis"], np.float32)   # into RAM (a memory-mapped map)
         keep = np.array(arrays["adapt_keep"], np.float32)
         if basis.ndim != 2 or basis.shape[1] != dim or keep.shape != (basis.shape[0],) or not len(keep):
@@ -63,7 +82,13 @@ class Adaptation:
             raise ValueError("adaptation holds non-finite values, or keeps outside (0, 1]")
         if np.abs(basis @ basis.T - np.eye(len(keep), dtype=np.float32)).max() > 1e-3:
             raise ValueError("adaptation's directions are not orthonormal")
-        return cls(basis, keep)
+        gains = []
+        for name in ("adapt_gain_in", "adapt_gain_out"):
+            g = None if name not in arrays else np.array(arrays[name], np.float32)
+            if g is not None and (g.shape != (dim,) or not np.isfinite(g).all() or (g <= 0).any()):
+                raise ValueError(f"adaptation's {name[6:]} is not {dim} positive finite gains")
+            gains.append(g)
+        return cls(basis, keep, *gains)
 
 
 def middle_refs(truth: np.ndarray) -> np.ndarray:
@@ -83,8 +108,8 @@ def rank_for(pairs: int, rank: int = RANK) -> int:
 def fit_within_place(queries: np.ndarray, refs: np.ndarray, rank: int = RANK, shrink: float = SHRINK
                      ) -> Adaptation:
     """Labelled frames' encodings ``queries`` (N, D) and their places' references ``refs`` (N, D), row by row
-    (any positive scale: each row is made unit) -> the within-place whitening (module docstring) of the
-    ``rank_for(N, rank)`` strongest directions. ValueError for no pairs or ``shrink`` <= 0."""
+    (any positive scale: each row is made unit) -> the within-place whitening (module docstring, step 2) of
+    the ``rank_for(N, rank)`` strongest directions. ValueError for no pairs or ``shrink`` <= 0."""
     q, r = unit_rows(queries), unit_rows(refs)
     if q.shape != r.shape or not len(q):
         raise ValueError(f"need matching pairs, got {q.shape} and {r.shape}")
@@ -94,6 +119,26 @@ def fit_within_place(queries: np.ndarray, refs: np.ndarray, rank: int = RANK, sh
     _, s, vt = np.linalg.svd(diff, full_matrices=False)
     var = s ** 2 / len(diff)
     m = min(rank_for(len(diff), rank), int((var > 0).sum()) or 1)
-    floor = shrink * float(var.mean()) if var.any() else 1.0
+    floor = shrink * float(var[:m].mean()) if var[:m].any() else 1.0
     keep = np.sqrt(floor / (var[:m] + floor))
     return Adaptation(vt[:m].astype(np.float32), keep.astype(np.float32))
+
+
+def fit_adaptation(queries: np.ndarray, refs: np.ndarray, places: np.ndarray, groups: np.ndarray | None = None,
+                   rank: int = RANK, shrink: float = SHRINK) -> Adaptation:
+    """The three steps (module docstring) from labelled pairs: frames' encodings ``queries`` and their places'
+    references ``refs`` (N, D), each pair's place ``places`` (N,) (references within ``TOLERANCE`` places
+    count as its own), the encoder's ``groups`` (D,) (None: no gains, step 2 alone)."""
+    if groups is None:
+        return fit_within_place(queries, refs, rank, shrink)
+    from vpr_edge.encoders.adapt_gains import fit_gains
+
+    q, r = unit_rows(queries).astype(np.float64), unit_rows(refs).astype(np.float64)
+    if q.shape != r.shape or len(groups) != q.shape[1] or len(places) != len(q):
+        raise ValueError(f"need matching pairs, places and groups, got {q.shape}, {r.shape}, {len(places)} and "
+                         f"{len(groups)}")
+    g_in = fit_gains(q, r, places, groups)
+    white = fit_within_place(q * g_in, r * g_in, rank, shrink)
+    first = Adaptation(white.basis, white.keep, g_in.astype(np.float32))
+    g_out = fit_gains(first.apply(q), first.apply(r), places, groups)
+    return Adaptation(white.basis, white.keep, g_in.astype(np.float32), g_out.astype(np.float32))

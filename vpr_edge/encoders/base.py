@@ -120,6 +120,11 @@ class Encoder:
         """Codebook size (GMM components, words, centres); 0 for none."""
         return 0
 
+    def groups(self) -> np.ndarray | None:
+        """The codebook entry each encoding dimension belongs to (D,) int64, or None where the dimensions form
+        no such groups: ``adapt`` learns one gain a group."""
+        return None
+
     def params(self) -> dict:
         """JSON-serialisable parameters (with ``to_arrays`` they rebuild the encoder)."""
         raise NotImplementedError

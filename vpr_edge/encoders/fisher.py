@@ -80,6 +80,10 @@ class FisherVector(Encoder):
     def n_components(self) -> int:
         return self.gmm.n_components
 
+    def groups(self) -> np.ndarray:
+        """Each dimension's GMM component: the mean gradients (K, d) then the variance gradients (K, d)."""
+        return np.tile(np.repeat(np.arange(self.gmm.n_components, dtype=np.int64), self.gmm.dim), 2)
+
     def params(self) -> dict:
         return {"alpha": self.alpha}
 

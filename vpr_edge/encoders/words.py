@@ -113,6 +113,10 @@ class Vlad(_Centres):
     def dim(self) -> int:
         return int(self.centres.size)
 
+    def groups(self) -> np.ndarray:
+        """Each dimension's centre (C, K row-major)."""
+        return np.repeat(np.arange(len(self.centres), dtype=np.int64), self.centres.shape[1])
+
     def params(self) -> dict:
         return {"alpha": self.alpha}
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vpr_edge.encoders.adapt import MIN_PAIRS, RANK, SHRINK, Adaptation, fit_within_place, middle_refs
+from vpr_edge.encoders.adapt import MIN_PAIRS, RANK, SHRINK, Adaptation, fit_adaptation, middle_refs
 from vpr_edge.errors import InputError, VprError, warn
 from vpr_edge.files.checks import check_not_input, check_writable
 from vpr_edge.files.one_writer import writer_lock
@@ -109,6 +109,9 @@ def adapt_map(map_path: str | os.PathLike[str], drives: Sequence[LabelledDrive],
     if pairs < MIN_PAIRS:
         raise InputError("{d}: {p} labelled frames, too short to learn from (at least {n})",
                          d=", ".join(d.frames for d in drives), p=pairs, n=MIN_PAIRS)
+    groups = source.encoder.groups()
+    if groups is not None:
+        require_scipy(map_path)
     with writer_lock(out, wait=False):
         q_enc, r_idx, used = [], [], []
         for drive, refs in labelled:
@@ -123,13 +126,26 @@ def adapt_map(map_path: str | os.PathLike[str], drives: Sequence[LabelledDrive],
         if len(q_enc) < MIN_PAIRS:
             raise VprError(f"{len(q_enc)} labelled frames could be decoded, too few to learn from (at least "
                            f"{MIN_PAIRS})")
-        adaptation = fit_within_place(np.stack(q_enc), source.stored.take(np.asarray(r_idx)).astype(np.float32),
-                                      rank, shrink)
+        places = np.asarray(r_idx)
+        adaptation = fit_adaptation(np.stack(q_enc), source.stored.take(places).astype(np.float32), places,
+                                    groups, rank, shrink)
+        n_gains = 0 if groups is None else int(groups.max()) + 1
         adapted = _adapted(source, adaptation, {"drives": used, "pairs": len(q_enc), "rank": len(adaptation.keep),
-                                                "shrink": shrink})
+                                                "shrink": shrink, "gains": n_gains})
         save_map(adapted, out, storage=source.stored.storage)
+    gains = f", {n_gains} codebook gains" if n_gains else ""
     return (f"adapted {map_path} on {len(q_enc)} labelled frames of {len(drives)} drive(s): "
-            f"{len(adaptation.keep)} directions whitened -> {out}")
+            f"{len(adaptation.keep)} directions whitened{gains} -> {out}")
+
+
+def require_scipy(map_path: str | os.PathLike[str]) -> None:
+    """InputError naming the missing extra unless SciPy is installed (an IFV or VLAD map's gains are fitted
+    with its L-BFGS)."""
+    import importlib.util
+
+    if importlib.util.find_spec("scipy") is None:
+        raise InputError("{m}: adapting a codebook map fits its gains with SciPy (missing): pip install "
+                         "'vpr-edge[fit]'", m=map_path)
 
 
 def _adapted(source: PlaceMap, adaptation: Adaptation, adapted_meta: dict, block: int = 4096) -> PlaceMap:

@@ -22,8 +22,9 @@ from vpr_edge.map.drives import Drives
 from vpr_edge.map.model import PlaceMap, Svm
 from vpr_edge.positions import Positions
 
-MAP_SCHEMA = 5          # 5: adaptation (adapt_*, "adapted"); 4: drives; 3: front end ("features"), encoder ("encoding")
-READS_SCHEMAS = (1, 2, 3, 4, 5)  # 2: IFV only, int8/float16/float32 encodings; 1: IFV, float32
+MAP_SCHEMA = 6          # 6: adaptation gains (adapt_gain_*); 5: adaptation (adapt_*, "adapted"); 4: drives;
+                        # 3: front end ("features"), encoder ("encoding")
+READS_SCHEMAS = (1, 2, 3, 4, 5, 6)  # 2: IFV only, int8/float16/float32 encodings; 1: IFV, float32
 
 
 def save_map(place_map: PlaceMap, path: str | os.PathLike[str], storage: str = DEFAULT_STORAGE) -> None:
