@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vpr_edge.encoders.adapt import Adaptation, fit_adaptation, fit_within_place
-from vpr_edge.encoders.adapt_gains import contrastive_loss, fit_gains
+from vpr_edge.encoders.adapt import Adaptation, Recipe, choose_recipe, fit_adaptation, fit_recipe, held_out_r1
+from vpr_edge.encoders.adapt_gains import GroupSums, contrastive_loss, fit_gains
 from vpr_edge.encoders.fisher import FisherVector, Gmm, fisher_gradients
 from vpr_edge.encoders.words import Vlad
 
@@ -55,11 +55,12 @@ def test_the_loss_is_a_plain_loop_and_its_gradient_exact() -> None:
     places = np.array([0, 1, 2, 5, 6, 9, 12, 13, 20, 21, 22, 30])
     near = np.abs(places[:, None] - places[None, :]) <= 2
     theta = 0.3 * rng.normal(size=GROUPS)
-    loss, grad = contrastive_loss(theta, q, r, groups, near, tau=0.1, reg=0.5)
-    assert loss == pytest.approx(plain_loss(theta, q, r, groups, near, 0.1, 0.5), rel=1e-9)
+    sums = GroupSums.of(q, r, groups)
+    loss, grad = contrastive_loss(theta, sums, near, tau=0.1, reg=0.5)
+    assert loss == pytest.approx(plain_loss(theta, q, r, groups, near, 0.1, 0.5), rel=1e-6)   # float32 sums
     step = 1e-6
-    numeric = [(contrastive_loss(theta + step * e, q, r, groups, near, 0.1, 0.5)[0]
-                - contrastive_loss(theta - step * e, q, r, groups, near, 0.1, 0.5)[0]) / (2 * step)
+    numeric = [(contrastive_loss(theta + step * e, sums, near, 0.1, 0.5)[0]
+                - contrastive_loss(theta - step * e, sums, near, 0.1, 0.5)[0]) / (2 * step)
                for e in np.eye(GROUPS)]
     np.testing.assert_allclose(grad, numeric, rtol=1e-5, atol=1e-8)
 
@@ -81,8 +82,8 @@ def test_gains_help_on_places_not_learned_from() -> None:
             q, r = ad.apply(q), ad.apply(r)
         return float(np.mean(np.argmax(_unit(q) @ _unit(r).T, axis=1) == np.arange(len(q))))
 
-    with_gains = fit_adaptation(queries[:half], refs[:half], np.arange(half), groups, rank=4)
-    without = fit_within_place(queries[:half], refs[:half], rank=4)
+    with_gains = fit_recipe(queries[:half], refs[:half], np.arange(half), groups, Recipe(4, True))
+    without = fit_recipe(queries[:half], refs[:half], np.arange(half), groups, Recipe(4, False))
     assert with_gains.gain_in is not None and with_gains.gain_out is not None
     assert r1(with_gains) > r1(without) + 0.05 and r1(with_gains) > r1(None) + 0.2, (r1(None), r1(without),
                                                                                       r1(with_gains))
@@ -90,7 +91,7 @@ def test_gains_help_on_places_not_learned_from() -> None:
 
 def test_an_adaptation_with_gains_is_stored_and_checked() -> None:
     queries, refs, groups = planted(80)
-    ad = fit_adaptation(queries, refs, np.arange(80), groups, rank=4)
+    ad = fit_recipe(queries, refs, np.arange(80), groups, Recipe(4, True))
     dim = GROUPS * WIDTH
     again = Adaptation.from_arrays(ad.to_arrays(), dim)
     x = np.random.default_rng(3).normal(size=(4, dim))
@@ -117,3 +118,37 @@ def test_each_encoders_groups_are_where_its_entries_lie() -> None:
         np.flatnonzero(groups == 1))
     vlad = Vlad(rng.normal(size=(5, 3)), None, 3)
     assert vlad.groups().tolist() == [c for c in range(5) for _ in range(3)]
+
+
+def test_the_recipe_is_chosen_on_the_pairs_own_held_out_places() -> None:
+    """Each recipe learned below the median place and scored above it, and the reverse; the best is refitted."""
+    queries, refs, groups = planted(160, seed=5)
+    places = np.arange(160)
+    choice = choose_recipe(queries, refs, places, groups, ranks=(2, 4))
+    assert set(choice.scores) == {"unadapted", "rank 2", "rank 2 with gains", "rank 4", "rank 4 with gains"}
+    low = places < 80
+    for recipe in (Recipe(2, False), Recipe(4, True)):   # each score as the docstring says, by hand
+        by_hand = np.mean([held_out_r1(fit_recipe(queries[a], refs[a], places[a], groups, recipe), queries[b],
+                                       refs[b], places[b]) for a, b in ((low, ~low), (~low, low))])
+        assert choice.scores[recipe.name] == pytest.approx(by_hand)
+    assert choice.recipe.gains and choice.scores[choice.recipe.name] == max(choice.scores.values())
+    ad, again = fit_adaptation(queries, refs, places, groups)
+    assert again == choose_recipe(queries, refs, places, groups) and ad.gain_in is not None
+    one, only = fit_adaptation(queries, refs, places, None, rank=3)   # no codebook: no gains; one rank given
+    assert set(only.scores) == {"unadapted", "rank 3"} and one.gain_in is None and len(one.keep) == 3
+
+
+def test_held_out_r1_is_a_plain_loop() -> None:
+    queries, refs, _ = planted(40, seed=6)
+    places = np.arange(40) * 3
+
+    def centred(x):
+        x = x / np.linalg.norm(x, axis=1, keepdims=True)
+        return x - x.mean(axis=0)
+
+    q, r = centred(queries), centred(refs)
+    right = 0
+    for i in range(40):
+        cos = [q[i] @ r[j] / np.linalg.norm(q[i]) / np.linalg.norm(r[j]) for j in range(40)]
+        right += abs(places[int(np.argmax(cos))] - places[i]) <= 2
+    assert held_out_r1(None, queries, refs, places) == pytest.approx(right / 40)

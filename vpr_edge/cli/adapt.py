@@ -7,7 +7,7 @@ from typing import Optional
 import typer
 
 from vpr_edge.cli.common import THREADS_HELP, app, user_errors
-from vpr_edge.encoders.adapt import RANK, SHRINK
+from vpr_edge.encoders.adapt import RANKS, SHRINK
 from vpr_edge.errors import InputError, printable
 from vpr_edge.files.checks import output_path
 from vpr_edge.frames.images import Frame
@@ -30,8 +30,10 @@ def adapt_cmd(
                                                       "own positions within --radius."),
     radius: float = typer.Option(RADIUS_M, min=0.0, help="With --gt-positions: metres within which a reference "
                                  "is a frame's place."),
-    rank: int = typer.Option(RANK, min=1, help="Directions of within-place change to whiten (fewer with fewer "
-                             "labelled frames)."),
+    rank: Optional[int] = typer.Option(None, min=1, help="Directions of within-place change to whiten (fewer "
+                                       "with fewer labelled frames); default: "
+                                       f"{' or '.join(map(str, RANKS))}, chosen on the drives' own held-out "
+                                       "places."),
     shrink: float = typer.Option(SHRINK, min=1e-6, help="How far each direction's variance is shrunk towards "
                                  "the mean (small: whitened fully)."),
     model: Optional[Path] = typer.Option(None, help="ONNX feature model (default: the map's own)."),

@@ -13,10 +13,16 @@ Each labelled frame is paired with its place's reference. Three steps, each lear
     keep_i = sqrt(l / (e_i + l)),   l = shrink * mean(e_1 .. e_rank)
 
 with ``B`` (rank, D) the differences' principal directions and ``e`` their variances; ``g_in``, ``g_out``
-(D,) are 1 where the encoder has no codebook blocks (``Encoder.groups``). The map is D -> D (identity outside
-``B``), so the stored rows keep their size and storage. A full linear map (LDA, a ridge map of frames onto
-references, a whitening of the whole space) lost on nordland-dev: 400 places are too few to estimate it
-(docs/usage.md, "Fitting vpr-edge to your route").
+(D,) are 1 without gains. The map is D -> D (identity outside ``B``), so the stored rows keep their size and
+storage. A full linear map (LDA, a ridge map of frames onto references, a whitening of the whole space) lost
+on nordland-dev: 400 places are too few to estimate it.
+
+What suits one front end does not suit another (80 directions help a 1,968-dim IFV and hurt a 112-dim GeM
+descriptor; gains help the 41-component IFV and hurt a 128-component one), so the recipe is chosen on the
+drive itself (``choose_recipe``): the pairs are split at their median place, each recipe (``RANKS``, with
+and without gains on a codebook map, ``Encoder.groups``) is learned on one half and scored on the other and
+the reverse, and the best, refitted on every pair, is kept (docs/decisions.md, "`adapt`: chosen on the
+drive's own places").
 
 References are mapped once, when the map is adapted; each query encoding is mapped in ``PlaceMap.encode``,
 so ``localize``, ``evaluate`` and the index all see mapped encodings.
@@ -29,7 +35,7 @@ import numpy as np
 
 from vpr_edge.encoders.base import unit_rows
 
-RANK = 80           # directions of within-place change whitened (chosen on an inner split of nordland-dev's first half)
+RANKS = (20, 80)    # directions of within-place change whitened: the choices tried on the drive's held-out places
 SHRINK = 0.1        # their variances shrunk towards this share of their mean (0: whitened fully)
 MIN_PAIRS = 50      # labelled frames a drive (or drives) must give to learn from
 PAIRS_PER_RANK = 4  # at least this many pairs a direction: fewer pairs learn fewer directions
@@ -100,12 +106,12 @@ def middle_refs(truth: np.ndarray) -> np.ndarray:
     return np.where(count > 0, mid, -1)
 
 
-def rank_for(pairs: int, rank: int = RANK) -> int:
+def rank_for(pairs: int, rank: int = max(RANKS)) -> int:
     """The directions learned from ``pairs`` labelled frames: ``rank``, fewer where pairs are few."""
     return max(1, min(rank, pairs // PAIRS_PER_RANK))
 
 
-def fit_within_place(queries: np.ndarray, refs: np.ndarray, rank: int = RANK, shrink: float = SHRINK
+def fit_within_place(queries: np.ndarray, refs: np.ndarray, rank: int = max(RANKS), shrink: float = SHRINK
                      ) -> Adaptation:
     """Labelled frames' encodings ``queries`` (N, D) and their places' references ``refs`` (N, D), row by row
     (any positive scale: each row is made unit) -> the within-place whitening (module docstring, step 2) of
@@ -124,13 +130,33 @@ def fit_within_place(queries: np.ndarray, refs: np.ndarray, rank: int = RANK, sh
     return Adaptation(vt[:m].astype(np.float32), keep.astype(np.float32))
 
 
-def fit_adaptation(queries: np.ndarray, refs: np.ndarray, places: np.ndarray, groups: np.ndarray | None = None,
-                   rank: int = RANK, shrink: float = SHRINK) -> Adaptation:
-    """The three steps (module docstring) from labelled pairs: frames' encodings ``queries`` and their places'
-    references ``refs`` (N, D), each pair's place ``places`` (N,) (references within ``TOLERANCE`` places
-    count as its own), the encoder's ``groups`` (D,) (None: no gains, step 2 alone)."""
-    if groups is None:
-        return fit_within_place(queries, refs, rank, shrink)
+@dataclass(frozen=True)
+class Recipe:
+    """What ``adapt`` learns: ``rank`` directions whitened, with gains before and after (``gains``) or not."""
+
+    rank: int
+    gains: bool
+
+    @property
+    def name(self) -> str:
+        return f"rank {self.rank}" + (" with gains" if self.gains else "")
+
+
+@dataclass(frozen=True)
+class Choice:
+    """The recipe kept and every recipe's held-out R@1 (``choose_recipe``; "unadapted": the map as it is)."""
+
+    recipe: Recipe
+    scores: dict[str, float]
+
+
+def fit_recipe(queries: np.ndarray, refs: np.ndarray, places: np.ndarray, groups: np.ndarray | None,
+               recipe: Recipe, shrink: float = SHRINK) -> Adaptation:
+    """``recipe`` (module docstring, steps 1-3; step 2 alone without gains) learned from labelled pairs:
+    frames' encodings ``queries`` and their places' references ``refs`` (N, D), each pair's place ``places``
+    (N,), the encoder's ``groups`` (D,) (None: no gains)."""
+    if not recipe.gains or groups is None:
+        return fit_within_place(queries, refs, recipe.rank, shrink)
     from vpr_edge.encoders.adapt_gains import fit_gains
 
     q, r = unit_rows(queries).astype(np.float64), unit_rows(refs).astype(np.float64)
@@ -138,7 +164,51 @@ def fit_adaptation(queries: np.ndarray, refs: np.ndarray, places: np.ndarray, gr
         raise ValueError(f"need matching pairs, places and groups, got {q.shape}, {r.shape}, {len(places)} and "
                          f"{len(groups)}")
     g_in = fit_gains(q, r, places, groups)
-    white = fit_within_place(q * g_in, r * g_in, rank, shrink)
+    white = fit_within_place(q * g_in, r * g_in, recipe.rank, shrink)
     first = Adaptation(white.basis, white.keep, g_in.astype(np.float32))
     g_out = fit_gains(first.apply(q), first.apply(r), places, groups)
     return Adaptation(white.basis, white.keep, g_in.astype(np.float32), g_out.astype(np.float32))
+
+
+def held_out_r1(adaptation: Adaptation | None, queries: np.ndarray, refs: np.ndarray, places: np.ndarray) -> float:
+    """The share of frames ``queries`` (N, D) whose most similar of the references ``refs`` (N, D) lies within
+    ``adapt_gains.TOLERANCE`` places of their own (``places`` (N,)), each set mapped by ``adaptation`` (None:
+    as it is) and centred on its own mean: one frame's R@1 on standardised cosines."""
+    from vpr_edge.encoders.adapt_gains import TOLERANCE
+
+    q, r = (unit_rows(queries), unit_rows(refs)) if adaptation is None else (adaptation.apply(queries),
+                                                                              adaptation.apply(refs))
+    q, r = unit_rows(q - q.mean(axis=0)), unit_rows(r - r.mean(axis=0))
+    best = np.argmax(q @ r.T, axis=1)
+    return float(np.mean(np.abs(places[best] - places) <= TOLERANCE))
+
+
+def choose_recipe(queries: np.ndarray, refs: np.ndarray, places: np.ndarray, groups: np.ndarray | None,
+                  ranks: tuple[int, ...] = RANKS, shrink: float = SHRINK) -> Choice:
+    """The recipe of ``ranks`` x (gains or not, on a codebook map) with the best held-out R@1 (module
+    docstring): learned on the pairs below the median place, scored on the rest, and the reverse, averaged.
+    With under ``MIN_PAIRS // 2`` pairs a side, the largest rank (with gains on a codebook map), unscored."""
+    places = np.asarray(places, np.int64)
+    low = places < np.median(places)
+    if min(int(low.sum()), int((~low).sum())) < MIN_PAIRS // 2:
+        return Choice(Recipe(max(ranks), groups is not None), {})
+    sides = [(low, ~low), (~low, low)]
+    q, r = np.asarray(queries), np.asarray(refs)
+    scores = {"unadapted": float(np.mean([held_out_r1(None, q[b], r[b], places[b]) for _, b in sides]))}
+    best: Recipe | None = None
+    for recipe in [Recipe(k, g) for k in ranks for g in ((False, True) if groups is not None else (False,))]:
+        scores[recipe.name] = float(np.mean([
+            held_out_r1(fit_recipe(q[a], r[a], places[a], groups, recipe, shrink), q[b], r[b], places[b])
+            for a, b in sides]))
+        if best is None or scores[recipe.name] > scores[best.name]:
+            best = recipe
+    assert best is not None
+    return Choice(best, scores)
+
+
+def fit_adaptation(queries: np.ndarray, refs: np.ndarray, places: np.ndarray, groups: np.ndarray | None = None,
+                   rank: int | None = None, shrink: float = SHRINK) -> tuple[Adaptation, Choice]:
+    """The adaptation of labelled pairs (``fit_recipe``'s arguments), its recipe chosen on the pairs' own
+    held-out places (``choose_recipe``; ``rank`` given: that rank alone) and refitted on every pair."""
+    choice = choose_recipe(queries, refs, places, groups, RANKS if rank is None else (rank,), shrink)
+    return fit_recipe(queries, refs, places, groups, choice.recipe, shrink), choice

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vpr_edge.encoders.adapt import MIN_PAIRS, RANK, SHRINK, Adaptation, fit_adaptation, middle_refs
+from vpr_edge.encoders.adapt import MIN_PAIRS, SHRINK, Adaptation, Choice, fit_adaptation, middle_refs
 from vpr_edge.errors import InputError, VprError, warn
 from vpr_edge.files.checks import check_not_input, check_writable
 from vpr_edge.files.one_writer import writer_lock
@@ -82,7 +82,7 @@ def _frame_count(query: MapQuery, frames: str) -> int:
 
 
 def adapt_map(map_path: str | os.PathLike[str], drives: Sequence[LabelledDrive], out: str | os.PathLike[str],
-              rank: int = RANK, shrink: float = SHRINK, model: str | os.PathLike[str] | None = None,
+              rank: int | None = None, shrink: float = SHRINK, model: str | os.PathLike[str] | None = None,
               batch_size: int = 8, ort_threads: int = 0,
               on_skip: Callable[[Frame], None] = lambda frame: None) -> str:
     """Learn ``map_path``'s adaptation from the labelled ``drives`` (``encoders.adapt``) and write the adapted
@@ -91,7 +91,7 @@ def adapt_map(map_path: str | os.PathLike[str], drives: Sequence[LabelledDrive],
     labels that do not fit their drive or the map, or too few labelled frames."""
     if not drives:
         raise InputError("give at least one labelled drive")
-    if rank < 1 or shrink <= 0:
+    if (rank is not None and rank < 1) or shrink <= 0:
         raise InputError("{opt.rank} must be >= 1 and {opt.shrink} > 0, got {r} and {s}", r=rank, s=shrink)
     check_not_input({"the adapted map": out}, [map_path] + [p for d in drives for p in (d.frames, d.truth)
                                                           if p != ALIGNED])
@@ -127,15 +127,27 @@ def adapt_map(map_path: str | os.PathLike[str], drives: Sequence[LabelledDrive],
             raise VprError(f"{len(q_enc)} labelled frames could be decoded, too few to learn from (at least "
                            f"{MIN_PAIRS})")
         places = np.asarray(r_idx)
-        adaptation = fit_adaptation(np.stack(q_enc), source.stored.take(places).astype(np.float32), places,
-                                    groups, rank, shrink)
-        n_gains = 0 if groups is None else int(groups.max()) + 1
+        adaptation, choice = fit_adaptation(np.stack(q_enc), source.stored.take(places).astype(np.float32), places,
+                                            groups, rank, shrink)
+        n_gains = 0 if adaptation.gain_in is None else int(groups.max()) + 1
         adapted = _adapted(source, adaptation, {"drives": used, "pairs": len(q_enc), "rank": len(adaptation.keep),
-                                                "shrink": shrink, "gains": n_gains})
+                                                "shrink": shrink, "gains": n_gains, "held_out": choice.scores})
         save_map(adapted, out, storage=source.stored.storage)
-    gains = f", {n_gains} codebook gains" if n_gains else ""
-    return (f"adapted {map_path} on {len(q_enc)} labelled frames of {len(drives)} drive(s): "
-            f"{len(adaptation.keep)} directions whitened{gains} -> {out}")
+    return f"adapted {map_path} on {len(q_enc)} labelled frames of {len(drives)} drive(s): " + \
+        summary(adaptation, choice, n_gains) + f" -> {out}"
+
+
+def summary(adaptation: Adaptation, choice: Choice, n_gains: int) -> str:
+    """What was learned and, where recipes were compared, why: one phrase; warns where no recipe beat the
+    map as it is on the drive's held-out places."""
+    what = f"{len(adaptation.keep)} directions whitened" + (f", {n_gains} codebook gains" if n_gains else "")
+    if not choice.scores:
+        return what
+    kept, plain = choice.scores[choice.recipe.name], choice.scores["unadapted"]
+    if kept <= plain:
+        warn(f"adapting does not raise one frame's R@1 on the drive's held-out places ({kept:.3f} against "
+             f"{plain:.3f} unadapted): compare the maps on a drive of your own")
+    return f"{what} (one frame's R@1 on held-out places {kept:.3f}, unadapted {plain:.3f})"
 
 
 def require_scipy(map_path: str | os.PathLike[str]) -> None:
