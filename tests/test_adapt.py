@@ -208,3 +208,14 @@ def test_drives_appended_to_an_adapted_map_are_mapped_as_its_own(drive: Path) ->
     a, b = load_map(drive / "a.npz"), load_map(drive / "b.npz")
     assert b.adaptation is not None and b.meta["adapted"] == a.meta["adapted"]
     np.testing.assert_allclose(b.stored.dense()[PLACES:], a.stored.dense()[:20], atol=1e-6)
+
+
+def test_a_codebook_map_without_scipy_is_refused_in_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    import sys
+
+    from vpr_edge.errors import InputError
+    from vpr_edge.map.adapt import require_scipy
+
+    monkeypatch.setitem(sys.modules, "scipy.optimize", None)   # an import of it raises ImportError
+    with pytest.raises(InputError, match="map.npz: adapting a codebook map fits its gains with SciPy"):
+        require_scipy("map.npz")

@@ -153,11 +153,11 @@ def summary(adaptation: Adaptation, choice: Choice, n_gains: int) -> str:
 def require_scipy(map_path: str | os.PathLike[str]) -> None:
     """InputError naming the missing extra unless SciPy is installed (an IFV or VLAD map's gains are fitted
     with its L-BFGS)."""
-    import importlib.util
-
-    if importlib.util.find_spec("scipy") is None:
+    try:
+        import scipy.optimize  # noqa: F401
+    except ImportError:
         raise InputError("{m}: adapting a codebook map fits its gains with SciPy (missing): pip install "
-                         "'vpr-edge[fit]'", m=map_path)
+                         "'vpr-edge[fit]'", m=map_path) from None
 
 
 def _adapted(source: PlaceMap, adaptation: Adaptation, adapted_meta: dict, block: int = 4096) -> PlaceMap:
