@@ -252,9 +252,9 @@ class BayesFilter:
 
     def _novelty(self, still: float | None) -> float:
         """How new a frame's view is, in [0, 1]: 1 for a moving camera (cue below ``still``, or no cue); for
-        one the cue reads as standing, 1 - cue (0: its view again). The frame moves the state that share of
-        a step and counts that share of its evidence. Where the map's drive stood too (``route``) the frame
-        is read as motion, as the map's references were."""
+        one the cue reads as standing, 1 - cue (0: its view again). The frame counts that share of its
+        evidence. Where the map's drive stood too (``route``) the frame is read as motion, as the map's
+        references were: novelty 1, and ``cue_weights`` weighs it as moving."""
         if still is None or not stands(still, self.config.still):
             return 1.0
         nxt = self._mode + 1
