@@ -151,10 +151,11 @@ class Choice:
 
 
 def fit_recipe(queries: np.ndarray, refs: np.ndarray, places: np.ndarray, groups: np.ndarray | None,
-               recipe: Recipe, shrink: float = SHRINK) -> Adaptation:
+               recipe: Recipe, shrink: float = SHRINK, gain_in: np.ndarray | None = None) -> Adaptation:
     """``recipe`` (module docstring, steps 1-3; step 2 alone without gains) learned from labelled pairs:
     frames' encodings ``queries`` and their places' references ``refs`` (N, D), each pair's place ``places``
-    (N,), the encoder's ``groups`` (D,) (None: no gains)."""
+    (N,), the encoder's ``groups`` (D,) (None: no gains); ``gain_in``: step 1's gains on these pairs, if
+    fitted already (``first_gains``; they do not depend on the rank)."""
     if not recipe.gains or groups is None:
         return fit_within_place(queries, refs, recipe.rank, shrink)
     from vpr_edge.encoders.adapt_gains import fit_gains
@@ -163,11 +164,21 @@ def fit_recipe(queries: np.ndarray, refs: np.ndarray, places: np.ndarray, groups
     if q.shape != r.shape or len(groups) != q.shape[1] or len(places) != len(q):
         raise ValueError(f"need matching pairs, places and groups, got {q.shape}, {r.shape}, {len(places)} and "
                          f"{len(groups)}")
-    g_in = fit_gains(q, r, places, groups)
+    g_in = fit_gains(q, r, places, groups) if gain_in is None else gain_in
     white = fit_within_place(q * g_in, r * g_in, recipe.rank, shrink)
     first = Adaptation(white.basis, white.keep, g_in.astype(np.float32))
     g_out = fit_gains(first.apply(q), first.apply(r), places, groups)
-    return Adaptation(white.basis, white.keep, g_in.astype(np.float32), g_out.astype(np.float32))
+    return Adaptation(white.basis, white.keep, first.gain_in, g_out.astype(np.float32))
+
+
+def first_gains(queries: np.ndarray, refs: np.ndarray, places: np.ndarray, groups: np.ndarray | None
+                ) -> np.ndarray | None:
+    """Step 1's gains on labelled pairs (``fit_recipe``'s arguments; None without ``groups``)."""
+    if groups is None:
+        return None
+    from vpr_edge.encoders.adapt_gains import fit_gains
+
+    return fit_gains(unit_rows(queries).astype(np.float64), unit_rows(refs).astype(np.float64), places, groups)
 
 
 def held_out_r1(adaptation: Adaptation | None, queries: np.ndarray, refs: np.ndarray, places: np.ndarray) -> float:
@@ -195,11 +206,12 @@ def choose_recipe(queries: np.ndarray, refs: np.ndarray, places: np.ndarray, gro
     sides = [(low, ~low), (~low, low)]
     q, r = np.asarray(queries), np.asarray(refs)
     scores = {"unadapted": float(np.mean([held_out_r1(None, q[b], r[b], places[b]) for _, b in sides]))}
+    gains = [first_gains(q[a], r[a], places[a], groups) for a, _ in sides]   # each side's step 1, once
     best: Recipe | None = None
     for recipe in [Recipe(k, g) for k in ranks for g in ((False, True) if groups is not None else (False,))]:
         scores[recipe.name] = float(np.mean([
-            held_out_r1(fit_recipe(q[a], r[a], places[a], groups, recipe, shrink), q[b], r[b], places[b])
-            for a, b in sides]))
+            held_out_r1(fit_recipe(q[a], r[a], places[a], groups, recipe, shrink, g_in), q[b], r[b], places[b])
+            for (a, b), g_in in zip(sides, gains)]))
         if best is None or scores[recipe.name] > scores[best.name]:
             best = recipe
     assert best is not None
