@@ -193,12 +193,12 @@ class BayesFilter:
         the places ``wanted()`` named; ``still``: the frame's motion cue."""
         s = np.asarray(sim_row, np.float64)
         part, sample = self._split(s, refs)
-        new = self._novelty(still)
+        new, route_stands = self._novelty(still)
         z = self._evidence(part, sample, new)
         cued = still is not None and bool(self.config.still)
         self._predict(cued)
         if cued:   # the cue observes the speed: 0 where the view is the same
-            moving, standing = cue_weights(float(still), stands(still, self.config.still) and new >= 1.0)
+            moving, standing = cue_weights(float(still), route_stands)
             self.b[0] *= standing
             self.b[1:] *= moving
             share = moving * (1.0 - 1.0 / self.moves.n_speeds) + standing / self.moves.n_speeds
@@ -250,17 +250,18 @@ class BayesFilter:
         self.b, self.off, self.elsewhere = self._window.predict(self.b, self.off, self.elsewhere, c.leave, c.jump,
                                                                 c.enter, kernel)
 
-    def _novelty(self, still: float | None) -> float:
-        """How new a frame's view is, in [0, 1]: 1 for a moving camera (cue below ``still``, or no cue); for
-        one the cue reads as standing, 1 - cue (0: its view again). The frame counts that share of its
-        evidence. Where the map's drive stood too (``route``) the frame is read as motion, as the map's
-        references were: novelty 1, and ``cue_weights`` weighs it as moving."""
+    def _novelty(self, still: float | None) -> tuple[float, bool]:
+        """(How new a frame's view is, in [0, 1]; whether the map's drive stood here too). Novelty is 1 for a
+        moving camera (cue below ``still``, or no cue); for one the cue reads as standing, 1 - cue (0: its
+        view again). The frame counts that share of its evidence. Where the map's drive stood too (``route``)
+        the frame is read as motion, as the map's references were: novelty 1, and ``cue_weights`` weighs it
+        as moving."""
         if still is None or not stands(still, self.config.still):
-            return 1.0
+            return 1.0, False
         nxt = self._mode + 1
         if self.route is not None and nxt < self.n_refs and self.route[nxt]:
-            return 1.0
-        return float(min(max(1.0 - still, 0.0), 1.0))
+            return 1.0, True
+        return float(min(max(1.0 - still, 0.0), 1.0)), False
 
     def _evidence(self, s: np.ndarray, sample: np.ndarray | None = None, new: float = 1.0) -> np.ndarray:
         """The frame's robust z-scores (at the places held; median and spread from ``sample``, None: ``s``)
