@@ -219,6 +219,17 @@ def test_robust_z_reads_the_upper_tail_where_unrelated_places_stand_out():
 
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 512, 5000])
+def test_quantiles_are_numpys_percentiles(n):
+    """The one-partition quantiles give ``np.percentile``'s (linear) on rows with ties and of any length."""
+    from vpr_edge.matchers.bayes import quantiles
+
+    rng = np.random.default_rng(n)
+    row = np.round(rng.normal(0.3, 0.1, n), 2).astype(np.float32)   # rounded: ties
+    qs = (25.0, 50.0, 75.0, 95.0, 0.0, 100.0)
+    assert np.allclose(quantiles(row, qs), np.percentile(row.astype(np.float64), qs), rtol=0, atol=1e-12)
+
+
 def test_without_a_cue_a_stopped_filter_starts_again():
     """With no motion cue nothing tells the filter a camera moves on but the evidence, which a broad or
     blank view gives little of: the blind kernel lets a stopped camera start again (``GO_BLIND``), so an
