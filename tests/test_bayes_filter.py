@@ -19,7 +19,10 @@ def config(**overrides) -> FilterConfig:
 
 def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=None):
     """The filter written as plain loops over (speed, place) and the off-map state (no hub means)."""
-    n_v, n_r = int(round(cfg.vmax / cfg.speed_step)) + 1, rows.shape[1]
+    speeds = [0.0]   # standing, then 1 to vmax places a frame in steps of speed_step
+    while cfg.vmax >= 1 and 1.0 + (len(speeds) - 1) * cfg.speed_step <= cfg.vmax + 1e-9:
+        speeds.append(1.0 + (len(speeds) - 1) * cfg.speed_step)
+    n_v, n_r = len(speeds), rows.shape[1]
     b = np.full((n_v, n_r), (1 - START_OFF) / (n_v * n_r))
     off = START_OFF
     scale_s = scale_w = 0.0
@@ -33,14 +36,11 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
         beta = cfg.temper * min(max(mean, SCALE_BOUNDS[0]), SCALE_BOUNDS[1]) * new
         # speeds
         mixed = np.zeros_like(b)
-        whole = int(round(1 / cfg.speed_step))   # one place a frame, in steps
-        changes = [(d, cfg.speed_change) for d in sorted({1, whole})]
         blind = cue is None or not cfg.still   # no motion cue: a stopped camera may start again
-        for v in range(n_v):
-            stay = 1 - 2 * len(changes) * cfg.speed_change
-            moves = [(v - d, c) for d, c in changes] + [(v + d, c) for d, c in changes] + [(v, stay)]
-            if blind and v == 0:
-                moves = [(w, pr * (1 - GO_BLIND)) for w, pr in moves] + [(whole, GO_BLIND)]
+        for v in range(n_v):   # to the next speed up or down
+            moves = [(v - 1, cfg.speed_change), (v + 1, cfg.speed_change), (v, 1 - 2 * cfg.speed_change)]
+            if blind and v == 0:   # ... and from standing to one place a frame
+                moves = [(w, pr * (1 - GO_BLIND)) for w, pr in moves] + [(1, GO_BLIND)]
             for w, pr in moves:
                 w = min(max(w, 0), n_v - 1)
                 for p in range(n_r):
@@ -49,7 +49,7 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
         moved = np.zeros_like(b)
         ran = 0.0
         for v in range(n_v):
-            s = v * cfg.speed_step   # places a frame: the whole places either side, each as near as it lies
+            s = speeds[v]   # places a frame: the whole places either side, each as near as it lies
             lo = int(np.floor(s + 1e-9))
             for d, share in ((lo, 1 - (s - lo)), (lo + 1, s - lo)):
                 for p in range(n_r):
@@ -228,6 +228,20 @@ def test_quantiles_are_numpys_percentiles(n):
     row = np.round(rng.normal(0.3, 0.1, n), 2).astype(np.float32)   # rounded: ties
     qs = (25.0, 50.0, 75.0, 95.0, 0.0, 100.0)
     assert np.allclose(quantiles(row, qs), np.percentile(row.astype(np.float64), qs), rtol=0, atol=1e-12)
+
+
+def test_the_speeds_are_standing_then_one_place_a_frame_up():
+    from vpr_edge.matchers.filter_motion import by_move, speed_steps, speed_values
+
+    np.testing.assert_allclose(speed_values(4, 0.5), [0, 1, 1.5, 2, 2.5, 3, 3.5, 4])
+    np.testing.assert_allclose(speed_values(4, 1.0), [0, 1, 2, 3, 4])
+    np.testing.assert_allclose(speed_values(0, 0.5), [0])
+    steps = speed_steps(speed_values(2, 0.5))
+    assert steps == [[(0, 1.0)], [(1, 1.0)], [(1, 0.5), (2, 0.5)], [(2, 1.0)]]
+    shifts = dict((d, list(w)) for d, w in by_move(steps))
+    assert shifts == {0: [1, 0, 0, 0], 1: [0, 1, 0.5, 0], 2: [0, 0, 0.5, 1]}
+    with pytest.raises(ValueError, match="divide vmax - 1"):
+        config(vmax=4, speed_step=0.4)
 
 
 def test_without_a_cue_a_stopped_filter_starts_again():

@@ -1,11 +1,13 @@
 """The ``stream-filter`` matcher: a Bayes filter over (place along the route, speed), plus one off-map state.
 
 The hidden state of a frame is where the camera is on the map and how fast it moves along it, in places a
-frame (0..``vmax``), or that it is somewhere the map does not hold (*off-map*). Each frame:
+frame (standing, or 1 to ``vmax`` in steps of ``speed_step``: ``filter_motion``), or that it is somewhere the
+map does not hold (*off-map*). Each frame:
 
-1. **Predict** (the motion model). A speed changes by one step with probability ``speed_change`` each way
-   (``filter_motion.speed_kernel``; on a frame with no motion cue a stopped camera also starts again,
-   ``filter_motion.blind``); then the camera moves on by its speed. Mass that runs past a drive's last place leaves the map; a drive
+1. **Predict** (the motion model). A speed changes to the next one up or down with probability
+   ``speed_change`` each (``filter_motion.speed_kernel``; on a frame with no motion cue a stopped camera also
+   starts again, ``filter_motion.blind``); then the camera moves on by its speed. Mass that runs past a
+   drive's last place leaves the map; a drive
    joined to another (``route.RouteGraph``'s junctions) passes a share ``JOIN`` of its junction places' mass
    on to the other drive. Every frame, ``leave`` of the on-map mass moves off the map, ``jump`` of it to a
    place anywhere on the map (a re-localisation), and ``enter`` of the off-map mass comes back onto the map
@@ -38,16 +40,17 @@ of the true place. A frame is lost below the line (``--target-precision``); ``wh
 missing mass: ``off-map`` (the off-map state), ``ambiguous`` (another stretch of the route) or ``settling``
 (spread thinly: not converged yet).
 
-On a route of more than ``4 * window`` places a firm answer (confidence at least ``hold``) lets the next
-frame read only the places within ``window`` of it (``filter_motion.Window``: the rest of the on-map mass
+On a route of more than ``4 * window`` places a firm answer (confidence at least ``hold``), or a frame read
+as standing after a window, lets the next frame read only the places within ``window`` of it (``filter_motion.Window``: the rest of the on-map mass
 held as one number, *elsewhere*, its likelihood that of the off-map state), its row's median and spread read
 on a fixed ``probe`` sample; ``span`` frames in every ``check`` read the whole route, as ``stream``'s local
 search does. On such a route with an index, a frame that would read the whole route reads instead the places
 within ``seek`` of the index's candidates and within ``max(seek, window / 4)`` of the ``peaks`` most probable
 places held (``around``): the state never spans the whole route.
 
-State: (``vmax`` + 1, R) float64 (the columns held while local), the hub means and ``HUB_DELAY`` z-score
-rows, whatever the stream's length; a frame costs O(vmax² R), O(vmax² W) over W places held.
+State: (V, R) float64 over V speeds (8 at the defaults; the columns held while local), the hub means and
+``HUB_DELAY`` z-score rows, whatever the stream's length; a frame costs O(V² + V R), O(V² + V W) over W
+places held.
 """
 from __future__ import annotations
 
@@ -227,7 +230,7 @@ class BayesFilter:
         self.elsewhere /= total
         at = self._read()
         self._learn_scale(float(z[at]))
-        self._follow()
+        self._follow(new < 1.0)
         return self._mode, self._conf
 
     # --- steps ----------------------------------------------------------------------------------------------
@@ -340,10 +343,14 @@ class BayesFilter:
         self._rank[self.cols] = m
         self._ranked = self.cols
 
-    def _follow(self) -> None:
+    def _follow(self, standing: bool = False) -> None:
         """Choose the places the next frame reads (module docstring): the window around a firm answer, or
-        every place; the mass moves with the choice."""
+        every place; the mass moves with the choice. A frame read as standing (``standing``: its view again,
+        little new evidence) keeps a window it read: there is nothing new to look for elsewhere."""
         if not self.local:
+            return
+        if standing and self.cols is not None:
+            self._move(places(self.graph.near(self._mode, self.config.window)))
             return
         self._held = self._held + 1 if self._conf >= self.config.hold else 0
         self._whole = not local_next(self._held, self.config.check, self.config.span)
@@ -359,7 +366,7 @@ class BayesFilter:
         if new is None:
             self.elsewhere = 0.0
         self.cols = new
-        self._window = None if new is None else Window(self.graph, new, self.moves.steps)
+        self._window = None if new is None else Window(self.graph, new, self.moves.steps, self.moves.shifts)
         self._whole = self._whole and new is None
 
     def _learn_scale(self, z_answer: float) -> None:

@@ -2,9 +2,11 @@
 window of places around its answer on a long route (``Window``), the rest of the on-map mass held as one
 number spread evenly (*elsewhere*); and what the motion cue says of the speed (``cue_weights``, step 3).
 
-Speeds are multiples of ``speed_step`` places a frame, 0 to ``vmax``. A speed between two whole places moves
-the camera by the nearer whole numbers of places, each as often as the speed lies near it (1.5: one place or
-two, half the time each), so a vehicle at half the mapping drive's speed is followed as well as one at it.
+Speeds are 0 (standing) and one place a frame to ``vmax`` in steps of ``speed_step`` (0.5: 1, 1.5, 2, ..).
+A speed between two whole places moves the camera by the nearer whole numbers of places, each as often as
+the speed lies near it (1.5: one place or two, half the time each). Below one place a frame a camera shows
+a place again; the motion cue reads such a frame as standing, so a slow vehicle is followed as stops and
+moves (a slow speed of its own let a trajectory linger by a look-alike: docs/decisions.md).
 
 On a route of more than ``4 * window`` places the filter reads only the places within ``window`` of a firm
 answer (and a fixed probe sample for the row's median and spread), as ``stream``'s local search does; every
@@ -27,34 +29,43 @@ from vpr_edge.matchers.route import RouteGraph
 Steps = list[list[tuple[int, float]]]   # per speed: (places moved in a frame, its probability)
 
 
-def speed_count(vmax: float, step: float) -> int:
-    """How many speeds 0, step, 2 step, .. vmax the filter follows."""
-    return int(round(vmax / step)) + 1
+def speed_values(vmax: int, step: float) -> np.ndarray:
+    """The speeds followed, places a frame (V,): 0, then 1 to ``vmax`` in steps of ``step`` (none but 0 when
+    ``vmax`` is 0)."""
+    if vmax < 1:
+        return np.zeros(1)
+    return np.r_[0.0, 1.0 + step * np.arange(int(round((vmax - 1) / step)) + 1)]
 
 
-def speed_steps(n_speeds: int, step: float) -> Steps:
-    """Speed k (k * ``step`` places a frame) -> the whole places it moves in a frame and their chances."""
+def speed_steps(speeds: np.ndarray) -> Steps:
+    """Each speed (places a frame) -> the whole places it moves in a frame and their chances."""
     out: Steps = []
-    for k in range(n_speeds):
-        s = k * step
+    for s in speeds:
         lo = int(math.floor(s + 1e-9))
-        f = s - lo
+        f = float(s) - lo
         out.append([(lo, 1.0)] if f < 1e-9 else [(lo, 1.0 - f), (lo + 1, f)])
     return out
 
 
-def speed_kernel(n_speeds: int, change: float, step: float = 1.0) -> np.ndarray:
-    """(V, V) row-stochastic: from speed v to v'. A speed changes by one ``step`` either way with
-    probability ``change``; with steps under a place, also by one whole place a frame either way with
-    probability ``change`` (a vehicle that stops or starts is not slowed by the finer steps). At the ends a
-    change that would leave the range stays."""
-    moves = sorted({1, int(round(1.0 / step))})
+def by_move(steps: Steps) -> list[tuple[int, np.ndarray]]:
+    """``steps`` regrouped by the places moved: (places, each speed's chance of moving them (V,)), so the
+    motion model shifts the mass once a distance, not once a speed."""
+    moves = sorted({d for parts in steps for d, _ in parts})
+    out = []
+    for d in moves:
+        w = np.array([sum(p for dd, p in parts if dd == d) for parts in steps])
+        out.append((d, w))
+    return out
+
+
+def speed_kernel(n_speeds: int, change: float) -> np.ndarray:
+    """(V, V) row-stochastic: from speed v to v'. A speed changes to the next one up or down with probability
+    ``change`` each; at the ends a change that would leave the range stays."""
     k = np.zeros((n_speeds, n_speeds))
     for v in range(n_speeds):
-        for m in moves:
-            for w in (v - m, v + m):
-                k[v, min(max(w, 0), n_speeds - 1)] += change
-        k[v, v] += 1.0 - 2.0 * len(moves) * change
+        for w in (v - 1, v + 1):
+            k[v, min(max(w, 0), n_speeds - 1)] += change
+        k[v, v] += 1.0 - 2.0 * change
     return k
 
 
@@ -73,12 +84,13 @@ def cue_weights(cue: float, as_motion: bool = False) -> tuple[float, float]:
     return max(math.exp(log_move - top), CUE_FLOOR), max(math.exp(log_stand - top), CUE_FLOOR)
 
 
-def blind(kernel: np.ndarray, step: float = 1.0) -> np.ndarray:
+def blind(kernel: np.ndarray) -> np.ndarray:
     """A speed kernel (V, V) for frames with no motion cue: a stopped camera also starts again at one place
-    a frame with probability ``GO_BLIND``. With a cue, each moving frame tells the filter it moves; without
-    one, broad evidence (neighbouring places alike) could hold it at speed 0 while the camera drives on."""
+    a frame (speed 1, the second speed) with probability ``GO_BLIND``. With a cue, each moving frame tells
+    the filter it moves; without one, broad evidence (neighbouring places alike) could hold it at speed 0
+    while the camera drives on."""
     k = kernel.copy()
-    one = min(int(round(1.0 / step)), len(k) - 1)
+    one = min(1, len(k) - 1)
     k[0] *= 1.0 - GO_BLIND
     k[0, one] += GO_BLIND
     return k
@@ -90,10 +102,12 @@ class Transitions:
 
     def __init__(self, graph: RouteGraph, config: FilterConfig) -> None:
         self.graph, self.config = graph, config
-        self.n_speeds = speed_count(config.vmax, config.speed_step)
-        self.steps = speed_steps(self.n_speeds, config.speed_step)
-        self.kernel = speed_kernel(self.n_speeds, config.speed_change, config.speed_step)
-        self.blind_kernel = blind(self.kernel, config.speed_step)   # frames with no motion cue
+        self.speeds = speed_values(config.vmax, config.speed_step)
+        self.n_speeds = len(self.speeds)
+        self.steps = speed_steps(self.speeds)
+        self.shifts = by_move(self.steps)
+        self.kernel = speed_kernel(self.n_speeds, config.speed_change)
+        self.blind_kernel = blind(self.kernel)   # frames with no motion cue
         later = [(int(s), int(e) + 1) for s, e in zip(graph.starts[1:], graph.ends[1:])]
         self.cut = {d: np.concatenate([np.arange(s, min(s + d, e)) for s, e in later]).astype(np.int64)
                     if later else np.zeros(0, np.int64) for d in range(1, int(math.ceil(config.vmax)) + 2)}
@@ -110,28 +124,28 @@ class Transitions:
         r = b.shape[1]
         ran = 0.0
         moved = np.zeros_like(b)
-        for k, parts in enumerate(self.steps):
-            for d, w in parts:
-                if d == 0:
-                    moved[k] += w * b[k]
-                    continue
-                if d >= r:
-                    ran += w * float(b[k].sum())
-                    continue
-                moved[k, d:] += w * b[k, :-d]
-                ran += w * float(b[k, r - d:].sum())
-                cc = self.cut[d]
-                if len(cc):   # came from another drive's end: off the map instead
-                    came = w * b[k, cc - d]
-                    moved[k, cc] -= came
-                    ran += float(came.sum())
+        for d, w in self.shifts:   # w (V,): each speed's chance of moving d places
+            wc = w[:, None]
+            if d == 0:
+                moved += wc * b
+                continue
+            if d >= r:
+                ran += float(w @ b.sum(axis=1))
+                continue
+            moved[:, d:] += wc * b[:, :-d]
+            ran += float(w @ b[:, r - d:].sum(axis=1))
+            cc = self.cut[d]
+            if len(cc):   # came from another drive's end: off the map instead
+                came = wc * b[:, cc - d]
+                moved[:, cc] -= came
+                ran += float(came.sum())
         for sources, targets in self.graph.junctions:
             share = moved[:, sources].sum(axis=1) * JOIN
             moved[:, sources] *= 1.0 - JOIN
             moved[:, targets] += (share / len(targets))[:, None]
         on = float(moved.sum())
         out = moved * (1.0 - c.leave - c.jump)
-        out += (c.jump * on + c.enter * off) * self.entry()
+        out += (c.jump * on + c.enter * off) / out.size   # onto every place and speed alike (``entry``)
         return out, off * (1.0 - c.enter) + c.leave * on + ran
 
 
@@ -140,8 +154,10 @@ class Window:
     step d and column, where its mass comes from (``src[d]``: a column, or ``FROM_*``), and whether moving d
     places leaves the map (``exit_off[d]``: past its drive's end) or the window (``exit_else[d]``)."""
 
-    def __init__(self, graph: RouteGraph, cols: np.ndarray, steps: Steps) -> None:
+    def __init__(self, graph: RouteGraph, cols: np.ndarray, steps: Steps,
+                 shifts: list[tuple[int, np.ndarray]] | None = None) -> None:
         self.graph, self.cols, self.steps = graph, np.asarray(cols, np.int64), steps
+        self.shifts = by_move(steps) if shifts is None else shifts   # (``by_move(steps)``, made once a route)
         starts = np.asarray(graph.starts, np.int64)
         k = np.searchsorted(starts, self.cols, side="right") - 1
         first, last = starts[k], graph.ends[k]
@@ -168,17 +184,16 @@ class Window:
         b = kernel.T @ b
         moved = np.zeros_like(b)
         ran = came_in = 0.0
-        for k, parts in enumerate(self.steps):
-            for d, p in parts:
-                src = self.src[d]
-                got = b[k, np.maximum(src, 0)]
-                got[src < 0] = 0.0
-                from_else = src == FROM_ELSEWHERE
-                got[from_else] = density
-                moved[k] += p * got
-                came_in += p * density * int(from_else.sum())
-                ran += p * float(b[k, self.exit_off[d]].sum())
-                elsewhere += p * float(b[k, self.exit_else[d]].sum())
+        for d, share in self.shifts:   # share (V,): each speed's chance of moving d places
+            src = self.src[d]
+            got = b[:, np.maximum(src, 0)]
+            got[:, src < 0] = 0.0
+            from_else = src == FROM_ELSEWHERE
+            got[:, from_else] = density
+            moved += share[:, None] * got
+            came_in += float(share.sum()) * density * int(from_else.sum())
+            ran += float(share @ b[:, self.exit_off[d]].sum(axis=1))
+            elsewhere += float(share @ b[:, self.exit_else[d]].sum(axis=1))
         elsewhere -= came_in
         for sources, targets, n_targets in self.joins:
             share = moved[:, sources].sum(axis=1) * JOIN

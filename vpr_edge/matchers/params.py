@@ -87,9 +87,10 @@ STREAM: dict[str, Param] = {
 # on nordland-dev, reported on Corridor (docs/decisions.md, "The stream filter's parameters")
 STREAM_FILTER: dict[str, Param] = {
     "vmax": Param(4, "fastest speed followed, in places per frame (speeds 0..vmax)"),
-    "speed_step": Param(1.0, "the speeds followed are multiples of this many places per frame (0.5: a camera at "
-                             "half or one and a half times the mapping drive's speed is followed too)"),
-    "speed_change": Param(0.03, "probability a frame's speed is one place a frame faster (and the same slower)"),
+    "speed_step": Param(0.5, "the moving speeds followed run from one place per frame to vmax in steps of this "
+                             "(0.5: 1, 1.5, 2, ..); slower, a camera shows places again, which the motion cue reads "
+                             "as standing"),
+    "speed_change": Param(0.03, "probability a frame's speed is the next one up (and the same, the next one down)"),
     "leave": Param(0.01, "probability a frame leaves the map (a detour, a road the map does not hold)"),
     "enter": Param(0.05, "probability a frame off the map comes back onto it, at any place"),
     "jump": Param(0.001, "probability a frame's place jumps anywhere on the map (a re-localisation)"),
