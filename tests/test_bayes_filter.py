@@ -66,8 +66,9 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
                 for tg in targets:
                     moved[v, tg] += share / len(targets)
         on = moved.sum()
-        nb = moved * (1 - cfg.leave - cfg.jump) + (cfg.jump * on + cfg.enter * off) / (n_v * n_r)
-        noff = off * (1 - cfg.enter) + cfg.leave * on + ran
+        leave, jump, enter = new * cfg.leave, new * cfg.jump, new * cfg.enter   # a standing camera's share
+        nb = moved * (1 - leave - jump) + (jump * on + enter * off) / (n_v * n_r)
+        noff = off * (1 - enter) + leave * on + ran
         if cue is not None and cfg.still:   # the cue's densities, standing and moving, the larger 1
             stand = np.exp(-0.5 * ((cue - CUE_STANDING[0]) / CUE_STANDING[1]) ** 2) / CUE_STANDING[1]
             move = np.exp(-0.5 * (cue / CUE_MOVING_SD) ** 2) / CUE_MOVING_SD

@@ -31,8 +31,9 @@ map does not hold (*off-map*). Each frame:
 3. The **motion cue** (``motion.MotionCue``) observes the speed: speed 0 and the moving speeds are weighed
    by how likely the frame's cue is for a standing camera (about 0.75) and a moving one (about 0)
    (``filter_motion.cue_weights``). A frame whose cue reaches ``still`` (its view is nearly the last
-   moving frame's) counts 1 - cue of its view's evidence (a view seen again says nothing new). Where the
-   map's own drive stood (``route``) the frame is read as motion.
+   moving frame's) counts 1 - cue of its view's evidence (a view seen again says nothing new), and as much
+   of the frame's ``leave``, ``jump`` and ``enter`` (a camera that stands stays where it is: a long stop
+   keeps its answer). Where the map's own drive stood (``route``) the frame is read as motion.
 
 The answer is the place of the posterior's mode (summed over speeds), its **confidence** the posterior mass
 within ``tolerance`` places of it along the route: the probability that the answer is within ``tolerance``
@@ -210,7 +211,7 @@ class BayesFilter:
         new, route_stands = self._novelty(still)
         z = self._evidence(part, sample, new)
         cued = still is not None and bool(self.config.still)
-        self._predict(cued)
+        self._predict(cued, new)
         if cued:   # the cue observes the speed: 0 where the view is the same
             moving, standing = cue_weights(float(still), route_stands)
             self.b[0] *= standing
@@ -253,16 +254,17 @@ class BayesFilter:
             raise ValueError(f"similarity row must have shape ({self.n_refs},), got {s.shape}")
         return s[self.cols], s[self._probe]
 
-    def _predict(self, cued: bool) -> None:
+    def _predict(self, cued: bool, hazard: float = 1.0) -> None:
         """The motion model, on the whole route or the window; a frame with no motion cue (``cued`` False)
-        moves its speeds by the blind kernel (``filter_motion.blind``)."""
+        moves its speeds by the blind kernel (``filter_motion.blind``); ``hazard`` of ``leave``, ``jump`` and
+        ``enter`` happen (the frame's novelty: a camera that stands neither leaves the map nor comes back)."""
         kernel = self.moves.kernel if cued else self.moves.blind_kernel
         if self.cols is None:
-            self.b, self.off = self.moves.predict(self.b, self.off, kernel)
+            self.b, self.off = self.moves.predict(self.b, self.off, kernel, hazard)
             return
         c = self.config
-        self.b, self.off, self.elsewhere = self._window.predict(self.b, self.off, self.elsewhere, c.leave, c.jump,
-                                                                c.enter, kernel)
+        self.b, self.off, self.elsewhere = self._window.predict(self.b, self.off, self.elsewhere, hazard * c.leave,
+                                                                hazard * c.jump, hazard * c.enter, kernel)
 
     def _novelty(self, still: float | None) -> tuple[float, bool]:
         """(How new a frame's view is, in [0, 1]; whether the map's drive stood here too). Novelty is 1 for a

@@ -116,10 +116,13 @@ class Transitions:
         """Where mass coming onto the map lands: (V, R), every place and speed alike, summing to 1."""
         return np.full((self.n_speeds, self.graph.n_refs), 1.0 / (self.n_speeds * self.graph.n_refs))
 
-    def predict(self, b: np.ndarray, off: float, kernel: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    def predict(self, b: np.ndarray, off: float, kernel: np.ndarray | None = None,
+                hazard: float = 1.0) -> tuple[np.ndarray, float]:
         """(V, R) on-map mass and the off-map mass -> the same one frame on (sums kept); ``kernel``: the
-        speeds' (None: ``kernel``)."""
+        speeds' (None: ``kernel``); ``hazard``: the share of ``leave``, ``jump`` and ``enter`` that happens
+        this frame (a standing camera's: ``bayes``, step 3)."""
         c = self.config
+        leave, jump, enter = hazard * c.leave, hazard * c.jump, hazard * c.enter
         b = (self.kernel if kernel is None else kernel).T @ b
         r = b.shape[1]
         ran = 0.0
@@ -144,9 +147,9 @@ class Transitions:
             moved[:, sources] *= 1.0 - JOIN
             moved[:, targets] += (share / len(targets))[:, None]
         on = float(moved.sum())
-        out = moved * (1.0 - c.leave - c.jump)
-        out += (c.jump * on + c.enter * off) / out.size   # onto every place and speed alike (``entry``)
-        return out, off * (1.0 - c.enter) + c.leave * on + ran
+        out = moved * (1.0 - leave - jump)
+        out += (jump * on + enter * off) / out.size   # onto every place and speed alike (``entry``)
+        return out, off * (1.0 - enter) + leave * on + ran
 
 
 class Window:
