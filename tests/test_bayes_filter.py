@@ -8,7 +8,7 @@ import pytest
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.bayes import BayesFilter, FilterConfig, robust_z
 from vpr_edge.matchers.constants import (CUE_FLOOR, CUE_MOVING_SD, CUE_STANDING, GO_BLIND, JOIN, SCALE_BOUNDS,
-                                         SCALE_PRIOR, SCALE_PRIOR_FRAMES, START_OFF)
+                                         SCALE_PRIOR, SCALE_PRIOR_FRAMES, START_OFF, Z_CAP)
 from vpr_edge.matchers.params import STREAM_FILTER
 from vpr_edge.matchers.route import RouteGraph
 
@@ -31,9 +31,10 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
     for t, row in enumerate(rows):
         cue = None if cues is None else cues[t]
         new = 1.0 if cue is None or cue < cfg.still else min(max(1 - cue, 0.0), 1.0)
-        z = robust_z(row)
         mean = (scale_s + SCALE_PRIOR * SCALE_PRIOR_FRAMES) / (scale_w + SCALE_PRIOR_FRAMES)
-        beta = cfg.temper * min(max(mean, SCALE_BOUNDS[0]), SCALE_BOUNDS[1]) * new
+        scale = min(max(mean, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
+        z = np.minimum(robust_z(row), scale + Z_CAP)   # no more evidence than the true place gives
+        beta = cfg.temper * scale * new
         # speeds
         mixed = np.zeros_like(b)
         blind = cue is None or not cfg.still   # no motion cue: a stopped camera may start again
@@ -229,6 +230,24 @@ def test_quantiles_are_numpys_percentiles(n):
     row = np.round(rng.normal(0.3, 0.1, n), 2).astype(np.float32)   # rounded: ties
     qs = (25.0, 50.0, 75.0, 95.0, 0.0, 100.0)
     assert np.allclose(quantiles(row, qs), np.percentile(row.astype(np.float64), qs), rtol=0, atol=1e-12)
+
+
+def test_a_spike_at_one_place_is_no_more_evidence_than_the_true_place_gives(monkeypatch):
+    """Foreign imagery: one place looks like every frame (a spike 20 spreads high) from the first frame, before
+    the hub means can know it. Counted up to the scale plus ``Z_CAP`` it never makes an answer sure; counted
+    in full it did for the first frames."""
+    from vpr_edge.matchers import bayes
+
+    def confidences():
+        rng = np.random.default_rng(5)
+        rows = rng.normal(0.3, 0.02, (20, 300))
+        rows[:, 50] += 0.4
+        f = BayesFilter(300, config())
+        return np.array([f.update(row, still=0.0)[1] for row in rows])
+
+    assert confidences().max() < 0.5
+    monkeypatch.setattr(bayes, "Z_CAP", 1e9)
+    assert confidences()[:8].min() > 0.98
 
 
 def test_the_speeds_are_standing_then_one_place_a_frame_up():

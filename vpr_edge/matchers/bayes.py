@@ -16,8 +16,9 @@ map does not hold (*off-map*). Each frame:
    z-scores ``z = (s - median) / spread`` (``robust_z``: the bulk's or the upper tail's spread, the larger;
    a front end whose unrelated places often stand out reads lower), less each place's running
    mean over this stream's moving frames (``hub_memory``: a place that looks like every frame is no
-   evidence; a frame joins those means ``HUB_DELAY`` frames late). The likelihood ratio of "the camera is
-   at place p" against "off the map" is
+   evidence; a frame joins those means ``HUB_DELAY`` frames late), each counted up to the likelihood's
+   scale (below) plus ``Z_CAP``: a spike beyond what the true place gives, at a place that looks like
+   anything, is no more evidence. The likelihood ratio of "the camera is at place p" against "off the map" is
 
        LR(p) = exp(beta * z_p - beta^2 / 2)
 
@@ -64,7 +65,7 @@ import numpy as np
 
 from vpr_edge.matchers.base import AMBIGUOUS, OFF_MAP, SETTLING
 from vpr_edge.matchers.constants import (HUB_DELAY, MIN_SPREAD, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
-                                         START_OFF, TAIL_QUANTILE)
+                                         START_OFF, TAIL_QUANTILE, Z_CAP)
 from vpr_edge.matchers.filter_config import FilterConfig
 from vpr_edge.matchers.filter_motion import Transitions, Window, cue_weights, regather
 from vpr_edge.matchers.motion import stands
@@ -209,7 +210,7 @@ class BayesFilter:
         s = np.asarray(sim_row, np.float64)
         part, sample = self._split(s, refs)
         new, route_stands = self._novelty(still)
-        z = self._evidence(part, sample, new)
+        z = np.minimum(self._evidence(part, sample, new), self.beta / self.config.temper + Z_CAP)
         cued = still is not None and bool(self.config.still)
         self._predict(cued, new)
         if cued:   # the cue observes the speed: 0 where the view is the same

@@ -43,6 +43,10 @@ SCALE_PRIOR, SCALE_PRIOR_FRAMES, SCALE_BOUNDS = 2.0, 10.0, (0.5, 8.0)
 # the percentile the upper tail of a frame's similarities is read to (``bayes.robust_z``): chosen on nordland-dev
 # against 90 and 97.5 (docs/decisions.md, "The stream filter's parameters")
 TAIL_QUANTILE = 95.0
+# a frame's z-scores count up to the likelihood's scale plus Z_CAP (the true place's z-score is normal about the
+# scale, sd 1): a spike beyond what the true place gives (a place that looks like anything) is no more evidence.
+# Chosen on nordland-dev among 2-5 (docs/decisions.md, "The stream filter's parameters")
+Z_CAP = 2.0
 HUB_DELAY = 8            # frames a frame's z-scores wait before they join the hub means (the passing place's view)
 # without a motion cue (``filter_motion.blind``): a stopped camera starts again at one place a frame with this
 # probability a frame; chosen on nordland-dev's pixels (docs/decisions.md, "The stream filter's parameters")
