@@ -30,7 +30,12 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
     answers, confs = [], []
     for t, row in enumerate(rows):
         cue = None if cues is None else cues[t]
-        new = 1.0 if cue is None or cue < cfg.still else min(max(1 - cue, 0.0), 1.0)
+        new = 1.0
+        if cue is not None and cue >= cfg.still:   # standing by the cue: the chance it moves all the same
+            stand = np.exp(-0.5 * ((cue - CUE_STANDING[0]) / CUE_STANDING[1]) ** 2) / CUE_STANDING[1]
+            move = np.exp(-0.5 * (cue / CUE_MOVING_SD) ** 2) / CUE_MOVING_SD
+            w_s, w_m = max(stand / max(stand, move), CUE_FLOOR), max(move / max(stand, move), CUE_FLOOR)
+            new = w_m / (w_m + w_s)
         mean = (scale_s + SCALE_PRIOR * SCALE_PRIOR_FRAMES) / (scale_w + SCALE_PRIOR_FRAMES)
         scale = min(max(mean, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
         z = np.minimum(robust_z(row), scale + Z_CAP)   # no more evidence than the true place gives

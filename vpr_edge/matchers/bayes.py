@@ -32,7 +32,8 @@ map does not hold (*off-map*). Each frame:
 3. The **motion cue** (``motion.MotionCue``) observes the speed: speed 0 and the moving speeds are weighed
    by how likely the frame's cue is for a standing camera (about 0.75) and a moving one (about 0)
    (``filter_motion.cue_weights``). A frame whose cue reaches ``still`` (its view is nearly the last
-   moving frame's) counts 1 - cue of its view's evidence (a view seen again says nothing new), and as much
+   moving frame's) counts of its view's evidence only the probability, by the same two normals at even
+   odds, that the camera moves all the same (a view seen again says nothing new), and as much
    of the frame's ``leave``, ``jump`` and ``enter`` (a camera that stands stays where it is: a long stop
    keeps its answer). Where the map's own drive stood (``route``) the frame is read as motion.
 
@@ -269,7 +270,8 @@ class BayesFilter:
 
     def _novelty(self, still: float | None) -> tuple[float, bool]:
         """(How new a frame's view is, in [0, 1]; whether the map's drive stood here too). Novelty is 1 for a
-        moving camera (cue below ``still``, or no cue); for one the cue reads as standing, 1 - cue (0: its
+        moving camera (cue below ``still``, or no cue); for one the cue reads as standing, the probability
+        that the camera moves all the same, from the cue's two normals at even odds (``cue_weights``; 0: its
         view again). The frame counts that share of its evidence. Where the map's drive stood too (``route``)
         the frame is read as motion, as the map's references were: novelty 1, and ``cue_weights`` weighs it
         as moving."""
@@ -278,7 +280,8 @@ class BayesFilter:
         nxt = self._mode + 1
         if self.route is not None and nxt < self.n_refs and self.route[nxt]:
             return 1.0, True
-        return float(min(max(1.0 - still, 0.0), 1.0)), False
+        moving, standing = cue_weights(float(still))
+        return moving / (moving + standing), False
 
     def _evidence(self, s: np.ndarray, sample: np.ndarray | None = None, new: float = 1.0) -> np.ndarray:
         """The frame's robust z-scores (at the places held; median and spread from ``sample``, None: ``s``)

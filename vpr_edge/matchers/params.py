@@ -105,8 +105,9 @@ STREAM_FILTER: dict[str, Param] = {
     "rival_window": Param(10, "places either side of the answer beyond which doubt counts as another stretch "
                               "of the route (lost_why 'ambiguous'); at least the map's likeness reach"),
     "still": Param(0.5, "motion cue: a frame whose cue is at least this (it differs from the last moving frame "
-                        "by at most half a typical moving step) may show its view again: it counts 1 - cue of its "
-                        "evidence (every cue weighs speed 0 against moving, CUE_STANDING); 0 = no cue"),
+                        "by at most half a typical moving step) may show its view again: it counts only the chance "
+                        "that the camera moves all the same of its evidence (every cue weighs speed 0 against "
+                        "moving, CUE_STANDING); 0 = no cue"),
     "still_memory": Param(MEMORY, "motion cue: moving frames whose median step (1 - cosine of encodings) is the "
                                   "stream's typical moving step"),
     "window": STREAM["window"], "probe": STREAM["probe"], "check": STREAM["check"], "span": STREAM["span"],
