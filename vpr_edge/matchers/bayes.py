@@ -7,11 +7,10 @@ map does not hold (*off-map*). Each frame:
 1. **Predict** (the motion model). A speed changes to the next one up or down with probability
    ``speed_change`` each (``filter_motion.speed_kernel``; on a frame with no motion cue a stopped camera also
    starts again, ``filter_motion.blind``); then the camera moves on by its speed. Mass that runs past a
-   drive's last place leaves the map; a drive
-   joined to another (``route.RouteGraph``'s junctions) passes a share ``JOIN`` of its junction places' mass
-   on to the other drive. Every frame, ``leave`` of the on-map mass moves off the map, ``jump`` of it to a
-   place anywhere on the map (a re-localisation), and ``enter`` of the off-map mass comes back onto the map
-   at any place.
+   drive's last place leaves the map; a drive joined to another (``route.RouteGraph``'s junctions) passes a
+   share ``JOIN`` of its junction places' mass on to the other drive. Every frame, ``leave`` of the on-map
+   mass moves off the map, ``jump`` of it to a place anywhere on the map (a re-localisation), and ``enter`` of
+   the off-map mass comes back onto the map at any place.
 2. **Correct** (the likelihood of the frame's similarity row). The row is read on its own scale: robust
    z-scores ``z = (s - median) / spread`` (``robust_z``: the bulk's or the upper tail's spread, the larger;
    a front end whose unrelated places often stand out reads lower), less each place's running
@@ -43,17 +42,18 @@ of the true place. A frame is lost below the line (``--target-precision``); ``wh
 missing mass: ``off-map`` (the off-map state), ``ambiguous`` (another stretch of the route) or ``settling``
 (spread thinly: not converged yet).
 
-On a route of more than ``4 * window`` places a firm answer (confidence at least ``hold``), or a frame read
-as standing after a window, lets the next frame read only the places within ``window`` of it (``filter_motion.Window``: the rest of the on-map mass
-held as one number, *elsewhere*, its likelihood that of the off-map state), its row's median and spread read
-on a fixed ``probe`` sample; ``span`` frames in every ``check`` read the whole route, as ``stream``'s local
-search does. On such a route with an index, a frame that would read the whole route reads instead the places
-within ``seek`` of the index's candidates and within ``max(seek, window / 4)`` of the ``peaks`` most probable
-places held (``around``): the state never spans the whole route.
+On a route of more than ``4 * window`` places a firm answer (confidence at least ``hold``), or a frame read as
+standing after a window, lets the next frame read only the places within ``window`` of it
+(``filter_motion.Window``: the rest of the on-map mass held as one number, *elsewhere*, its likelihood that of
+the off-map state), its row's median and spread read on a fixed ``probe`` sample; ``span`` frames in every
+``check`` read the whole route, as ``stream``'s local search does. On such a route with an index, a frame that
+would read the whole route reads instead the places within ``seek`` of the index's candidates and within
+``max(seek, window / 4)`` of the ``peaks`` most probable places held (``around``): the state never spans the
+whole route.
 
 State: (V, R) float64 over V speeds (8 at the defaults; the columns held while local), the hub means and
-``HUB_DELAY`` z-score rows, whatever the stream's length; a frame costs O(V² + V R), O(V² + V W) over W
-places held.
+``HUB_DELAY`` z-score rows, whatever the stream's length; a frame costs O(V² R), O(V² W) over W places
+held.
 """
 from __future__ import annotations
 
@@ -211,7 +211,7 @@ class BayesFilter:
         s = np.asarray(sim_row, np.float64)
         part, sample = self._split(s, refs)
         new, route_stands = self._novelty(still)
-        z = np.minimum(self._evidence(part, sample, new), self.beta / self.config.temper + Z_CAP)
+        z = np.minimum(self._evidence(part, sample, new), self.beta / self.config.temper + Z_CAP)   # (step 2)
         cued = still is not None and bool(self.config.still)
         self._predict(cued, new)
         if cued:   # the cue observes the speed: 0 where the view is the same
