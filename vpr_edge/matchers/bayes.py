@@ -198,11 +198,17 @@ class BayesFilter:
         return self.off
 
     @property
-    def beta(self) -> float:
-        """The likelihood's scale now (module docstring)."""
+    def scale(self) -> float:
+        """How far the true place's z-score stands out now: the answers' confidence-weighted mean, with its
+        prior, kept in ``SCALE_BOUNDS`` (module docstring)."""
         s, w = self._scale
         mean = (s + SCALE_PRIOR * SCALE_PRIOR_FRAMES) / (w + SCALE_PRIOR_FRAMES)
-        return self.config.temper * float(np.clip(mean, *SCALE_BOUNDS))
+        return float(np.clip(mean, *SCALE_BOUNDS))
+
+    @property
+    def beta(self) -> float:
+        """The likelihood's scale now: ``temper`` times ``scale`` (module docstring)."""
+        return self.config.temper * self.scale
 
     def update(self, sim_row: np.ndarray, refs: np.ndarray | None = None,
                still: float | None = None) -> tuple[int, float]:
@@ -211,7 +217,7 @@ class BayesFilter:
         s = np.asarray(sim_row, np.float64)
         part, sample = self._split(s, refs)
         new, route_stands = self._novelty(still)
-        z = np.minimum(self._evidence(part, sample, new), self.beta / self.config.temper + Z_CAP)   # (step 2)
+        z = np.minimum(self._evidence(part, sample, new), self.scale + Z_CAP)   # (step 2)
         cued = still is not None and bool(self.config.still)
         self._predict(cued, new)
         if cued:   # the cue observes the speed: 0 where the view is the same

@@ -35,10 +35,13 @@ class FilterConfig:
         for name in ("speed_change", "leave", "enter", "jump"):
             if not 0.0 <= getattr(self, name) < 0.5:
                 raise ValueError(f"{name} must lie in [0, 0.5), got {getattr(self, name)}")
-        span = max(self.vmax - 1, 0) / self.speed_step if self.speed_step > 0 else 0.5
-        if not 0.0 < self.speed_step <= 1.0 or abs(span - round(span)) > 1e-9:
-            raise ValueError(f"speed_step must lie in (0, 1] and divide vmax - 1, got {self.speed_step} for vmax "
-                             f"{self.vmax}")
+        bad_step = ValueError(f"speed_step must lie in (0, 1] and divide vmax - 1, got {self.speed_step} for vmax "
+                              f"{self.vmax}")
+        if not 0.0 < self.speed_step <= 1.0:
+            raise bad_step
+        steps = max(self.vmax - 1, 0) / self.speed_step   # speeds above one place a frame
+        if abs(steps - round(steps)) > 1e-9:
+            raise bad_step
         if self.vmax < 0 or self.tolerance < 0 or self.rival_window < 0:
             raise ValueError(f"need vmax, tolerance and rival_window >= 0 (got {self.vmax}, {self.tolerance}, "
                              f"{self.rival_window})")
