@@ -1,4 +1,4 @@
-"""The ``stream-filter`` matcher (``matchers.bayes``) against a plain-loop forward algorithm, and on planted streams
+"""The ``stream`` matcher (``matchers.bayes``) against a plain-loop forward algorithm, and on planted streams
 whose answers are known."""
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import pytest
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.bayes import BayesFilter, FilterConfig, robust_z
 from vpr_edge.matchers.constants import (CUE_FLOOR, CUE_MOVING_SD, CUE_STANDING, GO_BLIND, JOIN, SCALE_BOUNDS,
-                                         SCALE_PRIOR, SCALE_PRIOR_FRAMES, START_OFF, Z_CAP)
+                                         SCALE_PRIOR, SCALE_PRIOR_FRAMES, SLOW_CHANGE, SLOW_SPEED, START_OFF,
+                                         Z_CAP)
 from vpr_edge.matchers.params import STREAM_FILTER
 from vpr_edge.matchers.route import RouteGraph
 
@@ -19,9 +20,17 @@ def config(**overrides) -> FilterConfig:
 
 def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=None):
     """The filter written as plain loops over (speed, place) and the off-map state (no hub means)."""
-    speeds = [0.0]   # standing, then 1 to vmax places a frame in steps of speed_step
-    while cfg.vmax >= 1 and 1.0 + (len(speeds) - 1) * cfg.speed_step <= cfg.vmax + 1e-9:
-        speeds.append(1.0 + (len(speeds) - 1) * cfg.speed_step)
+    values = [0.0]   # standing, slow, then 1 to vmax places a frame in steps of speed_step
+    if cfg.vmax >= 1:
+        values.append(SLOW_SPEED)
+        while 1.0 + (len(values) - 2) * cfg.speed_step <= cfg.vmax + 1e-9:
+            values.append(1.0 + (len(values) - 2) * cfg.speed_step)
+    rows_of = []   # (speed index, places moved): each speed's cycle of whole places, one row a frame of it
+    for i, s in enumerate(values):
+        n = 1 if s == int(s) else (2 if 2 * s == int(2 * s) else 4)
+        cycle = [int(np.floor((j + 1) * s + 1e-9) - np.floor(j * s + 1e-9)) for j in range(n)]
+        rows_of += [(i, d) for d in cycle]
+    speeds = rows_of
     n_v, n_r = len(speeds), rows.shape[1]
     b = np.full((n_v, n_r), (1 - START_OFF) / (n_v * n_r))
     off = START_OFF
@@ -40,30 +49,53 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
         scale = min(max(mean, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
         z = np.minimum(robust_z(row), scale + Z_CAP)   # no more evidence than the true place gives
         beta = cfg.temper * scale * new
-        # speeds
+        # speeds: a kept speed moves to its cycle's next row; a change lands on each row of the new speed
         mixed = np.zeros_like(b)
         blind = cue is None or not cfg.still   # no motion cue: a stopped camera may start again
-        for v in range(n_v):   # to the next speed up or down
-            moves = [(v - 1, cfg.speed_change), (v + 1, cfg.speed_change), (v, 1 - 2 * cfg.speed_change)]
-            if blind and v == 0:   # ... and from standing to one place a frame
-                moves = [(w, pr * (1 - GO_BLIND)) for w, pr in moves] + [(1, GO_BLIND)]
-            for w, pr in moves:
-                w = min(max(w, 0), n_v - 1)
+        n_u = len(values)
+        ladder = [0] + list(range(2, n_u)) if n_u > 1 else [0]
+        for r, (u, _) in enumerate(speeds):
+            to = {}   # speed index -> probability
+            if n_u == 1:
+                to[0] = 1.0
+            elif u == 1:   # slow: to standing or one place a frame
+                to = {0: cfg.speed_change, 2: cfg.speed_change}
+            else:
+                j = ladder.index(u)
+                for w in (ladder[max(j - 1, 0)], ladder[min(j + 1, len(ladder) - 1)]):
+                    to[w] = to.get(w, 0.0) + cfg.speed_change
+                if u in (0, 2):
+                    to[1] = SLOW_CHANGE
+            to[u] = to.get(u, 0.0) + 1.0 - sum(to.values())
+            for w, pr in to.items():
+                targets = [r2 for r2, (u2, _) in enumerate(speeds) if u2 == w]
+                if w == u:   # the cycle's next row
+                    mine = [r2 for r2 in targets]
+                    k = mine.index(r)
+                    targets, pr_each = [mine[(k + 1) % len(mine)]], pr
+                else:
+                    pr_each = pr / len(targets)
+                for r2 in targets:
+                    share = pr_each
+                    if blind and r == 0:
+                        share *= 1 - GO_BLIND
+                    for p in range(n_r):
+                        mixed[r2, p] += share * b[r, p]
+            if blind and r == 0:   # ... and from standing to one place a frame
+                one = [r2 for r2, (u2, _) in enumerate(speeds) if values[u2] == 1.0][0]
                 for p in range(n_r):
-                    mixed[w, p] += pr * b[v, p]
+                    mixed[one, p] += GO_BLIND * b[r, p]
         # moves
         moved = np.zeros_like(b)
         ran = 0.0
         for v in range(n_v):
-            s = speeds[v]   # places a frame: the whole places either side, each as near as it lies
-            lo = int(np.floor(s + 1e-9))
-            for d, share in ((lo, 1 - (s - lo)), (lo + 1, s - lo)):
-                for p in range(n_r):
-                    q = p + d
-                    if q >= n_r or seq_of[q] != seq_of[p]:
-                        ran += share * mixed[v, p]
-                    else:
-                        moved[v, q] += share * mixed[v, p]
+            d = speeds[v][1]   # this row's whole places
+            for p in range(n_r):
+                q = p + d
+                if q >= n_r or seq_of[q] != seq_of[p]:
+                    ran += mixed[v, p]
+                else:
+                    moved[v, q] += mixed[v, p]
         for sources, targets in graph.junctions:
             for v in range(n_v):
                 share = sum(moved[v, s] for s in sources) * JOIN
@@ -255,18 +287,39 @@ def test_a_spike_at_one_place_is_no_more_evidence_than_the_true_place_gives(monk
     assert confidences()[:8].min() > 0.98
 
 
-def test_the_speeds_are_standing_then_one_place_a_frame_up():
-    from vpr_edge.matchers.filter_motion import by_move, speed_steps, speed_values
+def test_the_speeds_are_standing_slow_then_one_place_a_frame_up():
+    from vpr_edge.matchers.filter_motion import by_move, phases, speed_kernel, speed_rows, speed_values
 
-    np.testing.assert_allclose(speed_values(4, 0.5), [0, 1, 1.5, 2, 2.5, 3, 3.5, 4])
-    np.testing.assert_allclose(speed_values(4, 1.0), [0, 1, 2, 3, 4])
+    np.testing.assert_allclose(speed_values(4, 0.5), [0, 0.5, 1, 1.5, 2, 2.5, 3, 3.5, 4])
+    np.testing.assert_allclose(speed_values(4, 1.0), [0, 0.5, 1, 2, 3, 4])
     np.testing.assert_allclose(speed_values(0, 0.5), [0])
-    steps = speed_steps(speed_values(2, 0.5))
-    assert steps == [[(0, 1.0)], [(1, 1.0)], [(1, 0.5), (2, 0.5)], [(2, 1.0)]]
-    shifts = dict((d, list(w)) for d, w in by_move(steps))
-    assert shifts == {0: [1, 0, 0, 0], 1: [0, 1, 0.5, 0], 2: [0, 0, 0.5, 1]}
+    assert (phases(1.5), phases(0.5), phases(2.0), phases(1.25)) == ([1, 2], [0, 1], [2], [1, 1, 1, 2])
+    with pytest.raises(ValueError, match="no cycle"):
+        phases(1.3)
+    speeds = speed_values(2, 0.5)
+    of, moves = speed_rows(speeds)
+    assert list(of) == [0, 1, 1, 2, 3, 3, 4] and list(moves) == [0, 0, 1, 1, 1, 2, 2]
+    assert [(d, list(rows)) for d, rows in by_move(moves)] == [(0, [0, 1]), (1, [2, 3, 4]), (2, [5, 6])]
+    k = speed_kernel(speeds, of, 0.03)
+    np.testing.assert_allclose(k.sum(axis=1), 1.0)
+    assert k[3, 4] == k[3, 5] == pytest.approx(0.015) and k[4, 5] == pytest.approx(0.94)   # a cycle held
+    assert k[5, 4] == pytest.approx(0.94) and k[0, 3] == pytest.approx(0.03)   # standing -> one place a frame
+    assert k[0, 1] + k[0, 2] == pytest.approx(SLOW_CHANGE) and k[1, 2] == pytest.approx(0.94)   # slow, rarely
     with pytest.raises(ValueError, match="divide vmax - 1"):
         config(vmax=4, speed_step=0.4)
+
+
+def test_a_vehicle_slower_than_the_maps_drive_is_followed_not_run_ahead_of():
+    """A camera at half a place a frame whose frames all differ (no view repeats for the cue to read as
+    standing) is followed by the slow speed's cycle: no sure answer runs ahead of it."""
+    rng = np.random.default_rng(4)
+    places = np.r_[np.arange(40), 40 + np.arange(120) // 2]
+    rows = planted(len(places), 200, places, 0.6, rng)
+    f = BayesFilter(200, config())
+    got = np.array([f.update(row, None, 0.0) for row in rows])
+    sure = got[:, 1] >= 0.98
+    assert (np.abs(got[sure, 0] - places[sure]) <= 2).all()
+    assert sure[60:].mean() > 0.8
 
 
 def test_without_a_cue_a_stopped_filter_starts_again():
@@ -275,10 +328,12 @@ def test_without_a_cue_a_stopped_filter_starts_again():
     answer held at speed 0 moves on once the evidence stops holding it; the cued kernel is the plain one."""
     from vpr_edge.matchers.filter_motion import blind, speed_kernel
 
-    plain = speed_kernel(5, 0.03)
-    k = blind(plain)
+    speeds = np.array([0.0, 0.5, 1.0, 2.0])
+    of = np.array([0, 1, 1, 2, 3])
+    plain = speed_kernel(speeds, of, 0.03)
+    k = blind(plain, 3)
     np.testing.assert_allclose(k.sum(axis=1), 1.0)
-    assert k[0, 1] == pytest.approx(plain[0, 1] * (1 - GO_BLIND) + GO_BLIND)
+    assert k[0, 3] == pytest.approx(plain[0, 3] * (1 - GO_BLIND) + GO_BLIND)
     np.testing.assert_array_equal(k[1:], plain[1:])
     rng = np.random.default_rng(9)
     places = np.r_[np.arange(20), np.full(30, 19)]

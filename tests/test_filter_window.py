@@ -27,10 +27,10 @@ def test_a_window_of_every_place_is_the_whole_route_model(step: float) -> None:
     rng = np.random.default_rng(1)
     g, cfg = graph(), config(jump=0.01, leave=0.02, enter=0.1, speed_step=step)
     whole = Transitions(g, cfg)
-    b = rng.random((len(Transitions(g, cfg).steps), g.n_refs))
+    b = rng.random((len(Transitions(g, cfg).moves), g.n_refs))
     b /= b.sum() * 1.25
     want_b, want_off = whole.predict(b, 0.2)
-    got_b, got_off, got_else = Window(g, np.arange(g.n_refs), whole.steps).predict(
+    got_b, got_off, got_else = Window(g, np.arange(g.n_refs), whole.moves).predict(
         b, 0.2, 0.0, cfg.leave, cfg.jump, cfg.enter, whole.kernel)
     np.testing.assert_allclose(got_b, want_b, atol=1e-15)
     assert abs(got_off - want_off) < 1e-12 and got_else == 0.0
@@ -43,13 +43,13 @@ def test_a_window_keeps_the_mass_and_matches_the_whole_route_inside(step: float)
     rng = np.random.default_rng(2)
     g, cfg = graph(), config(jump=0.0, leave=0.0, enter=0.0, speed_step=step)
     cols = np.arange(10, 40)
-    n_v = len(Transitions(g, cfg).steps)
+    n_v = len(Transitions(g, cfg).moves)
     b = np.zeros((n_v, g.n_refs))
     b[:, 20:26] = rng.random((n_v, 6))
     b /= b.sum() * 1.25
     whole = Transitions(g, cfg)
     want_b, want_off = whole.predict(b, 0.2)
-    got_b, got_off, got_else = Window(g, cols, whole.steps).predict(b[:, cols], 0.2, 0.0, 0.0, 0.0, 0.0,
+    got_b, got_off, got_else = Window(g, cols, whole.moves).predict(b[:, cols], 0.2, 0.0, 0.0, 0.0, 0.0,
                                                                      whole.kernel)
     np.testing.assert_allclose(got_b, want_b[:, cols], atol=1e-15)
     assert abs(got_b.sum() + got_off + got_else - 1.0) < 1e-12

@@ -1,12 +1,13 @@
 """The ``stream-filter`` matcher: a Bayes filter over (place along the route, speed), plus one off-map state.
 
 The hidden state of a frame is where the camera is on the map and how fast it moves along it, in places a
-frame (standing, or 1 to ``vmax`` in steps of ``speed_step``: ``filter_motion``), or that it is somewhere the
-map does not hold (*off-map*). Each frame:
+frame (standing, half a place, or 1 to ``vmax`` in steps of ``speed_step``: ``filter_motion``), or that it is
+somewhere the map does not hold (*off-map*). Each frame:
 
 1. **Predict** (the motion model). A speed changes to the next one up or down with probability
    ``speed_change`` each (``filter_motion.speed_kernel``; on a frame with no motion cue a stopped camera also
-   starts again, ``filter_motion.blind``); then the camera moves on by its speed. Mass that runs past a
+   starts again, ``filter_motion.blind``); then the camera moves on by its speed, a fractional speed by whole
+   places in a fixed cycle (1.5: one, then two; ``filter_motion.phases``). Mass that runs past a
    drive's last place leaves the map; a drive joined to another (``route.RouteGraph``'s junctions) passes a
    share ``JOIN`` of its junction places' mass on to the other drive. Every frame, ``leave`` of the on-map
    mass moves off the map, ``jump`` of it to a place anywhere on the map (a re-localisation), and ``enter`` of
@@ -51,9 +52,9 @@ would read the whole route reads instead the places within ``seek`` of the index
 ``max(seek, window / 4)`` of the ``peaks`` most probable places held (``around``): the state never spans the
 whole route.
 
-State: (V, R) float64 over V speeds (8 at the defaults; the columns held while local), the hub means and
-``HUB_DELAY`` z-score rows, whatever the stream's length; a frame costs O(V² R), O(V² W) over W places
-held.
+State: (V, R) float64 over V rows, one per frame of each speed's cycle (13 at the defaults; the columns held
+while local), the hub means and ``HUB_DELAY`` z-score rows, whatever the stream's length; a frame costs
+O(V² R), O(V² W) over W places held.
 """
 from __future__ import annotations
 
@@ -378,7 +379,7 @@ class BayesFilter:
         if new is None:
             self.elsewhere = 0.0
         self.cols = new
-        self._window = None if new is None else Window(self.graph, new, self.moves.steps, self.moves.shifts)
+        self._window = None if new is None else Window(self.graph, new, self.moves.moves)
         self._whole = self._whole and new is None
 
     def _learn_scale(self, z_answer: float) -> None:

@@ -51,12 +51,15 @@ HUB_DELAY = 8            # frames a frame's z-scores wait before they join the h
 # without a motion cue (``filter_motion.blind``): a stopped camera starts again at one place a frame with this
 # probability a frame; chosen on nordland-dev's pixels (docs/decisions.md, "The stream filter's parameters")
 GO_BLIND = 0.1
+# a camera slower than the map's drive (``filter_motion.speed_values``): SLOW_SPEED places a frame, reached from
+# standing or from one place a frame with probability SLOW_CHANGE a frame (left as any speed is, by
+# ``speed_change``). Rare: a stop with a repeated view is read by the motion cue. Chosen on nordland-dev
+# (docs/decisions.md, "The stream filter's parameters")
+SLOW_SPEED, SLOW_CHANGE = 0.5, 0.001
+MAX_PHASES = 4          # a speed's fraction of a place is a multiple of 1/n, n at most this (its cycle's length)
 CUE_FLOOR = 0.05        # the motion cue's weight of the speed it contradicts (the cue may be wrong)
 # the stream filter reads the motion cue as a normal about CUE_STANDING[0] (sd CUE_STANDING[1]) where the camera
 # stands and about 0 (sd CUE_MOVING_SD) where it moves (``filter_motion.cue_weights``); chosen on nordland-dev
 # (docs/decisions.md, "The stream filter's parameters")
 CUE_STANDING = (0.75, 0.15)
 CUE_MOVING_SD = 0.3
-# the stream filter's window (``filter_motion.Window``): a column's predecessor lies in another drive (no mass
-# comes in) or outside the window (its share of the mass held elsewhere comes in)
-FROM_ANOTHER_DRIVE, FROM_ELSEWHERE = -1, -2

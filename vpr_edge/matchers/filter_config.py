@@ -35,9 +35,9 @@ class FilterConfig:
         for name in ("speed_change", "leave", "enter", "jump"):
             if not 0.0 <= getattr(self, name) < 0.5:
                 raise ValueError(f"{name} must lie in [0, 0.5), got {getattr(self, name)}")
-        bad_step = ValueError(f"speed_step must lie in (0, 1] and divide vmax - 1, got {self.speed_step} for vmax "
-                              f"{self.vmax}")
-        if not 0.0 < self.speed_step <= 1.0:
+        bad_step = ValueError(f"speed_step must be 1, 0.5 or 0.25 and divide vmax - 1, got {self.speed_step} for "
+                              f"vmax {self.vmax}")
+        if self.speed_step not in (1.0, 0.5, 0.25):   # a speed's cycle of whole places: at most 4 frames
             raise bad_step
         steps = max(self.vmax - 1, 0) / self.speed_step   # speeds above one place a frame
         if abs(steps - round(steps)) > 1e-9:

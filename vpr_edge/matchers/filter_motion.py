@@ -2,11 +2,14 @@
 window of places around its answer on a long route (``Window``), the rest of the on-map mass held as one
 number spread evenly (*elsewhere*); and what the motion cue says of the speed (``cue_weights``, step 3).
 
-Speeds are 0 (standing) and one place a frame to ``vmax`` in steps of ``speed_step`` (0.5: 1, 1.5, 2, ..).
-A speed between two whole places moves the camera by the nearer whole numbers of places, each as often as
-the speed lies near it (1.5: one place or two, half the time each). Below one place a frame a camera shows
-a place again; the motion cue reads such a frame as standing, so a slow vehicle is followed as stops and
-moves (a slow speed of its own let a trajectory linger by a look-alike: docs/decisions.md).
+Speeds are 0 (standing), a slow ``SLOW_SPEED`` (half a place a frame: a camera slower than the map's drive),
+then one place a frame to ``vmax`` in steps of ``speed_step`` (0.5: 1, 1.5, 2, ..). A speed between whole
+places moves the camera by whole places in a fixed cycle (1.5: one place, then two; ``phases``), each step of
+the cycle a row of the state, so a trajectory at 1.5 is a line, not a random walk. A speed changes to the next
+one up or down with probability ``speed_change`` each (standing and one place a frame are neighbours); the slow
+speed is reached from standing or one place a frame with probability ``SLOW_CHANGE`` only: a stop that repeats
+its view is read by the motion cue, and a slow speed held without need lets a trajectory linger by a look-alike
+(docs/decisions.md).
 
 On a route of more than ``4 * window`` places the filter reads only the places within ``window`` of a firm
 answer (and a fixed probe sample for the row's median and spread), as ``stream``'s local search does; every
@@ -18,54 +21,82 @@ window of every place it is ``Transitions`` exactly (tested).
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 import numpy as np
 
-from vpr_edge.matchers.constants import (CUE_FLOOR, CUE_MOVING_SD, CUE_STANDING, FROM_ANOTHER_DRIVE, FROM_ELSEWHERE,
-                                         GO_BLIND, JOIN)
+from vpr_edge.matchers.constants import (CUE_FLOOR, CUE_MOVING_SD, CUE_STANDING, GO_BLIND, JOIN, MAX_PHASES,
+                                         SLOW_CHANGE, SLOW_SPEED)
 from vpr_edge.matchers.filter_config import FilterConfig
 from vpr_edge.matchers.route import RouteGraph
 
-Steps = list[list[tuple[int, float]]]   # per speed: (places moved in a frame, its probability)
-
-
 def speed_values(vmax: int, step: float) -> np.ndarray:
-    """The speeds followed, places a frame (V,): 0, then 1 to ``vmax`` in steps of ``step`` (none but 0 when
-    ``vmax`` is 0)."""
+    """The speeds followed, places a frame (U,): 0, ``SLOW_SPEED``, then 1 to ``vmax`` in steps of ``step``
+    (none but 0 when ``vmax`` is 0)."""
     if vmax < 1:
         return np.zeros(1)
-    return np.r_[0.0, 1.0 + step * np.arange(int(round((vmax - 1) / step)) + 1)]
+    return np.r_[0.0, SLOW_SPEED, 1.0 + step * np.arange(int(round((vmax - 1) / step)) + 1)]
 
 
-def speed_steps(speeds: np.ndarray) -> Steps:
-    """Each speed (places a frame) -> the whole places it moves in a frame and their chances."""
-    out: Steps = []
-    for s in speeds:
-        lo = int(math.floor(s + 1e-9))
-        f = float(s) - lo
-        out.append([(lo, 1.0)] if f < 1e-9 else [(lo, 1.0 - f), (lo + 1, f)])
-    return out
+def phases(speed: float) -> list[int]:
+    """The whole places a camera at ``speed`` places a frame moves in each frame of its cycle (1.5: [1, 2];
+    0.5: [0, 1]; 2: [2]); ValueError where the fraction is not a multiple of 1/n for n <= ``MAX_PHASES``."""
+    frac = Fraction(speed).limit_denominator(MAX_PHASES)
+    if abs(float(frac) - speed) > 1e-9:
+        raise ValueError(f"a speed of {speed} places a frame has no cycle of at most {MAX_PHASES} frames")
+    n = frac.denominator
+    return [math.floor((j + 1) * frac) - math.floor(j * frac) for j in range(n)]
 
 
-def by_move(steps: Steps) -> list[tuple[int, np.ndarray]]:
-    """``steps`` regrouped by the places moved: (places, each speed's chance of moving them (V,)), so the
-    motion model shifts the mass once a distance, not once a speed."""
-    moves = sorted({d for parts in steps for d, _ in parts})
-    out = []
-    for d in moves:
-        w = np.array([sum(p for dd, p in parts if dd == d) for parts in steps])
-        out.append((d, w))
-    return out
+def speed_rows(speeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The state's rows: one per frame of each speed's cycle (``phases``) -> (each row's speed index (V,),
+    the whole places each row moves in a frame (V,))."""
+    of = [i for i, s in enumerate(speeds) for _ in phases(float(s))]
+    moves = [d for s in speeds for d in phases(float(s))]
+    return np.array(of, np.int64), np.array(moves, np.int64)
 
 
-def speed_kernel(n_speeds: int, change: float) -> np.ndarray:
-    """(V, V) row-stochastic: from speed v to v'. A speed changes to the next one up or down with probability
-    ``change`` each; at the ends a change that would leave the range stays."""
-    k = np.zeros((n_speeds, n_speeds))
-    for v in range(n_speeds):
-        for w in (v - 1, v + 1):
-            k[v, min(max(w, 0), n_speeds - 1)] += change
-        k[v, v] += 1.0 - 2.0 * change
+def by_move(moves: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """The rows grouped by the places they move: (places, the rows (int64)), by places, so the motion model
+    shifts the mass once a distance, not once a row."""
+    return [(int(d), np.flatnonzero(moves == d)) for d in np.unique(moves)]
+
+
+def value_kernel(speeds: np.ndarray, change: float) -> np.ndarray:
+    """(U, U) row-stochastic over ``speed_values``: to the next speed up or down with probability ``change``
+    each (standing's next up is one place a frame; a change that would leave the range stays); into the slow
+    speed from standing or one place a frame with ``SLOW_CHANGE``, out of it to either with ``change``."""
+    n = len(speeds)
+    k = np.zeros((n, n))
+    if n == 1:
+        k[0, 0] = 1.0
+        return k
+    moving = [0] + list(range(2, n))   # standing, then 1 .. vmax: the ladder of speeds
+    for j, v in enumerate(moving):
+        for w in (moving[max(j - 1, 0)], moving[min(j + 1, len(moving) - 1)]):
+            k[v, w] += change
+    for v in (0, 2):   # standing and one place a frame: into the slow speed
+        k[v, 1] += SLOW_CHANGE
+    k[1, 0] = k[1, 2] = change
+    k[np.arange(n), np.arange(n)] += 1.0 - k.sum(axis=1)
+    return k
+
+
+def speed_kernel(speeds: np.ndarray, of: np.ndarray, change: float) -> np.ndarray:
+    """(V, V) row-stochastic over the rows (``speed_rows``' ``of``): a speed kept moves on to the next step of
+    its cycle; a change (``value_kernel``) lands on each step of the new speed's cycle alike."""
+    k_val = value_kernel(speeds, change)
+    n = len(of)
+    k = np.zeros((n, n))
+    first = {int(u): int(np.flatnonzero(of == u)[0]) for u in np.unique(of)}
+    count = np.bincount(of)
+    for r in range(n):
+        u = int(of[r])
+        nxt = r + 1 if r + 1 < n and of[r + 1] == u else first[u]
+        k[r, nxt] += k_val[u, u]
+        for w in np.flatnonzero(k_val[u]):
+            if w != u:
+                k[r, of == w] += k_val[u, w] / count[w]
     return k
 
 
@@ -84,13 +115,12 @@ def cue_weights(cue: float, as_motion: bool = False) -> tuple[float, float]:
     return max(math.exp(log_move - top), CUE_FLOOR), max(math.exp(log_stand - top), CUE_FLOOR)
 
 
-def blind(kernel: np.ndarray) -> np.ndarray:
-    """A speed kernel (V, V) for frames with no motion cue: a stopped camera also starts again at one place
-    a frame (speed 1, the second speed) with probability ``GO_BLIND``. With a cue, each moving frame tells
-    the filter it moves; without one, broad evidence (neighbouring places alike) could hold it at speed 0
-    while the camera drives on."""
+def blind(kernel: np.ndarray, one: int) -> np.ndarray:
+    """A speed kernel (V, V) for frames with no motion cue: a stopped camera (row 0) also starts again at one
+    place a frame (row ``one``) with probability ``GO_BLIND``. With a cue, each moving frame tells the filter it
+    moves; without one, broad evidence (neighbouring places alike) could hold it at speed 0 while the camera
+    drives on."""
     k = kernel.copy()
-    one = min(1, len(k) - 1)
     k[0] *= 1.0 - GO_BLIND
     k[0, one] += GO_BLIND
     return k
@@ -103,11 +133,12 @@ class Transitions:
     def __init__(self, graph: RouteGraph, config: FilterConfig) -> None:
         self.graph, self.config = graph, config
         self.speeds = speed_values(config.vmax, config.speed_step)
-        self.n_speeds = len(self.speeds)
-        self.steps = speed_steps(self.speeds)
-        self.shifts = by_move(self.steps)
-        self.kernel = speed_kernel(self.n_speeds, config.speed_change)
-        self.blind_kernel = blind(self.kernel)   # frames with no motion cue
+        self.of, self.moves = speed_rows(self.speeds)   # the state's rows: each speed's cycle
+        self.n_speeds = len(self.of)
+        self.shifts = by_move(self.moves)
+        self.kernel = speed_kernel(self.speeds, self.of, config.speed_change)
+        one = np.flatnonzero(self.speeds == 1.0)
+        self.blind_kernel = blind(self.kernel, int(np.flatnonzero(self.of == one[0])[0]) if len(one) else 0)
         later = [(int(s), int(e) + 1) for s, e in zip(graph.starts[1:], graph.ends[1:])]
         self.cut = {d: np.concatenate([np.arange(s, min(s + d, e)) for s, e in later]).astype(np.int64)
                     if later else np.zeros(0, np.int64) for d in range(1, int(math.ceil(config.vmax)) + 2)}
@@ -127,21 +158,19 @@ class Transitions:
         r = b.shape[1]
         ran = 0.0
         moved = np.zeros_like(b)
-        for d, w in self.shifts:   # w (V,): each speed's chance of moving d places
-            wc = w[:, None]
+        for d, rows in self.shifts:   # the rows that move d places
             if d == 0:
-                moved += wc * b
+                moved[rows] = b[rows]
                 continue
             if d >= r:
-                ran += float(w @ b.sum(axis=1))
+                ran += float(b[rows].sum())
                 continue
-            moved[:, d:] += wc * b[:, :-d]
-            ran += float(w @ b[:, r - d:].sum(axis=1))
+            moved[rows, d:] = b[rows, :-d]
+            ran += float(b[rows, r - d:].sum())
             cc = self.cut[d]
             if len(cc):   # came from another drive's end: off the map instead
-                came = wc * b[:, cc - d]
-                moved[:, cc] -= came
-                ran += float(came.sum())
+                ran += float(moved[np.ix_(rows, cc)].sum())
+                moved[np.ix_(rows, cc)] = 0.0
         for sources, targets in self.graph.junctions:
             share = moved[:, sources].sum(axis=1) * JOIN
             moved[:, sources] *= 1.0 - JOIN
@@ -153,21 +182,25 @@ class Transitions:
 
 
 class Window:
-    """The places ``cols`` (sorted int64 (W,)) of ``graph`` held at the speeds of ``steps``: for each whole
-    step d and column, where its mass comes from (``src[d]``: a column, or ``FROM_*``), and whether moving d
-    places leaves the map (``exit_off[d]``: past its drive's end) or the window (``exit_else[d]``)."""
+    """The places ``cols`` (sorted int64 (W,)) of ``graph`` held at rows that move ``moves`` (V,) whole places a
+    frame: for each row and column, where its mass comes from (``src``: a flat index into the (V, W) mass, or
+    past its end: ``gone`` for a predecessor in another drive (no mass), ``gone + 1`` for one outside the window
+    (*elsewhere*'s density)), and whether moving on leaves the map (``exit_off``: past its drive's end) or the
+    window (``exit_else``)."""
 
-    def __init__(self, graph: RouteGraph, cols: np.ndarray, steps: Steps,
-                 shifts: list[tuple[int, np.ndarray]] | None = None) -> None:
-        self.graph, self.cols, self.steps = graph, np.asarray(cols, np.int64), steps
-        self.shifts = by_move(steps) if shifts is None else shifts   # (``by_move(steps)``, made once a route)
+    def __init__(self, graph: RouteGraph, cols: np.ndarray, moves: np.ndarray) -> None:
+        self.graph, self.cols, self.moves = graph, np.asarray(cols, np.int64), np.asarray(moves, np.int64)
         starts = np.asarray(graph.starts, np.int64)
         k = np.searchsorted(starts, self.cols, side="right") - 1
         first, last = starts[k], graph.ends[k]
-        d = np.arange(max(p for parts in steps for p, _ in parts) + 1)[:, None]
+        d = self.moves[:, None]
         before, after = self.cols[None, :] - d, self.cols[None, :] + d
         pos, inside = self.positions(before)
-        self.src = np.where(before < first, FROM_ANOTHER_DRIVE, np.where(inside, pos, FROM_ELSEWHERE))
+        n_v, w = len(self.moves), len(self.cols)
+        self.gone = n_v * w
+        flat = np.arange(n_v)[:, None] * w + pos
+        self.src = np.where(before < first, self.gone, np.where(inside, flat, self.gone + 1))
+        self.n_from_else = int((self.src == self.gone + 1).sum())
         self.exit_off = after > last
         self.exit_else = ~self.exit_off & ~self.positions(after)[1]
         self.joins = [(self.positions(s)[0][self.positions(s)[1]], self.positions(t)[0][self.positions(t)[1]],
@@ -182,22 +215,12 @@ class Window:
                 kernel: np.ndarray) -> tuple[np.ndarray, float, float]:
         """(V, W) window mass, the off-map and elsewhere masses -> the same one frame on (sums kept)."""
         r, w = self.graph.n_refs, len(self.cols)
-        n_speeds = len(self.steps)
+        n_speeds = len(self.moves)
         density = elsewhere / (n_speeds * (r - w)) if r > w else 0.0
         b = kernel.T @ b
-        moved = np.zeros_like(b)
-        ran = came_in = 0.0
-        for d, share in self.shifts:   # share (V,): each speed's chance of moving d places
-            src = self.src[d]
-            got = b[:, np.maximum(src, 0)]
-            got[:, src < 0] = 0.0
-            from_else = src == FROM_ELSEWHERE
-            got[:, from_else] = density
-            moved += share[:, None] * got
-            came_in += float(share.sum()) * density * int(from_else.sum())
-            ran += float(share @ b[:, self.exit_off[d]].sum(axis=1))
-            elsewhere += float(share @ b[:, self.exit_else[d]].sum(axis=1))
-        elsewhere -= came_in
+        moved = np.concatenate([b.ravel(), [0.0, density]])[self.src]
+        ran = float(b[self.exit_off].sum())
+        elsewhere += float(b[self.exit_else].sum()) - density * self.n_from_else
         for sources, targets, n_targets in self.joins:
             share = moved[:, sources].sum(axis=1) * JOIN
             moved[:, sources] *= 1.0 - JOIN
