@@ -201,7 +201,7 @@ def naive_road(sim, vmax, grid, decay, bias, turn, memory, lock, rival_window, s
     ``why``: a list that gets each frame's reason, as ``RoadMatcher.why``."""
     from vpr_edge.matchers import MATCHERS
 
-    defaults = MATCHERS["stream"].params
+    defaults = MATCHERS["stream-rules"].params
     unique = defaults["unique"] if unique is None else unique
     confirm = defaults["confirm"] if confirm is None else confirm
     stuck = defaults["stuck"] if stuck is None else stuck

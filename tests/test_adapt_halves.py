@@ -59,7 +59,7 @@ def test_adapting_on_one_half_helps_the_other_where_queries_share_a_nuisance(tmp
     for std in (False, True):
         plain, adapted = scores["plain", std, 0][0], scores["adapted", std, 0][0]
         assert adapted > plain + 0.3 and adapted > 0.8, (std, plain, adapted)
-        assert scores["adapted", std, 0][2] > scores["plain", std, 0][2] + 0.2   # the stream matcher's mapped right
+        assert scores["adapted", std, 0][2] > scores["plain", std, 0][2] + 0.1   # the stream matcher's mapped right
     assert load_map(tmp_path / "adapted.npz").meta["adapted"]["pairs"] == half   # learned on one half only
     for kind in ("plain", "adapted"):
         cut = load_map(tmp_path / f"test.{kind}.npz")

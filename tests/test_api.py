@@ -69,23 +69,25 @@ def test_bad_frames_and_options(api_map: Path) -> None:
 
 def test_a_labelled_drives_line_sets_the_target_precision_of_any_mode(api_map: Path, tmp_path: Path) -> None:
     """With a calibration, ``target_precision`` is the line of any mode: the score its drive's answers at least
-    as high were right that often at; without one, ``stream`` refuses it (its score is no probability)."""
+    as high were right that often at; without one, ``stream-rules`` refuses it (its score is no probability)."""
     from vpr_edge.calibration import fit, write
     from vpr_edge.errors import InputError
 
     rng = np.random.default_rng(4)
     s = rng.uniform(0, 2, 300)
     curve = fit(s, rng.random(300) < s / 2, 1, answered=s >= 1.0)
-    write(tmp_path / "cal.json", {"stream": curve}, "test")
+    write(tmp_path / "cal.json", {"stream-rules": curve}, "test")
+    rules = {"mode": "stream-rules", "calibration": tmp_path / "cal.json"}
     for target in (0.7, 0.9):
-        loc = Localizer(api_map, calibration=tmp_path / "cal.json", target_precision=target)
+        loc = Localizer(api_map, target_precision=target, **rules)
         assert loc.threshold == curve.line(target) and np.isfinite(loc.threshold)
-    assert Localizer(api_map, calibration=tmp_path / "cal.json").threshold == 1.0   # stream's own line
+    assert Localizer(api_map, **rules).threshold == 1.0   # stream-rules' own line
     with pytest.raises(InputError, match="cal.json, the labelled drive, does not show") as short:   # before the map
-        Localizer(api_map.with_name("missing.npz"), calibration=tmp_path / "cal.json", target_precision=0.999)
+        Localizer(api_map.with_name("missing.npz"), target_precision=0.999, **rules)
     assert short.value.inputs == ("target_precision",)
     with pytest.raises(InputError, match="not the probability"):
-        Localizer(api_map, target_precision=0.9)
+        Localizer(api_map, mode="stream-rules", target_precision=0.9)
+    assert Localizer(api_map, target_precision=0.9).threshold == 0.9   # stream's score is the probability
 
 
 def test_constructed_and_pushed_from_threads(api_map: Path, small_queries: Path) -> None:
@@ -121,7 +123,7 @@ def test_threads_limit_blas() -> None:
 def test_local_search_reads_only_the_window(api_map: Path, small_queries: Path) -> None:
     """With a local search (window 3 on the 111-place sample map) push computes only the similarities the
     matcher asks for, and answers as the matcher does on the full similarity matrix (evaluate's path)."""
-    loc = Localizer(api_map, params={"window": 3, "hold": 1.0, "probe": 16}, threads=1)
+    loc = Localizer(api_map, params={"window": 3, "hold": 0.5, "probe": 16}, threads=1)
     files = sorted(small_queries.iterdir())
     sizes: list[int] = []
     real = loc.map.scores
@@ -183,7 +185,7 @@ def test_evaluate_runs_the_stream_matcher_as_localize_does(api_map: Path, small_
     assert [m.ref_index for m in pushed if not m.lost] == [int(r) for r, lost in zip(report.refs, report.lost)
                                                            if not lost]
     assert [m.lost_why for m in pushed] == list(report.why)          # the same reason for each lost frame
-    assert all((m.lost_why is None) == (not m.lost) for m in pushed) and pushed[0].lost_why == "no-trajectory"
+    assert all((m.lost_why is None) == (not m.lost) for m in pushed) and pushed[0].lost_why == "off-map"
     blind = get_matcher("stream").run(loc.similarity(loc.encode([load_image(f) for f in sorted(stream.iterdir())])))
     assert not np.allclose(blind.scores, report.scores, atol=1e-5)       # the cue made a difference here
 
@@ -220,7 +222,7 @@ def test_a_map_rewritten_in_place_stops_cleanly(tmp_path: Path, api_map: Path, s
 
 def test_confidence_is_the_modes_own_probability(tmp_path: Path) -> None:
     """Without a calibration, a mode that models the probability that its answer is right gives it as the
-    line's ``confidence``: stream-filter's answers given are at least the target precision sure, their score
+    line's ``confidence``: stream's answers given are at least the target precision sure, their score
     that probability; a lost frame and a mode without a model give none."""
     from helpers import driven_encodings
     from vpr_edge.matchers.constants import TARGET_PRECISION
@@ -230,11 +232,11 @@ def test_confidence_is_the_modes_own_probability(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-m", "vpr_edge", "build-map", str(tmp_path / "refs.npy"), "-o",
                            str(tmp_path / "m.npz")], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
-    prob = Localizer(tmp_path / "m.npz", mode="stream-filter", threads=1)
+    prob = Localizer(tmp_path / "m.npz", mode="stream", threads=1)
     got = [prob.push_encoding(q) for q in queries]
     given = [m for m in got if not m.lost]
     assert len(given) > 30
     assert all(TARGET_PRECISION <= m.confidence <= 1.0 and m.score == m.confidence for m in given)
     assert all(m.confidence is None for m in got if m.lost)
-    plain = Localizer(tmp_path / "m.npz", threads=1)
+    plain = Localizer(tmp_path / "m.npz", mode="stream-rules", threads=1)
     assert all(plain.push_encoding(q).confidence is None for q in queries[:20])

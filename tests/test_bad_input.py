@@ -106,7 +106,7 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
     write_npz(w / "nan_codebook.npz", arrays | {"encoder_gmm_means": arrays["encoder_gmm_means"] * np.nan}, meta)
     np.savez_compressed(w / "compressed.npz", **arrays, __meta__=np.array(__import__("json").dumps(meta)))
     np.savez(w / "meta_list.npz", **arrays, __meta__=np.array("[1, 2, 3]"))
-    # calibrations of mode stream: one of schema 1 (no line), one whose line falls as its thresholds rise
+    # calibrations of the stream modes: one of schema 1 (no line), one whose line falls as its thresholds rise
     curve = {"scores": [0.0, 2.0], "confidence": [0.2, 0.9], "n": 24, "tolerance": 1}
     for name, schema, extra in (("cal_v1", 1, {}), ("cal_badline", 2, {"line": {"scores": [1.0, 2.0],
                                                                                "precision": [0.9, 0.8]}}),
@@ -114,7 +114,7 @@ def ws(tmp_path_factory: pytest.TempPathFactory, small_refs: Path, small_queries
                                 ("cal_newer", CALIBRATION_SCHEMA + 1, {})):
         (w / f"{name}.json").write_text(__import__("json").dumps(
             {"kind": "calibration", "schema": schema, "source": "test", "method": "logistic",
-             "modes": {"stream": curve | extra}}))
+             "modes": {"stream": curve | extra, "stream-rules": curve | extra}}))
     return w
 
 
@@ -130,6 +130,7 @@ class Case:
 
 BM = "build-map {w}/refs -o {w}/out.npz --components 4"
 LOC = "localize -m {w}/good.npz -s {w}/queries"
+RULES = LOC + " --mode stream-rules"   # the rule-based matcher, whose parameters the cases below refuse
 EV = "evaluate --similarity {w}/sim.npy --gt {w}/gt.csv --modes single"
 
 CASES = [
@@ -261,13 +262,13 @@ CASES = [
     Case("loc-model-env-missing", LOC, ("gone.onnx", "VPR_EDGE_MODEL"), env=(("VPR_EDGE_MODEL", "{w}/gone.onnx"),)),
     Case("loc-svm-without-svm", LOC + " --mode svm", ("good.npz", "build-map --svm")),
     Case("loc-format-contradicts-out", LOC + " --format jsonl -o {w}/old_results.csv", ("old_results.csv", "--format")),
-    Case("loc-param-unknown", LOC + " --param speed=3", ("--param", "speed=3", "lock")),
-    Case("loc-param-bad-value", LOC + " --param lock=high", ("--param", "lock=high", "not a number")),
-    Case("loc-param-bad-hub", LOC + " --param hub=high", ("--param", "hub=high", "not a number")),
-    Case("loc-param-confirm-refused", LOC + " --param confirm=0", ("--param", "confirm must be at least 1")),
-    Case("loc-param-stuck-refused", LOC + " --param stuck=-1", ("--param", "stuck must be at least 0")),
-    Case("loc-param-trust-refused", LOC + " --param trust=0", ("--param", "trust must be in (0, 1]")),
-    Case("loc-param-refused", LOC + " --param decay=1.5", ("--param", "decay must be in (0, 1)")),
+    Case("loc-param-unknown", RULES + " --param speed=3", ("--param", "speed=3", "lock")),
+    Case("loc-param-bad-value", RULES + " --param lock=high", ("--param", "lock=high", "not a number")),
+    Case("loc-param-bad-hub", RULES + " --param hub=high", ("--param", "hub=high", "not a number")),
+    Case("loc-param-confirm-refused", RULES + " --param confirm=0", ("--param", "confirm must be at least 1")),
+    Case("loc-param-stuck-refused", RULES + " --param stuck=-1", ("--param", "stuck must be at least 0")),
+    Case("loc-param-trust-refused", RULES + " --param trust=0", ("--param", "trust must be in (0, 1]")),
+    Case("loc-param-refused", RULES + " --param decay=1.5", ("--param", "decay must be in (0, 1)")),
     Case("loc-param-still-refused", LOC + " --param still=1.5", ("--param", "still must be in [0, 1]")),
     Case("loc-param-of-another-mode", LOC + " --param open_ends=true", ("--param", "open_ends=true", "stream takes")),
     Case("loc-param-other-mode", LOC + " --mode single --param lock=3", ("--param", "single takes")),
@@ -286,13 +287,13 @@ CASES = [
     Case("loc-out-link-loop", LOC + " -o {w}/loop", ("loop", "loop of symbolic links")),
     Case("loc-min-confidence-nan", LOC + " --min-confidence nan", ("--min-confidence nan", "finite")),
     Case("ev-min-confidence-inf", EV + " --min-confidence inf", ("--min-confidence inf", "finite")),
-    Case("loc-target-precision-one", LOC + " --mode stream-filter --target-precision 1", ("--target-precision 1",
+    Case("loc-target-precision-one", LOC + " --mode stream --target-precision 1", ("--target-precision 1",
                                                                                          "between 0 and 1")),
-    Case("loc-target-precision-on-stream", LOC + " --target-precision 0.99", ("--target-precision 0.99",
-                                                                             "not the probability", "--min-confidence")),
+    Case("loc-target-precision-on-stream", RULES + " --target-precision 0.99", ("--target-precision 0.99",
+                                                                           "not the probability", "--min-confidence")),
     Case("ev-target-precision-negative", EV + " --target-precision -0.5", ("--target-precision -0.5", "between 0 and 1")),
     Case("loc-target-precision-calibration-without-line",
-         LOC + " --calibration {w}/cal_v1.json --target-precision 0.99",
+         RULES + " --calibration {w}/cal_v1.json --target-precision 0.99",
          ("--target-precision 0.99", "not the probability", "--calibration")),
     Case("loc-target-precision-beyond-the-drive", LOC + " --calibration {w}/cal_short.json --target-precision 0.98",
          ("--target-precision 0.98", "cal_short.json", "does not show that precision")),

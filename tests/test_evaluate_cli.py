@@ -71,7 +71,7 @@ def test_evaluate_real_frames_json_plot(tmp_path: Path, eval_map: Path, small_qu
     one_view_frames = int(one_view(np.array([[i] for i in range(24)]), same_view).sum())
     assert {m["one_view_frames"] for m in doc["modes"].values()} == {one_view_frames}
     why = doc["modes"]["stream"]["lost_why"]   # the stream matcher says why each lost frame is lost
-    assert set(why) == {"weak-view", "no-trajectory", "ambiguous"} and "lost frames by why" in proc.stdout
+    assert why and set(why) <= {"off-map", "ambiguous", "settling"} and "lost frames by why" in proc.stdout
     lost = round(doc["modes"]["stream"]["lost_mapped"] * 24)   # every frame here is mapped
     assert sum(w["mapped"] for w in why.values()) == lost and all(w["unmapped"] == 0 for w in why.values())
     assert doc["modes"]["single"]["lost_why"] == {} and doc["modes"]["dtw"]["lost_why"] == {}
@@ -129,7 +129,7 @@ def test_evaluate_by_default_runs_the_default_mode_beside_the_baselines_in_a_sho
     assert list(doc["modes"]) == [DEFAULT_MATCHER, "single", "seqslam-online"]
     assert all(set(m) == JSON_KEYS for m in doc["modes"].values())          # --json keeps every figure
     lines = proc.stdout.splitlines()
-    shown = [c for c in SHORT if c != "ECE"]                     # no mode here has a probability
+    shown = list(SHORT)                                          # the default mode's score is a probability
     assert lines[1].split() == ["mode", *shown] and len(shown) + 1 <= 10
     assert [line.split()[0] for line in lines[2:5]] == list(doc["modes"])
     explained = [line.split()[0] for line in lines[6:6 + len(shown)]]
@@ -151,7 +151,7 @@ def test_evaluate_by_default_runs_the_default_mode_beside_the_baselines_in_a_sho
         assert table in every.stdout
     assert "--modes all" not in every.stdout and "--details:" not in every.stdout
     # a short table without a probability mode leaves ECE out
-    plain = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single,stream")
+    plain = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single,stream-rules")
     assert plain.returncode == 0 and "ECE" not in plain.stdout and plain.stderr == "", plain.stderr
     assert_one_line_error(run("evaluate", "--similarity", s, "--gt", gt, "--modes", "all,nope"), "--modes",
                           "unknown matcher 'nope'", "or all")
@@ -257,7 +257,7 @@ def test_evaluate_window_reaches_the_stream_matcher(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_evaluate_param_sets_matcher_parameters(tmp_path: Path) -> None:
-    """--param KEY=VALUE reaches every chosen mode that has KEY (here the stream's bias and lock, and dtw-open's
+    """--param KEY=VALUE reaches every chosen mode that has KEY (here stream-rules' bias and lock, and dtw-open's
     hub removal), runs as the matcher called directly with it, and is recorded in the settings."""
     from vpr_edge.evaluation.scoring import evaluate_mode
     from vpr_edge.evaluation.truth import pad
@@ -266,19 +266,20 @@ def test_evaluate_param_sets_matcher_parameters(tmp_path: Path) -> None:
     s, gt = planted_similarity(tmp_path)
     sim, truth = np.load(s), pad([[p] for p in np.arange(40) + 10])
     js = tmp_path / "p.json"
-    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single,stream,dtw-open", "--json", js,
+    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "single,stream-rules,dtw-open", "--json", js,
                "--param", "bias=1.5", "--param", "lock=4", "--param", "hubs=false")
     assert proc.returncode == 0, proc.stderr
     got = json.loads(js.read_text())["modes"]
-    for name, over in (("stream", {"bias": 1.5, "lock": 4.0}), ("dtw-open", {"hubs": False})):
+    for name, over in (("stream-rules", {"bias": 1.5, "lock": 4.0}), ("dtw-open", {"hubs": False})):
         want = evaluate_mode(get_matcher(name).with_params(**over), sim, truth)
         assert got[name]["recall_at_1"] == pytest.approx(want.recall[1]) and got[name]["auc"] == pytest.approx(want.auc)
         assert got[name]["settings"] == json.loads(json.dumps(want.settings))
-    assert got["stream"]["settings"]["bias"] == 1.5 and got["single"]["settings"] == {"min_confidence": None}
+    assert got["stream-rules"]["settings"]["bias"] == 1.5 and got["single"]["settings"] == {"min_confidence": None}
     for args, needle in ((["--param", "nope=1"], "nope"), (["--param", "lock=x"], "not a number"),
                          (["--param", "decay=3"], "decay"), (["--modes", "single", "--param", "lock=3"], "lock"),
                          (["--param", "unique=1"], "unique must be in [0, 1)")):
-        assert_one_line_error(run("evaluate", "--similarity", s, "--gt", gt, *args), needle)
+        modes = [] if "--modes" in args else ["--modes", "single,stream-rules,dtw-open"]
+        assert_one_line_error(run("evaluate", "--similarity", s, "--gt", gt, *modes, *args), needle)
 
 
 def test_evaluate_scores_a_calibration_from_other_frames(tmp_path: Path) -> None:
@@ -324,57 +325,57 @@ def test_evaluate_draws_a_calibrations_line_at_the_target_precision(tmp_path: Pa
 
     s, gt = planted_similarity(tmp_path)
     cal = tmp_path / "cal.json"
-    saved = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream", "--save-calibration", cal)
+    saved = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream-rules", "--save-calibration", cal)
     assert saved.returncode == 0, saved.stderr
     # it says each mode's line at the target: 40 frames do not show 0.98 (Wilson's bound: 40 of 40 show 0.937)
-    assert "each mode's line" in saved.stdout and "stream: none: these frames do not show 0.98" in saved.stdout
-    line = load(cal, "stream").line(0.9)
-    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream", "--calibration", cal,
+    assert "each mode's line" in saved.stdout and "stream-rules: none: these frames do not show 0.98" in saved.stdout
+    line = load(cal, "stream-rules").line(0.9)
+    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream-rules", "--calibration", cal,
                "--target-precision", "0.9", "--answers", tmp_path / "a.csv", "--json", tmp_path / "r.json")
     assert proc.returncode == 0, proc.stderr
-    stream = json.loads((tmp_path / "r.json").read_text())["modes"]["stream"]
+    stream = json.loads((tmp_path / "r.json").read_text())["modes"]["stream-rules"]
     assert stream["settings"]["min_confidence"] == pytest.approx(line)
     rows = list(csv.DictReader(open(tmp_path / "a.csv")))
     assert [r["lost"] == "1" for r in rows] == [float(r["score"]) < line - 1e-5 for r in rows]
-    assert run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream", "--calibration", cal, "--json",
+    assert run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream-rules", "--calibration", cal, "--json",
                tmp_path / "own.json").returncode == 0
-    own = json.loads((tmp_path / "own.json").read_text())["modes"]["stream"]["settings"]["min_confidence"]
+    own = json.loads((tmp_path / "own.json").read_text())["modes"]["stream-rules"]["settings"]["min_confidence"]
     assert own == 1.0
 
 
 def test_evaluate_target_precision_line_gap_and_answers(tmp_path: Path) -> None:
-    """``--target-precision`` is stream-filter's line; every mode gets the best line and the line gap; ``--answers``
+    """``--target-precision`` is stream's line; every mode gets the best line and the line gap; ``--answers``
     writes each frame's answer per mode; a target outside (0, 1) is one line, exit 2, before any output."""
     import csv
 
     s, gt = planted_similarity(tmp_path)
-    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream,stream-filter", "--target-precision",
+    proc = run("evaluate", "--similarity", s, "--gt", gt, "--modes", "stream-rules,stream", "--target-precision",
                "0.9", "--answers", tmp_path / "a.csv", "--json", tmp_path / "r.json", "--details")
     assert proc.returncode == 0, proc.stderr
     assert "line gap" in proc.stdout
     doc = json.loads((tmp_path / "r.json").read_text())
-    prob = doc["modes"]["stream-filter"]
+    prob = doc["modes"]["stream"]
     assert prob["settings"]["min_confidence"] == 0.9 and prob["target_precision"] == 0.9
     assert 0.0 <= prob["best_line_recall"] <= 1.0 and prob["line_gap"] is not None
     rows = list(csv.DictReader(open(tmp_path / "a.csv")))
-    assert len(rows) == 80 and {r["mode"] for r in rows} == {"stream", "stream-filter"}
-    assert all(r["probability"] == "" for r in rows if r["mode"] == "stream")
-    assert all(0.0 <= float(r["probability"]) <= 1.0 for r in rows if r["mode"] == "stream-filter")
-    lost = [r for r in rows if r["mode"] == "stream-filter" and r["lost"] == "1"]
+    assert len(rows) == 80 and {r["mode"] for r in rows} == {"stream-rules", "stream"}
+    assert all(r["probability"] == "" for r in rows if r["mode"] == "stream-rules")
+    assert all(0.0 <= float(r["probability"]) <= 1.0 for r in rows if r["mode"] == "stream")
+    lost = [r for r in rows if r["mode"] == "stream" and r["lost"] == "1"]
     assert all(float(r["probability"]) < 0.9 and r["why"] for r in lost)
-    given = [r for r in rows if r["mode"] == "stream-filter" and r["lost"] == "0"]
+    given = [r for r in rows if r["mode"] == "stream" and r["lost"] == "0"]
     # an answer given is at least the line sure, its score that probability
     assert given and all(float(r["score"]) == float(r["probability"]) >= 0.9 for r in given)
     # without --calibration, the probability's own reliability over every frame, against a plain loop
-    p = np.array([float(r["probability"]) for r in rows if r["mode"] == "stream-filter"])
-    right = np.array([r["right"] == "1" for r in rows if r["mode"] == "stream-filter"])
+    p = np.array([float(r["probability"]) for r in rows if r["mode"] == "stream"])
+    right = np.array([r["right"] == "1" for r in rows if r["mode"] == "stream"])
     ece = 0.0
     for b in range(10):
         members = [(q, ok) for q, ok in zip(p, right) if b / 10 <= q < (b + 1) / 10 or (b == 9 and q == 1.0)]
         if members:
             ece += len(members) / len(p) * abs(np.mean([ok for _, ok in members]) - np.mean([q for q, _ in members]))
     assert prob["ece"] == pytest.approx(ece, abs=1e-6) and sum(b["n"] for b in prob["reliability"]) == 80 // 2
-    assert doc["modes"]["stream"]["ece"] is None
+    assert doc["modes"]["stream-rules"]["ece"] is None
     for bad in ("1", "0", "-0.5", "nan"):
         proc = run("evaluate", "--similarity", s, "--gt", gt, "--target-precision", bad, "--json", tmp_path / "x.json")
         assert proc.returncode == 2
@@ -402,9 +403,9 @@ def test_evaluate_agrees_with_a_count_from_localizes_own_output(tmp_path: Path) 
         rows = list(csv.DictReader(out.read_text().splitlines()))
         given = [r for r in rows if r["lost"] == "0"]
         right = [r for r in given if int(r["ref_index"]) in truth[int(r["frame_index"])]]
-        assert len(rows) == 111 and len(right) > 80
+        assert len(rows) == 111 and len(right) > 55 and len(right) == len(given)   # lost where unsure, else right
         stream = json.loads(js.read_text())["modes"]["stream"]
         assert stream["mapped_right"] == pytest.approx(len(right) / len(rows))
         assert stream["answered_right"] == pytest.approx(len(right) / len(given))
         counted.append(len(right))
-    assert counted[1] > counted[0]   # the sample: 95 -> 101 mapped frames answered right
+    assert counted[1] > counted[0]   # the sample: 64 -> 78 mapped frames answered right

@@ -9,12 +9,12 @@ import pytest
 from vpr_edge.matchers.base import run_online
 from vpr_edge.matchers.bayes import BayesFilter, FilterConfig
 from vpr_edge.matchers.filter_motion import Transitions, Window, regather
-from vpr_edge.matchers.params import STREAM_FILTER
+from vpr_edge.matchers.params import STREAM
 from vpr_edge.matchers.route import RouteGraph
 
 
 def config(**overrides) -> FilterConfig:
-    return FilterConfig.of({k: p.default for k, p in STREAM_FILTER.items()} | overrides)
+    return FilterConfig.of({k: p.default for k, p in STREAM.items()} | overrides)
 
 
 def graph() -> RouteGraph:

@@ -14,6 +14,7 @@ from vpr_edge.index.encodings import Encodings
 from vpr_edge.index.ivf import IvfIndex, fit_ivf
 from vpr_edge.map import MAP_SCHEMA, load_map
 from vpr_edge.matchers import MATCHERS, step
+from vpr_edge.matchers.motion import stillness
 from vpr_edge.matchers.road import RoadMatcher
 from vpr_edge.matchers.stream_config import StreamConfig
 
@@ -61,7 +62,7 @@ class OnePassEach(RoadMatcher):
 def test_compact_pass_equals_one_pass_per_window() -> None:
     rng = np.random.default_rng(2)
     sim = rng.normal(size=(60, 500))
-    params = MATCHERS["stream"].params | {"window": 0}
+    params = MATCHERS["stream-rules"].params | {"window": 0}
     a, b = RoadMatcher(500, StreamConfig.of(params)), OnePassEach(500, StreamConfig.of(params))
     for row in sim:
         cands = rng.choice(500, 12, replace=False)
@@ -76,18 +77,20 @@ def test_searching_around_candidates_answers_as_the_dense_matcher() -> None:
     stored = Encodings.pack(refs, "int8")
     index = fit_ivf(stored, lists=70)
     answers = {}
+    cues = stillness(queries)   # as Localizer: the motion cue of the encodings, the map's stops and reach
     for name in ("dense", "index"):
-        m = MATCHERS["stream"].on_route([refs]).stream(len(refs))   # as Localizer: the map's stops and reach
+        m = MATCHERS["stream"].on_route([refs]).stream(len(refs))
         out = []
-        for q in queries:
+        for q, cue in zip(queries, cues):
             cands = None if name == "dense" else (lambda q=q: index.candidates(stored, q))
-            out.append(step(m, lambda idx, q=q: stored.similarity(q[None], idx)[0], None, cands))
+            still = float(cue) if np.isfinite(cue) else None
+            out.append(step(m, lambda idx, q=q: stored.similarity(q[None], idx)[0], still, cands))
         answers[name] = np.array(out)
-    mapped = truth >= 0
+    mapped, line = truth >= 0, MATCHERS["stream"].min_confidence
     for name, res in answers.items():
-        right = (np.abs(res[:, 0] - truth) <= 2) & (res[:, 1] >= 1.0)
+        right = (np.abs(res[:, 0] - truth) <= 2) & (res[:, 1] >= line)
         assert right[mapped][20:].mean() > 0.9, name
-        assert (res[~mapped, 1] < 1.0).mean() > 0.7, name
+        assert (res[~mapped, 1] < line).mean() > 0.7, name
     same = np.abs(answers["dense"][:, 0] - answers["index"][:, 0]) <= 2
     assert same[mapped].mean() > 0.95
 
@@ -123,8 +126,8 @@ def test_build_map_indexes_and_localize_uses_it(tmp_path: Path) -> None:
     assert code == 2 and err.count("\n") == 1 and "--index hnsw" in err and not (tmp_path / "x.npz").exists()
 
 
-@pytest.mark.parametrize("mode, search", [("stream", "index"), ("stream", "coarse"), ("stream-filter", "index"),
-                                          ("stream-filter", "coarse")])
+@pytest.mark.parametrize("mode, search", [("stream", "index"), ("stream", "coarse"), ("stream", "index"),
+                                          ("stream", "coarse")])
 def test_evaluate_answers_as_localize(tmp_path: Path, mode: str, search: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """``evaluate`` runs the per-frame search ``localize`` runs (``map.search``): on a map with an index its
     whole-route frames go through the index's candidates, on a long map (here: the length made short) through

@@ -66,7 +66,7 @@ def test_a_densely_sampled_map_keeps_its_right_answers_unique() -> None:
     q = refs[truth] + 0.12 * rng.normal(size=(300, d))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     sim = q @ refs.T
-    m = get_matcher("stream")
+    m = get_matcher("stream-rules")
     on_map = m.on_route([refs.astype(np.float32)])
     assert on_map.reach > m.params["rival_window"]
     kept = {}

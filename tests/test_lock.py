@@ -141,7 +141,7 @@ def test_the_recursion_hands_each_frame_to_its_verdict(strong: bool) -> None:
     n = 1000
     rng = np.random.default_rng(2)
     sim = planted(rng, n, places_at_speeds([(1.0, 60)], start=100.0), noise=0.2)
-    params = MATCHERS["stream"].params | {"window": 50}
+    params = MATCHERS["stream-rules"].params | {"window": 50}
     m = RoadMatcher(n, StreamConfig.of(params))
     m.verdict = Recorder(strong)
     local = 0
@@ -291,7 +291,7 @@ def test_recent_views_correct_a_place_seen_by_every_frame_in_full() -> None:
 def run(sim: np.ndarray, places: np.ndarray):
     """The ``stream`` matcher's report on planted rows of a vehicle at ``places`` (-1: off the map)."""
     truth = np.where(places[:, None] >= 0, places[:, None], -1)
-    return evaluate_mode(get_matcher("stream"), sim, truth, tolerance=1)
+    return evaluate_mode(get_matcher("stream-rules"), sim, truth, tolerance=1)
 
 
 def test_the_same_scores_for_a_narrow_and_a_wide_band_of_cosines() -> None:
@@ -352,7 +352,7 @@ def test_the_hub_line_and_the_stuck_rule_lose_more_of_a_look_alike(rule: dict, w
         places = -np.ones(200, int)
         sim = planted(rng, 300, places, noise=1.0, signal=0.0)
         sim[:, 120:120 + width] += lift
-        m = get_matcher("stream")
+        m = get_matcher("stream-rules")
         on.append(np.mean(m.with_params(**rule).run(sim, still=np.zeros(200)).scores < m.min_confidence))
         off.append(np.mean(m.with_params(hub=-99.0, stuck=0).run(sim, still=np.zeros(200)).scores
                            < m.min_confidence))

@@ -32,7 +32,7 @@ def test_unknown_matcher() -> None:
 
 
 def test_parse_params_reads_each_default_type_and_refuses_bad_items() -> None:
-    stream, dtw = get_matcher("stream"), get_matcher("dtw-open")
+    stream, dtw = get_matcher("stream-rules"), get_matcher("dtw-open")
     assert stream.parse_params(["bias=1.6", "lock = 7", "window=0", "stop-gain=0.5"]) == \
         {"bias": 1.6, "lock": 7.0, "window": 0, "stop_gain": 0.5}
     assert dtw.parse_params(["hubs=false", "open_ends=1", "variant=similarity"]) == \

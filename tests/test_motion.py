@@ -131,17 +131,17 @@ def test_road_matcher_motion_cue_against_plain_loops() -> None:
     cues[[0, 15, 16]] = np.nan
     params = {"vmax": 1.5, "grid": 2, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 6.0, "lock": 3.0,
               "rival_window": 2, "stop_gain": 0.3, "stop_decay": 0.95, "still": 0.5}
-    got = MATCHERS["stream"].with_params(**params).run(sim, k=1, still=cues)
+    got = MATCHERS["stream-rules"].with_params(**params).run(sim, k=1, still=cues)
     want = naive_road(sim, **params, cues=cues)
     assert list(got.refs) == [r for r, _ in want]
     np.testing.assert_allclose(got.scores, [c for _, c in want], atol=1e-5)
     blind = naive_road(sim, **params)
     assert not np.allclose([c for _, c in want], [c for _, c in blind], atol=1e-3)
-    off = MATCHERS["stream"].with_params(**params | {"still": 0.0}).run(sim, k=1, still=cues)   # 0: cue unused
+    off = MATCHERS["stream-rules"].with_params(**params | {"still": 0.0}).run(sim, k=1, still=cues)   # 0: cue unused
     np.testing.assert_allclose(off.scores, [c for _, c in blind], atol=1e-5)
     stood = np.zeros(20, bool)
     stood[11:15] = True                                   # the map's drive stood where the stop happens
-    on_route = replace(MATCHERS["stream"].with_params(**params), route=stood).run(sim, k=1, still=cues)
+    on_route = replace(MATCHERS["stream-rules"].with_params(**params), route=stood).run(sim, k=1, still=cues)
     want = naive_road(sim, **params, cues=cues, route=stood)
     assert list(on_route.refs) == [r for r, _ in want]
     np.testing.assert_allclose(on_route.scores, [c for _, c in want], atol=1e-5)
@@ -152,7 +152,7 @@ def test_road_matcher_holds_a_real_cameras_stop() -> None:
     0.8 alike the view (sensor noise on a small image), which no fixed cosine near 1 reads as a stop, while
     moving frames are unrelated views. The relative cue reads the stop, and every stopped frame is answered
     within 2 places of 100 and locked, over eight draws."""
-    matcher = get_matcher("stream")
+    matcher = get_matcher("stream-rules")
     for seed in range(8):
         rng = np.random.default_rng(seed)
         places = np.concatenate([places_at_speeds([(1.0, 60)], start=40), np.full(40, 100), places_at_speeds([(1.0, 40)], start=101)])
@@ -173,7 +173,7 @@ def test_road_matcher_moves_through_the_maps_own_stop() -> None:
     references did (every answer inside the station and moving on through it, the
     places after it followed), where reading the frames as a stop against an unknown route keeps the answer
     at the station's first references."""
-    matcher = get_matcher("stream")
+    matcher = get_matcher("stream-rules")
     for seed in range(4):
         rng = np.random.default_rng(seed)
         views = unit_rows(rng.normal(size=(300, 64)))
@@ -199,7 +199,7 @@ def test_road_matcher_follows_a_creep_with_the_anchored_cue() -> None:
     fraction of the moving steps before it: its first frames stand (the cue is relative to the moving steps),
     but against the last frame that moved the steps add up, motion shows every few frames, and the creep is
     followed."""
-    matcher = get_matcher("stream")
+    matcher = get_matcher("stream-rules")
     places = np.concatenate([places_at_speeds([(1.0, 40)], start=50), places_at_speeds([(0.25, 120)], start=90)])
     theta = np.r_[np.arange(40) * 2.0, 80 + 0.1 * np.arange(120)]       # moving: unrelated views; creeping: 0.1 rad a frame
     enc = np.c_[np.cos(theta), np.sin(theta), np.zeros((160, 3))]
@@ -219,7 +219,7 @@ def test_road_matcher_long_stop_held_with_the_motion_cue() -> None:
     camera is seen to stand: its frames leave the state as it was) every stopped frame stays locked within 2
     places of the stop over eight noise draws; without it (the stop_gain rule alone) the lock fades in most
     draws."""
-    matcher = get_matcher("stream")
+    matcher = get_matcher("stream-rules")
     held, held_blind = 0, 0
     for seed in range(8):
         rng = np.random.default_rng(seed)
@@ -238,7 +238,7 @@ def test_road_matcher_stop_not_overrun_with_the_motion_cue() -> None:
     resembles the next three): each stopped frame's row also has 0.8 of a true match at 101-103. The moving
     trajectory could feed on them and run past the stop; with the motion cue a standing camera's view feeds no
     moving trajectory, so every stopped frame is answered within one place of the stop. Eight noise draws."""
-    matcher = get_matcher("stream")
+    matcher = get_matcher("stream-rules")
     for seed in range(8):
         rng = np.random.default_rng(seed)
         places = np.concatenate([places_at_speeds([(1.0, 60)], start=40), np.full(25, 100), places_at_speeds([(1.0, 40)], start=101)])
@@ -256,7 +256,7 @@ def test_road_matcher_off_map_stop_with_the_motion_cue_stays_lost() -> None:
     true match would: with the cue saying moving, then stopped, the repeated view builds no lock (a stop holds
     a lock, it does not make one): lost through at least 90% of the stop over eight draws, locked on 300 in
     at most 10% (counting each repeat in full instead locks on it in 85%)."""
-    matcher = get_matcher("stream")
+    matcher = get_matcher("stream-rules")
     places = np.concatenate([places_at_speeds([(1.0, 40)], start=50), np.full(10, -1), np.full(30, 300)])
     cues = np.full(len(places), 0.0)
     cues[51:] = 1.0
@@ -283,7 +283,7 @@ def test_a_front_end_that_sees_every_image_alike_is_followed() -> None:
     places = places_at_speeds([(1.0, 30), (0.0, 8), (1.5, 30), (0.0, 6), (1.0, 20)], start=5.0)
     frames = unit_rows(common + eps * (detail[places] + 0.4 * unit_rows(rng.normal(size=(len(places), dim)))))
     assert (refs @ refs.T).min() > 0.998 and (frames @ refs.T).min() > 0.998
-    matcher = get_matcher("stream").on_route([refs])
+    matcher = get_matcher("stream-rules").on_route([refs])
     assert not matcher.route.any()
     cue = matcher.cue(frames)
     stop = np.r_[False, places[1:] == places[:-1]]
@@ -307,7 +307,7 @@ def test_road_matcher_stuck_rule_against_plain_loops() -> None:
     params = {"vmax": 1.5, "grid": 2, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 50.0, "lock": 3.0,
               "rival_window": 2, "stop_gain": 0.3, "stop_decay": 0.95, "still": 0.5}
     for stuck in (0, 3):
-        got = MATCHERS["stream"].with_params(**params | {"stuck": stuck, "hub": -99.0}).run(sim, k=1, still=cues)
+        got = MATCHERS["stream-rules"].with_params(**params | {"stuck": stuck, "hub": -99.0}).run(sim, k=1, still=cues)
         want = naive_road(sim, **params, cues=cues, stuck=stuck)
         assert list(got.refs) == [r for r, _ in want]
         np.testing.assert_allclose(got.scores, [c for _, c in want], atol=1e-5)
@@ -329,7 +329,7 @@ def test_road_matcher_trust_against_plain_loops() -> None:
               "rival_window": 2, "stop_gain": 0.3, "stop_decay": 0.95, "still": 0.0, "evidence_decay": 0.0}
     scores = {}
     for trust in (1.0, 0.3):
-        got = MATCHERS["stream"].with_params(**params | {"trust": trust, "hub": -99.0}).run(sim, k=1)
+        got = MATCHERS["stream-rules"].with_params(**params | {"trust": trust, "hub": -99.0}).run(sim, k=1)
         want = naive_road(sim, **params, trust=trust)   # the loops have no hub line
         assert list(got.refs) == [r for r, _ in want]
         np.testing.assert_allclose(got.scores, [c for _, c in want], atol=1e-5)

@@ -79,17 +79,17 @@ def test_errors_outside_the_map_name_the_library_inputs_and_the_cli_flags() -> N
     assert wrong.value.inputs == ("target_precision",)
     assert str(wrong.value).startswith("target_precision 1.5: ")
     assert wrong.value.line(flag).startswith("--target-precision 1.5: the target precision must lie between 0 and 1")
-    with pytest.raises(InputError) as wrong:   # a live line: a target precision sets no line of `stream`
-        get_matcher("stream").lost_line(None, 0.99, live=True)
+    with pytest.raises(InputError) as wrong:   # a live line: a target precision sets no line of `stream-rules`
+        get_matcher("stream-rules").lost_line(None, 0.99, live=True)
     assert wrong.value.inputs == ("target_precision", "min_confidence", "calibration")
-    assert wrong.value.line(flag).startswith("--target-precision 0.99: mode stream's score is not the probability")
-    assert get_matcher("stream").lost_line(None, 0.99) == get_matcher("stream").min_confidence   # evaluate's
-    assert get_matcher("stream-filter").lost_line(None, 0.99, live=True) == 0.99
+    assert wrong.value.line(flag).startswith("--target-precision 0.99: mode stream-rules's score is not the probability")
+    assert get_matcher("stream-rules").lost_line(None, 0.99) == get_matcher("stream-rules").min_confidence   # evaluate's
+    assert get_matcher("stream").lost_line(None, 0.99, live=True) == 0.99
     # a labelled drive's line sets any mode's: the score its answers reached the precision at
-    assert get_matcher("stream").lost_line(None, 0.99, live=True, line=lambda p: 1.2 + p) == 2.19
-    assert get_matcher("stream-filter").lost_line(None, 0.9, live=True, line=lambda p: 0.5) == 0.5
-    assert get_matcher("stream").lost_line(1.3, 0.99, live=True, line=lambda p: 0.5) == 1.3   # given wins
-    assert get_matcher("stream").lost_line(None, 0.99, line=lambda p: float("inf")) == float("inf")   # all lost
+    assert get_matcher("stream-rules").lost_line(None, 0.99, live=True, line=lambda p: 1.2 + p) == 2.19
+    assert get_matcher("stream").lost_line(None, 0.9, live=True, line=lambda p: 0.5) == 0.5
+    assert get_matcher("stream-rules").lost_line(1.3, 0.99, live=True, line=lambda p: 0.5) == 1.3   # given wins
+    assert get_matcher("stream-rules").lost_line(None, 0.99, line=lambda p: float("inf")) == float("inf")   # all lost
     with pytest.raises(ValueError) as refused:   # a ValueError still, as callers of parse_params catch
         get_matcher("seqslam").parse_params(["ds=x"])
     assert str(refused.value) == "params 'ds=x': 'x' is not an int"

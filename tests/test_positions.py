@@ -94,17 +94,20 @@ def test_map_positions_answers_and_stamps(positioned: Path, small_queries: Path,
     assert info["route"]["length_m"] == 46.0 and info["route"]["extent"]["y"] == [0.0, 46.0]
     names = sorted(p.name for p in small_queries.glob("*.jpg"))
     (tmp_path / "t.csv").write_text("frame,stamp\n" + "".join(f"{n},{100 + i / 4}\n" for i, n in enumerate(names)))
-    proc = run("localize", "-m", positioned / "map.npz", "-s", small_queries, "--timestamps", tmp_path / "t.csv",
-               "--format", "jsonl")
-    assert proc.returncode == 0, proc.stderr
-    lines = [json.loads(x) for x in proc.stdout.splitlines()]
-    assert [m["stamp"] for m in lines] == [100 + i / 4 for i in range(24)]
-    for m in lines:
-        if m["lost"]:
-            assert m["ref_index"] is None and m["x"] is None and m["along_m"] is None
-        else:   # on the route, within one reference (2 m) of the answered reference, heading as mapped
-            assert m["x"] == 5.0 and abs(m["y"] - 2.0 * m["ref_index"]) <= 1.0 and m["heading"] == 0.0
-            assert m["along_m"] == m["y"] and m["lat"] is None
+    for mode in ("stream", "stream-rules"):
+        proc = run("localize", "-m", positioned / "map.npz", "-s", small_queries, "--timestamps", tmp_path / "t.csv",
+                   "--format", "jsonl", "--mode", mode)
+        assert proc.returncode == 0, proc.stderr
+        lines = [json.loads(x) for x in proc.stdout.splitlines()]
+        assert [m["stamp"] for m in lines] == [100 + i / 4 for i in range(24)]
+        for m in lines:
+            if m["lost"]:
+                assert m["ref_index"] is None and m["x"] is None and m["along_m"] is None
+            else:   # on the route, within one reference (2 m) of the answered reference, heading as mapped
+                assert m["x"] == 5.0 and abs(m["y"] - 2.0 * m["ref_index"]) <= 1.0 and m["heading"] == 0.0
+                assert m["along_m"] == m["y"] and m["lat"] is None
+        assert any(not m["lost"] for m in lines)
+    # stream-rules follows half-reference steps: some answers lie between references
     assert any(m["y"] % 2.0 == 1.0 for m in lines if not m["lost"]), "no answer between references"
 
 
@@ -380,8 +383,11 @@ def test_calibrated_confidence_end_to_end(positioned: Path, small_queries: Path,
     ordered = sorted(conf)
     assert all(b[1] >= a[1] - 1e-9 for a, b in zip(ordered, ordered[1:]))   # never less confident at a higher score
     plain = [json.loads(x) for x in run("localize", "-m", positioned / "map.npz", "-s", small_queries,
-                                        "--format", "jsonl").stdout.splitlines()]
-    assert all(m["confidence"] is None for m in plain)
+                                        "--format", "jsonl", "--mode", "stream-rules").stdout.splitlines()]
+    assert all(m["confidence"] is None for m in plain)   # no calibration, no probability of its own
+    own = [json.loads(x) for x in run("localize", "-m", positioned / "map.npz", "-s", small_queries,
+                                      "--format", "jsonl").stdout.splitlines()]
+    assert all(m["confidence"] == m["score"] for m in own if not m["lost"])   # stream's own probability
     (tmp_path / "bad.json").write_text('{"kind": "calibration", "schema": 1, "modes": {"stream": {"scores": [2, 1], '
                                        '"confidence": [0.1, 0.2], "n": 2, "tolerance": 1}}}')
     for f, problem in (("cal.json", "no calibration for mode dtw"), ("bad.json", "non-decreasing"),

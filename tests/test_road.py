@@ -19,7 +19,7 @@ def test_road_matcher_follows_any_speed(speed: float) -> None:
     rng = np.random.default_rng(int(speed * 10))
     places = places_at_speeds([(1.0, 15), (speed, 60)], start=100)
     sim = planted(rng, 600, places)
-    res = get_matcher("stream").run(sim)
+    res = get_matcher("stream-rules").run(sim)
     settled = slice(25, None)
     assert np.mean(np.abs(res.refs[settled] - places[settled]) <= 1) > 0.95
 
@@ -28,7 +28,7 @@ def test_road_matcher_stop_off_the_map_on_a_look_alike() -> None:
     """A vehicle that drives off the map and stops where the view resembles place 300 as a true match would
     (the frame repeated with fresh noise, as a camera repeats a view) stays lost; counting every repeat in full
     (stop_gain 1, the moving decay) locks on the look-alike. Eight noise draws, the shares over all of them."""
-    default = get_matcher("stream")
+    default = get_matcher("stream-rules")
     counted = replace(default, params={**default.params, "stop_gain": 1.0, "stop_decay": default.params["decay"]})
     places = np.concatenate([places_at_speeds([(1.0, 40)], start=50), np.full(10, -1), np.full(12, 300)])
     stop = slice(54, 62)
@@ -49,7 +49,7 @@ def test_road_matcher_lag_trap_and_stop_on_a_mapped_place() -> None:
     strength; docs/results.md, "Right or silent".) A stop of 30 frames on a mapped place (its view repeated with fresh noise,
     no motion cue): the vehicle stays localised through it (every answer within one place; a noise draw may
     leave one frame's evidence short, that frame lost). Eight noise draws each."""
-    matcher = get_matcher("stream")
+    matcher = get_matcher("stream-rules")
     for seed in range(8):
         rng = np.random.default_rng(seed)
         places = places_at_speeds([(1.0, 160)], start=20)
@@ -70,7 +70,7 @@ def test_road_matcher_detour_lost_and_restart() -> None:
     places = np.concatenate([places_at_speeds([(1.0, 40), (2.0, 30)], start=50), np.full(40, -1),
                              places_at_speeds([(1.5, 40)], start=400)])
     sim = planted(rng, 600, places)
-    matcher = get_matcher("stream")
+    matcher = get_matcher("stream-rules")
     res = matcher.run(sim)
     first, second, off = slice(10, 70), slice(125, 150), slice(80, 110)
     assert np.mean(np.abs(res.refs[first] - places[first]) <= 1) > 0.95
@@ -93,7 +93,7 @@ def test_road_matcher_detour_through_look_alikes() -> None:
     has faded (its memory: 8-12 frames, docs/results.md, "Right or silent") the frames are reported lost, and
     the vehicle is found again within a few frames of re-entering the map (a new place waits ``confirm`` 3
     frames: 8 at most). Eight noise draws each."""
-    matcher = get_matcher("stream")
+    matcher = get_matcher("stream-rules")
     for strength, run in ((1.0, 1), (0.8, 3)):
         lost, found = [], []
         for seed in range(8):
@@ -122,7 +122,7 @@ def test_evaluate_reports_lock_on_and_exit_delays() -> None:
                              places_at_speeds([(1.5, 40)], start=400)])
     truth = places[:, None]
     sim = planted(rng, 600, places)
-    stream = evaluate_mode(get_matcher("stream"), sim, truth)
+    stream = evaluate_mode(get_matcher("stream-rules"), sim, truth)
     assert len(stream.lock_frames) == 2 and max(stream.lock_frames) <= 8
     assert len(stream.exit_frames) == 1 and stream.exit_frames[0] <= 12
     single = evaluate_mode(get_matcher("single"), sim, truth)
@@ -135,7 +135,7 @@ def test_road_matcher_reports_leaving_the_map_within_four_frames() -> None:
     average; without the view lines and the uniqueness floor (the trajectory score alone) the lock's memory
     holds the answer for 5
     frames or more (8 on average) and loses about 60%."""
-    m = get_matcher("stream")
+    m = get_matcher("stream-rules")
     off = m.with_params(evidence=-99.0, hub=-99.0, unique=0.0)   # the trajectory score alone
     exits, shares, exits_off = [], [], []
     for seed in range(8):
@@ -158,7 +158,7 @@ def test_road_matcher_lost_line_is_the_rows_own() -> None:
     rng = np.random.default_rng(4)
     places = np.concatenate([places_at_speeds([(1.0, 60)], start=10), np.full(20, -1), places_at_speeds([(1.0, 40)], start=120)])
     sim = planted(rng, 300, places)
-    m = get_matcher("stream")
+    m = get_matcher("stream-rules")
     base = m.run(sim)
     for scaled in (0.9 + 0.05 * sim, 3.0 * sim - 1.0):
         other = m.run(scaled)
@@ -179,7 +179,7 @@ def test_an_answer_with_a_rival_as_strong_along_its_drive_is_lost() -> None:
     truth = np.arange(60) % 40
     half[np.arange(60), truth] += 1.0
     sim = np.concatenate([half, half], axis=1)      # references 40..79 are 0..39 again
-    stream = MATCHERS["stream"]
+    stream = MATCHERS["stream-rules"]
     assert stream.params["unique"] > 0
     alone = stream.run(sim, k=1)
     off = stream.with_params(unique=0.0).run(sim, k=1)
@@ -199,7 +199,7 @@ def test_road_matcher_against_plain_loops(grid: int, vmax: float, stop_gain: flo
     sim = planted(rng, 20, places_at_speeds([(1.0, 12), (0.0, 5), (0.5, 8)], start=1), noise=0.6)
     params = {"vmax": vmax, "grid": grid, "decay": 0.8, "bias": 0.5, "turn": 0.7, "memory": 6.0, "lock": 3.0,
               "rival_window": 2, "stop_gain": stop_gain, "stop_decay": stop_decay}
-    m = RoadMatcher(20, StreamConfig.of(MATCHERS["stream"].params | params))
+    m = RoadMatcher(20, StreamConfig.of(MATCHERS["stream-rules"].params | params))
     got, reasons, naive_reasons = [], [], []
     for row in sim:
         got.append(m.update(row))
@@ -215,15 +215,15 @@ def test_road_matcher_against_plain_loops(grid: int, vmax: float, stop_gain: flo
 def test_road_matcher_route_shorter_than_its_fastest_step(n_refs: int) -> None:
     """Maps with fewer positions than the top speed's step (4 places/frame x grid 2) run, as the loops do; a
     one-place map answers that place and never locks (a z-score over one reference is 0)."""
-    one = get_matcher("stream").run(np.random.default_rng(0).normal(size=(8, 1)))
+    one = get_matcher("stream-rules").run(np.random.default_rng(0).normal(size=(8, 1)))
     assert (one.refs == 0).all() and (one.scores < 1).all()
     sim = np.random.default_rng(n_refs).normal(size=(8, n_refs))
     sim[:, 0] += 1e-3   # no row is constant (its z-score would be 0/0)
-    params = dict(MATCHERS["stream"].params)
+    params = dict(MATCHERS["stream-rules"].params)
     params = {k: params[k] for k in ("vmax", "grid", "decay", "bias", "turn", "memory", "lock", "rival_window",
                                      "stop_gain", "stop_decay")} | {"bias": 0.5, "lock": 1.0}  # no all-0 states
     # the loops have no hub line
-    m = RoadMatcher(n_refs, StreamConfig.of(MATCHERS["stream"].params | params | {"hub": -99.0}))
+    m = RoadMatcher(n_refs, StreamConfig.of(MATCHERS["stream-rules"].params | params | {"hub": -99.0}))
     got = [m.update(row) for row in sim]
     want = naive_road(sim, **params)
     assert [r for r, _ in got] == [r for r, _ in want]
@@ -245,10 +245,10 @@ def test_road_matcher_takes_whole_numbers_for_real_parameters() -> None:
     """From Python a real-valued parameter may come as an int (``params={"memory": 25}``): the matcher runs as
     with the same float (it once kept an int64 array for the running means and failed on the first frame)."""
     sim = planted(np.random.default_rng(4), 60, places_at_speeds([(1.0, 30)], start=5))
-    floats = {k: v for k, v in get_matcher("stream").params.items() if isinstance(v, float) and v == int(v)}
+    floats = {k: v for k, v in get_matcher("stream-rules").params.items() if isinstance(v, float) and v == int(v)}
     assert "memory" in floats
-    as_ints = get_matcher("stream").with_params(**{k: int(v) for k, v in floats.items()})
-    np.testing.assert_array_equal(as_ints.run(sim).refs, get_matcher("stream").run(sim).refs)
+    as_ints = get_matcher("stream-rules").with_params(**{k: int(v) for k, v in floats.items()})
+    np.testing.assert_array_equal(as_ints.run(sim).refs, get_matcher("stream-rules").run(sim).refs)
 
 
 def test_lock_verdict_and_evidence_average_are_the_rules_in_order() -> None:

@@ -40,7 +40,7 @@ def test_every_part_together_against_plain_loops(seed: int) -> None:
     route = np.zeros(n, bool)
     route[44:46] = True   # the mapping drive stood there, just after the third stop
     candidates = [None if k % 4 == 0 else np.r_[np.argsort(-row)[:3], rng.integers(0, n)] for k, row in enumerate(sim)]
-    params = MATCHERS["stream"].params | dict(vmax=2.0, grid=2, decay=0.9, bias=0.5, turn=0.5, memory=20.0,
+    params = MATCHERS["stream-rules"].params | dict(vmax=2.0, grid=2, decay=0.9, bias=0.5, turn=0.5, memory=20.0,
                                               lock=2.0, hold=2.0, window=6, probe=20, check=7, span=2, seek=2,
                                               peaks=2, still=0.5, rival_window=3)
     m = RoadMatcher(n, StreamConfig.of(params), route=route, graph=graph)

@@ -19,7 +19,7 @@ def test_local_search_follows_a_long_route_and_finds_a_jump() -> None:
     places = np.concatenate([places_at_speeds([(1.0, 60), (3.0, 40), (0.0, 20), (0.5, 40)], start=100),
                              places_at_speeds([(2.0, 120)], start=2200)])
     sim = planted(rng, 3000, places, noise=0.3)
-    matcher = get_matcher("stream").with_params(window=50)
+    matcher = get_matcher("stream-rules").with_params(window=50)
     online = matcher.stream(3000)
     asked, got = [], []
     for row in sim:
@@ -40,11 +40,11 @@ def test_local_search_follows_a_long_route_and_finds_a_jump() -> None:
 
 
 def test_local_search_is_off_on_small_routes() -> None:
-    m = RoadMatcher(400, StreamConfig.of(MATCHERS["stream"].params | {"window": 100}))
+    m = RoadMatcher(400, StreamConfig.of(MATCHERS["stream-rules"].params | {"window": 100}))
     for row in planted(np.random.default_rng(0), 400, np.arange(100, 150)):
         m.update(row)
         assert m.wanted() is None
-    m = RoadMatcher(3000, StreamConfig.of(MATCHERS["stream"].params | {"window": 50}))
+    m = RoadMatcher(3000, StreamConfig.of(MATCHERS["stream-rules"].params | {"window": 50}))
     with pytest.raises(ValueError):
         m.update(np.zeros(10), np.arange(10))   # refs not asked for
 
@@ -56,9 +56,9 @@ def test_road_matcher_local_search_against_plain_loops() -> None:
     rng = np.random.default_rng(7)
     places = places_at_speeds([(1.0, 20), (0.0, 6), (2.0, 8), (1.0, 20)], start=3)
     sim = planted(rng, 60, places, noise=0.3)
-    params = MATCHERS["stream"].params | {"vmax": 2.0, "grid": 2, "window": 5, "probe": 16, "check": 8, "span": 2,
+    params = MATCHERS["stream-rules"].params | {"vmax": 2.0, "grid": 2, "window": 5, "probe": 16, "check": 8, "span": 2,
                                           "hold": 1.0, "memory": 6.0, "lock": 3.0, "rival_window": 2}
-    got = MATCHERS["stream"].with_params(**params).run(sim, k=1)
+    got = MATCHERS["stream-rules"].with_params(**params).run(sim, k=1)
     want = naive_road_local(sim, **params)
     assert list(got.refs) == [r for r, _, _ in want]
     np.testing.assert_allclose(got.scores, [c for _, c, _ in want], atol=1e-5)

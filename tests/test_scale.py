@@ -47,7 +47,7 @@ def test_route_and_stream_files_round_trip(tmp_path: Path) -> None:
 
 def test_a_large_route_searched_around_candidates_holds_no_whole_route_state() -> None:
     n = 200_000
-    m = RoadMatcher(n, StreamConfig.of(MATCHERS["stream"].params))
+    m = RoadMatcher(n, StreamConfig.of(MATCHERS["stream-rules"].params))
     rng = np.random.default_rng(0)
     for t in range(30):
         refs = m.around(np.array([1000 + 2 * t, 150_000, int(rng.integers(n))]))
@@ -61,7 +61,7 @@ def test_a_large_route_searched_around_candidates_holds_no_whole_route_state() -
 
 
 def test_a_reference_first_seen_late_starts_from_the_prior() -> None:
-    params = MATCHERS["stream"].params
+    params = MATCHERS["stream-rules"].params
     m = RoadMatcher(1000, StreamConfig.of(params))
     m._t = 500                                                 # 500 frames elsewhere on the route
     first = m._normalise(np.full(3, 4.0), 10, 0.0, 1.0)

@@ -1,4 +1,4 @@
-"""The stream matcher's configuration (``stream_config.StreamConfig``): read from ``params.STREAM``, checked
+"""The stream matcher's configuration (``stream_config.StreamConfig``): read from ``params.STREAM_RULES``, checked
 once, with the one-line messages the matcher gives."""
 from __future__ import annotations
 
@@ -7,19 +7,19 @@ import re
 import pytest
 
 from vpr_edge.matchers import get_matcher
-from vpr_edge.matchers.params import STREAM, defaults
+from vpr_edge.matchers.params import STREAM_RULES, defaults
 from vpr_edge.matchers.road import RoadMatcher
 from vpr_edge.matchers.stream_config import StreamConfig
 
 
 def test_the_defaults_round_trip() -> None:
     config = StreamConfig.default()
-    assert config.params() == defaults(STREAM) == get_matcher("stream").params
+    assert config.params() == defaults(STREAM_RULES) == get_matcher("stream-rules").params
     assert StreamConfig.of(config.params()) == config
     assert (config.model.decay, config.search.window, config.rules.lock) == \
-        (STREAM["decay"].default, STREAM["window"].default, STREAM["lock"].default)
+        (STREAM_RULES["decay"].default, STREAM_RULES["window"].default, STREAM_RULES["lock"].default)
     with pytest.raises(TypeError):   # every parameter is needed
-        StreamConfig.of({k: v for k, v in defaults(STREAM).items() if k != "turn"})
+        StreamConfig.of({k: v for k, v in defaults(STREAM_RULES).items() if k != "turn"})
 
 
 @pytest.mark.parametrize("bad,message", [
@@ -33,13 +33,13 @@ def test_the_defaults_round_trip() -> None:
 ])
 def test_a_bad_value_is_refused_in_one_line(bad: dict, message: str) -> None:
     with pytest.raises(ValueError) as config_error:
-        StreamConfig.of(defaults(STREAM) | bad)
+        StreamConfig.of(defaults(STREAM_RULES) | bad)
     assert str(config_error.value) == message
     with pytest.raises(ValueError) as registry_error:   # the registry's factory builds the same config
-        get_matcher("stream").with_params(**bad).stream(10)
+        get_matcher("stream-rules").with_params(**bad).stream(10)
     assert str(registry_error.value) == message
     with pytest.raises(ValueError, match=re.escape(message)):   # as --param reports it
-        get_matcher("stream").parse_params([f"{k}={v}" for k, v in bad.items()])
+        get_matcher("stream-rules").parse_params([f"{k}={v}" for k, v in bad.items()])
 
 
 def test_the_matcher_takes_the_config_and_the_map() -> None:

@@ -49,8 +49,9 @@ class Match:
     interpolated between references where the matcher resolves finer than one reference, a score (higher =
     more confident; its meaning per mode: docs/matchers.md), the ``confidence`` (the probability that the
     answer is right: from a calibration of the mode where one is given, else the mode's own where it models
-    one, ``stream-filter``; None without either), the lost flag and, for a lost frame of
-    a mode that says so, why it is lost (``matchers.LOST_WHY``: weak-view, no-trajectory, ambiguous; else None)."""
+    one, ``stream``; None without either), the lost flag and, for a lost frame of
+    a mode that says so, why it is lost (``matchers.LOST_WHY``: off-map, ambiguous, settling; ``stream-rules``: weak-view, no-trajectory,
+    ambiguous; else None)."""
 
     frame_index: int
     frame: str
@@ -88,7 +89,7 @@ class Localizer:
 
     ``mode`` names a registered matcher (``vpr_edge.matchers.MATCHERS``), ``params`` overrides its
     parameters, ``min_confidence`` its lost threshold (default: the matcher's own); ``target_precision`` the
-    line of a matcher whose score is the probability that its answer is right (``stream-filter``; for another
+    line of a matcher whose score is the probability that its answer is right (``stream``; for another
     mode, VprError: it sets no line there) or, with a ``calibration`` (``evaluate --save-calibration`` on a
     labelled drive), of any mode: the lowest score whose answers at least as high were right that often on
     the drive (``calibration.Curve.line``; ``threshold`` is the line drawn, ``drive_line`` whether it is the

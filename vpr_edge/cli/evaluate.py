@@ -53,8 +53,8 @@ _QUERIES = typer.Option(None, "--queries", "-q", help="Query frames: a folder (f
 _TOPIC = typer.Option(None, help="With a bag as --queries: its image topic.")
 _SIMILARITY = typer.Option(None, "--similarity", help="Evaluate a (Q, R) float .npy similarity matrix instead (rows "
                                                       "= queries, higher = more alike), e.g. from another tool's "
-                                                      "descriptors; no model needed (and no motion cue: mode stream "
-                                                      "then runs its stop_gain rule).")
+                                                      "descriptors; no model needed (and no motion cue: a stop is "
+                                                      "then read from the similarities alone).")
 _REFS = typer.Option(None, "--refs", help="With --features pixels: the reference folder.")
 _FEATURES = typer.Option(FeaturesOpt.map, help="map: the map's CNN features and encoding; pixels: SeqSLAM's front "
                                                "end (grey, 64x32, patch-normalised, mean absolute difference), from "
@@ -80,7 +80,7 @@ _TOLERANCE = typer.Option(0, min=0, help="Frames of slack added around each refe
                                          "slack: 1).")
 _MIN_CONFIDENCE = typer.Option(None, help="Lost threshold for modes with a lost state (default: each mode's own).")
 _TARGET_PRECISION = typer.Option(
-    None, help="The line of modes whose score is the probability that the answer is right (stream-filter; "
+    None, help="The line of modes whose score is the probability that the answer is right (stream; "
                "default %.2f), and of every mode --calibration holds (where its drive's answers reached it); "
                "and the precision at which every mode's best line is read." % TARGET_PRECISION)
 _ANSWERS = typer.Option(None, "--answers", help="Write each frame's answer per mode here (CSV: frame, mode, ref, "
@@ -208,7 +208,7 @@ def print_table(result: Evaluation, tolerance: int, details: bool, modes: str | 
         typer.echo("\n--details: every column and the tables behind them; --json FILE: every figure")
     if modes is None:
         others = "".join(f"{m}, " for m in DEFAULT_MODES[1:] if m not in BASELINES)
-        typer.echo(f"--modes all: every mode (stream-filter, dtw, ...), not only localize's default "
+        typer.echo(f"--modes all: every mode (stream-rules, dtw, ...), not only localize's default "
                    f"({DEFAULT_MODES[0]}), {others}the baselines {' and '.join(BASELINES)}")
 
 

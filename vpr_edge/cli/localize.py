@@ -42,12 +42,13 @@ _MODEL = typer.Option(None, help="ONNX feature model; must be the map's model (d
 _MODE = typer.Option(DEFAULT_MATCHER, metavar="MATCHER", help=MODE_HELP)
 _MIN_CONFIDENCE = typer.Option(
     None, help="Frames scoring below this are reported lost (reference and position fields empty). "
-               "Default: the mode's own (stream: %.1f; other modes: never lost)." % MATCHERS["stream"].min_confidence)
+               "Default: the mode's own (stream: its --target-precision; stream-rules: %.1f; other modes: never lost)."
+               % MATCHERS["stream-rules"].min_confidence)
 _TARGET_PRECISION = typer.Option(
-    None, help="Modes whose score is the probability that the answer is right (stream-filter): the line, "
+    None, help="Modes whose score is the probability that the answer is right (stream): the line, "
                "answers below it are lost (default %.2f). With --calibration, any mode: the line where the "
                "labelled drive's answers at least as sure were right this often; else refused for another "
-               "mode (stream: its line is --min-confidence)." % TARGET_PRECISION)
+               "mode (stream-rules: its line is --min-confidence)." % TARGET_PRECISION)
 _PARAM = typer.Option(None, "--param", metavar="KEY=VALUE", help=PARAM_HELP)
 _CALIBRATION = typer.Option(None, help="A calibration (evaluate --save-calibration on a labelled drive of this "
                                        "route): each line's confidence is then the probability that its answer is "

@@ -1,6 +1,6 @@
 """Whole-route similarities for one frame at a fraction of the cost: signs first, exact values where they count.
 
-A local search (``stream``) still searches the whole route on some frames: its periodic check, and every
+A local search (``stream-rules``) still searches the whole route on some frames: its periodic check, and every
 frame while lost or not firmly locked. On a large map those frames read every stored encoding (100,000 x
 2,048 int8: 205 MB, 62 ms on one core). ``CoarseSearch`` keeps the signs of the stored encodings (one bit a
 dimension: an eighth of int8's bytes) and per frame:

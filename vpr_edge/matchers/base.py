@@ -223,7 +223,7 @@ class Matcher:
         if live and target is not None and not self.probability and line is None:
             raise InputError("{opt.target_precision} {v}: mode {name}'s score is not the probability that its "
                              "answer is right, so no target precision sets its line ({opt.min_confidence} does, "
-                             "or a {opt.calibration} from a labelled drive; stream-filter's score is one)",
+                             "or a {opt.calibration} from a labelled drive; stream's score is one)",
                              v=target, name=self.name)
         if given is not None:
             return float(given)
@@ -354,8 +354,8 @@ def check_target_precision(target: float | None) -> float | None:
 
 WEAK_VIEW, NO_TRAJECTORY, AMBIGUOUS, LOCKED = "weak-view", "no-trajectory", "ambiguous", "locked"
 OFF_MAP, SETTLING = "off-map", "settling"
-# why a frame is lost (``lost_why``): ``stream``'s weak-view, no-trajectory, ambiguous; ``stream-filter``'s
-# off-map, ambiguous, settling
+# why a frame is lost (``lost_why``): ``stream``'s off-map, ambiguous, settling; ``stream-rules``' weak-view,
+# no-trajectory, ambiguous
 RULE_REASONS: tuple[str, ...] = (WEAK_VIEW, NO_TRAJECTORY, AMBIGUOUS)
 FILTER_REASONS: tuple[str, ...] = (OFF_MAP, AMBIGUOUS, SETTLING)
 LOST_WHY: tuple[str, ...] = (WEAK_VIEW, NO_TRAJECTORY, AMBIGUOUS, OFF_MAP, SETTLING)
@@ -371,7 +371,7 @@ def lost_why(why: str | None, lost: bool) -> str | None:
     """A frame's reason for being lost, from its matcher's ``why()``: None where it is answered or the matcher
     gives no reason; the matcher's reason (``LOST_WHY``) where it is lost; "ambiguous" where the matcher holds
     it "locked" but a stricter lost line (``--min-confidence`` above the matcher's) calls it lost: the
-    ``stream`` score above 1 is the answer's uniqueness."""
+    ``stream-rules`` score above 1 is the answer's uniqueness."""
     if not lost or why is None:
         return None
     return AMBIGUOUS if why == LOCKED else why

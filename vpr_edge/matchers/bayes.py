@@ -1,4 +1,4 @@
-"""The ``stream-filter`` matcher: a Bayes filter over (place along the route, speed), plus one off-map state.
+"""The ``stream`` matcher: a Bayes filter over (place along the route, speed), plus one off-map state.
 
 The hidden state of a frame is where the camera is on the map and how fast it moves along it, in places a
 frame (standing, half a place, or 1 to ``vmax`` in steps of ``speed_step``: ``filter_motion``), or that it is
@@ -47,7 +47,7 @@ On a route of more than ``4 * window`` places a firm answer (confidence at least
 standing after a window, lets the next frame read only the places within ``window`` of it
 (``filter_motion.Window``: the rest of the on-map mass held as one number, *elsewhere*, its likelihood that of
 the off-map state), its row's median and spread read on a fixed ``probe`` sample; ``span`` frames in every
-``check`` read the whole route, as ``stream``'s local search does. On such a route with an index, a frame that
+``check`` read the whole route, as ``stream-rules``'s local search does. On such a route with an index, a frame that
 would read the whole route reads instead the places within ``seek`` of the index's candidates and within
 ``max(seek, window / 4)`` of the ``peaks`` most probable places held (``around``): the state never spans the
 whole route.
@@ -113,7 +113,7 @@ def likelihood(z: np.ndarray, beta: float) -> tuple[np.ndarray, float]:
 
 
 class BayesFilter:
-    """The online ``stream-filter`` matcher (module docstring) over ``n_refs`` places of ``graph``'s route."""
+    """The online ``stream`` matcher (module docstring) over ``n_refs`` places of ``graph``'s route."""
 
     searches_locally = True
 
@@ -379,7 +379,8 @@ class BayesFilter:
         if new is None:
             self.elsewhere = 0.0
         self.cols = new
-        self._window = None if new is None else Window(self.graph, new, self.moves.moves)
+        self._window = None if new is None else Window(self.graph, new, self.moves.moves, self.moves.over,
+                                                             self.moves.forks)
         self._whole = self._whole and new is None
 
     def _learn_scale(self, z_answer: float) -> None:
@@ -391,7 +392,7 @@ class BayesFilter:
 
 def bayes_filter(n_refs: int, *, route: np.ndarray | None = None, graph: RouteGraph | None = None,
                  reach: int = 0, **params) -> BayesFilter:
-    """The registry's ``stream-filter`` (``params.STREAM_FILTER``); ``route``, ``graph`` and ``reach`` are the map's
+    """The registry's ``stream`` (``params.STREAM``); ``route``, ``graph`` and ``reach`` are the map's
     (``Matcher.on_route``): a rival lies beyond ``reach`` as well as beyond ``rival_window``."""
     config = FilterConfig.of(params)
     if reach > config.rival_window:

@@ -26,7 +26,7 @@ PEAK_POOL = 4        # the best hypotheses held are chosen among this many times
 PEAK_SPACING = 2     # ... each more than this many neighbourhoods from a better one
 MIN_SPREAD = 1e-12   # the smallest spread a frame's similarities are z-scored with (a flat row)
 
-# --- the lost line of a matcher whose score is a probability (``stream-filter``) ----------------------------
+# --- the lost line of a matcher whose score is a probability (``stream``) ----------------------------
 # answers whose probability of being right is below this are lost (``--target-precision``); also the
 # precision at which ``evaluate`` reads every mode's best line
 TARGET_PRECISION = 0.98

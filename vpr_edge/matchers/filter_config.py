@@ -1,5 +1,5 @@
-"""The ``stream-filter`` matcher's parameters (``bayes``), checked once; their defaults and meanings are
-``params.STREAM_FILTER``."""
+"""The ``stream`` matcher's parameters (``bayes``), checked once; their defaults and meanings are
+``params.STREAM``."""
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
@@ -7,7 +7,7 @@ from dataclasses import dataclass, fields
 
 @dataclass(frozen=True)
 class FilterConfig:
-    """The filter's parameters (``params.STREAM_FILTER``: their defaults and meanings). ``still_memory`` and
+    """The filter's parameters (``params.STREAM``: their defaults and meanings). ``still_memory`` and
     ``seek_frames`` are read where the motion cue and the index query are made."""
 
     vmax: int

@@ -12,7 +12,7 @@ its view is read by the motion cue, and a slow speed held without need lets a tr
 (docs/decisions.md).
 
 On a route of more than ``4 * window`` places the filter reads only the places within ``window`` of a firm
-answer (and a fixed probe sample for the row's median and spread), as ``stream``'s local search does; every
+answer (and a fixed probe sample for the row's median and spread), as ``stream-rules``'s local search does; every
 ``check`` frames it reads the whole route for ``span`` frames, and it reads it whenever the answer is not
 firm. ``Window`` moves the mass it holds one frame on with the same motion model as the whole-route
 ``Transitions``; what leaves the window joins *elsewhere*, what enters it comes from there. On a
@@ -126,6 +126,41 @@ def blind(kernel: np.ndarray, one: int) -> np.ndarray:
     return k
 
 
+def overruns(graph: RouteGraph, dmax: int) -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Where mass that moves past a drive's end lands: per whole step d (1..``dmax``), (sources, landings,
+    shares) (n,) each: a place within d of a drive's end that is a junction's source moves on into each of
+    that junction's targets alike, as far past the target as it overran the end (``near``'s continuation).
+    Landings past their own drive's end are left out: that mass leaves the map."""
+    ends = graph.ends
+    into: dict[int, set[int]] = {}
+    for sources, targets in graph.junctions:
+        for e in np.intersect1d(sources, ends):
+            into.setdefault(int(e), set()).update(int(t) for t in targets)
+    out = {}
+    for d in range(1, dmax + 1):
+        src, dst, share = [], [], []
+        for e, targets in sorted(into.items()):
+            first = graph.bounds(e)[0]
+            for p in range(max(first, e - d + 1), e + 1):
+                k = p + d - e - 1   # places past the target
+                for t in sorted(targets):
+                    if t + k <= graph.bounds(t)[1]:
+                        src.append(p), dst.append(t + k), share.append(1.0 / len(targets))
+        out[d] = (np.array(src, np.int64), np.array(dst, np.int64), np.array(share))
+    return out
+
+
+def forks(graph: RouteGraph) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The junctions whose sources lie inside a drive (not at its end): the camera there may go on along its
+    drive or turn into the targets (``JOIN``). A drive's end only continues (``overruns``)."""
+    out = []
+    for sources, targets in graph.junctions:
+        inner = np.setdiff1d(sources, graph.ends)
+        if len(inner):
+            out.append((inner, targets))
+    return out
+
+
 class Transitions:
     """The motion model on a route graph: ``predict(b, off)`` moves the on-map mass ``b`` (V, R) and the
     off-map mass one frame on (``bayes`` module docstring, step 1)."""
@@ -140,8 +175,11 @@ class Transitions:
         one = np.flatnonzero(self.speeds == 1.0)
         self.blind_kernel = blind(self.kernel, int(np.flatnonzero(self.of == one[0])[0]) if len(one) else 0)
         later = [(int(s), int(e) + 1) for s, e in zip(graph.starts[1:], graph.ends[1:])]
+        dmax = int(self.moves.max())
         self.cut = {d: np.concatenate([np.arange(s, min(s + d, e)) for s, e in later]).astype(np.int64)
-                    if later else np.zeros(0, np.int64) for d in range(1, int(math.ceil(config.vmax)) + 2)}
+                    if later else np.zeros(0, np.int64) for d in range(1, dmax + 1)}
+        self.over = overruns(graph, dmax)   # past a drive's end, into the drives that follow it
+        self.forks = forks(graph)
 
     def entry(self) -> np.ndarray:
         """Where mass coming onto the map lands: (V, R), every place and speed alike, summing to 1."""
@@ -171,7 +209,12 @@ class Transitions:
             if len(cc):   # came from another drive's end: off the map instead
                 ran += float(moved[np.ix_(rows, cc)].sum())
                 moved[np.ix_(rows, cc)] = 0.0
-        for sources, targets in self.graph.junctions:
+            src, dst, share = self.over[d]
+            if len(src):   # ... or on into the drives that follow that end
+                went = b[np.ix_(rows, src)] * share
+                np.add.at(moved, (rows[:, None], dst[None, :]), went)
+                ran -= float(went.sum())
+        for sources, targets in self.forks:
             share = moved[:, sources].sum(axis=1) * JOIN
             moved[:, sources] *= 1.0 - JOIN
             moved[:, targets] += (share / len(targets))[:, None]
@@ -186,10 +229,16 @@ class Window:
     frame: for each row and column, where its mass comes from (``src``: a flat index into the (V, W) mass, or
     past its end: ``gone`` for a predecessor in another drive (no mass), ``gone + 1`` for one outside the window
     (*elsewhere*'s density)), and whether moving on leaves the map (``exit_off``: past its drive's end) or the
-    window (``exit_else``)."""
+    window (``exit_else``); ``over`` and ``forks``: the route's (``overruns``, ``forks``; None: made here).
+    Mass that overruns a held drive end lands on the held places that follow it (``cont``), or joins
+    elsewhere; a drive start's predecessor outside the window brings none."""
 
-    def __init__(self, graph: RouteGraph, cols: np.ndarray, moves: np.ndarray) -> None:
+    def __init__(self, graph: RouteGraph, cols: np.ndarray, moves: np.ndarray,
+                 over: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None,
+                 fork_list: list[tuple[np.ndarray, np.ndarray]] | None = None) -> None:
         self.graph, self.cols, self.moves = graph, np.asarray(cols, np.int64), np.asarray(moves, np.int64)
+        over = overruns(graph, int(self.moves.max())) if over is None else over
+        fork_list = forks(graph) if fork_list is None else fork_list
         starts = np.asarray(graph.starts, np.int64)
         k = np.searchsorted(starts, self.cols, side="right") - 1
         first, last = starts[k], graph.ends[k]
@@ -204,7 +253,16 @@ class Window:
         self.exit_off = after > last
         self.exit_else = ~self.exit_off & ~self.positions(after)[1]
         self.joins = [(self.positions(s)[0][self.positions(s)[1]], self.positions(t)[0][self.positions(t)[1]],
-                       len(t)) for s, t in graph.junctions]
+                       len(t)) for s, t in fork_list]
+        self.cont = []   # (rows, source columns, landing columns (-1: elsewhere), shares)
+        for dd in np.unique(self.moves[self.moves > 0]):
+            src, dst, share = over.get(int(dd), (np.zeros(0, np.int64),) * 2 + (np.zeros(0),))
+            s_pos, s_in = self.positions(src) if len(src) else (src, src.astype(bool))
+            if not s_in.any():
+                continue
+            d_pos, d_in = self.positions(dst[s_in])
+            self.cont.append((np.flatnonzero(self.moves == dd), s_pos[s_in], np.where(d_in, d_pos, -1),
+                              share[s_in]))
 
     def positions(self, places: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Places (any shape) -> (their columns, clipped; whether the window holds them)."""
@@ -221,6 +279,12 @@ class Window:
         moved = np.concatenate([b.ravel(), [0.0, density]])[self.src]
         ran = float(b[self.exit_off].sum())
         elsewhere += float(b[self.exit_else].sum()) - density * self.n_from_else
+        for rows, src, dst, share in self.cont:   # on past a drive's end into the drives that follow it
+            went = b[np.ix_(rows, src)] * share
+            held = dst >= 0
+            np.add.at(moved, (rows[:, None], dst[None, held]), went[:, held])
+            elsewhere += float(went[:, ~held].sum())
+            ran -= float(went.sum())
         for sources, targets, n_targets in self.joins:
             share = moved[:, sources].sum(axis=1) * JOIN
             moved[:, sources] *= 1.0 - JOIN

@@ -1,6 +1,6 @@
 """How far along a route its references stay alike: the reach a rival trajectory must lie beyond.
 
-The ``stream`` matcher's uniqueness compares the best trajectory with the best one ending more than
+The ``stream-rules`` matcher's uniqueness compares the best trajectory with the best one ending more than
 ``rival_window`` references from it. On a map sampled densely (a camera's every frame, a slow drive) a
 reference a few places on still resembles the answer's, so a trajectory ending there collects part of the
 answer's evidence, and a right answer's uniqueness falls with the map's density rather than with its

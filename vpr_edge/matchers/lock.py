@@ -1,4 +1,4 @@
-"""The ``stream`` matcher's verdict: the lock's rules (``road``'s module docstring says what each one guards).
+"""The ``stream-rules`` matcher's verdict: the lock's rules (``road``'s module docstring says what each one guards).
 
     score = [locked] + uniqueness,   uniqueness = 1 - (H_rival + 1) / (H_best + 1)
 
@@ -171,7 +171,7 @@ def lock_verdict(evidence: float, best: float, own_uniqueness: float, evidence_l
 
 @dataclass(frozen=True)
 class LockRules:
-    """The lock's rules' parameters (``matchers.params.STREAM``: their defaults and meanings): ``lock``,
+    """The lock's rules' parameters (``matchers.params.STREAM_RULES``: their defaults and meanings): ``lock``,
     ``evidence``, ``evidence_decay``, ``hub``, ``unique``, ``confirm``, ``stuck``, ``trust``, ``hold``, and
     ``rival_window``: places either side of the answer that a rival trajectory must lie beyond."""
 

@@ -22,7 +22,8 @@ class Param:
     meaning: str
 
 
-STREAM: dict[str, Param] = {
+# the ``stream-rules`` matcher (``road``): trajectories and the rules of its lost state
+STREAM_RULES: dict[str, Param] = {
     "vmax": Param(4.0, "fastest speed followed, in references per frame"),
     "grid": Param(2, "positions per reference (2: half-reference steps)"),
     "decay": Param(0.9, "each frame discounts a trajectory's past evidence by this factor (about 1/(1-decay) "
@@ -83,13 +84,12 @@ STREAM: dict[str, Param] = {
     "still_memory": Param(MEMORY, "motion cue: moving frames whose median step (1 - cosine of encodings) is the "
                                   "stream's typical moving step"),
 }
-# the ``stream-filter`` matcher (``bayes``): the motion model, the likelihood, the confidence and the motion cue. Chosen
+# the default ``stream`` matcher (``bayes``): the motion model, the likelihood, the confidence and the motion cue. Chosen
 # on nordland-dev, reported on Corridor (docs/decisions.md, "The stream filter's parameters")
-STREAM_FILTER: dict[str, Param] = {
+STREAM: dict[str, Param] = {
     "vmax": Param(4, "fastest speed followed, in places per frame (speeds 0..vmax)"),
-    "speed_step": Param(0.5, "the moving speeds followed run from one place per frame to vmax in steps of this "
-                             "(0.5: 1, 1.5, 2, ..); slower, a camera shows places again, which the motion cue reads "
-                             "as standing"),
+    "speed_step": Param(0.5, "the speeds followed above standing and half a place a frame run from one place per "
+                             "frame to vmax in steps of this (1, 0.5 or 0.25; 0.5: 1, 1.5, 2, ..)"),
     "speed_change": Param(0.03, "probability a frame's speed is the next one up (and the same, the next one down)"),
     "leave": Param(0.01, "probability a frame leaves the map (a detour, a road the map does not hold)"),
     "enter": Param(0.05, "probability a frame off the map comes back onto it, at any place"),
@@ -110,10 +110,11 @@ STREAM_FILTER: dict[str, Param] = {
                         "moving, CUE_STANDING); 0 = no cue"),
     "still_memory": Param(MEMORY, "motion cue: moving frames whose median step (1 - cosine of encodings) is the "
                                   "stream's typical moving step"),
-    "window": STREAM["window"], "probe": STREAM["probe"], "check": STREAM["check"], "span": STREAM["span"],
+    "window": STREAM_RULES["window"], "probe": STREAM_RULES["probe"], "check": STREAM_RULES["check"],
+    "span": STREAM_RULES["span"],
     "hold": Param(0.9, "local search: an answer is firm (the next frame may read its window only) at this "
                        "confidence"),
-    "seek": STREAM["seek"], "peaks": STREAM["peaks"], "seek_frames": STREAM["seek_frames"],
+    "seek": STREAM_RULES["seek"], "peaks": STREAM_RULES["peaks"], "seek_frames": STREAM_RULES["seek_frames"],
 }
 STREAM_DTW: dict[str, Param] = {
     "decay": Param(0.9, "each frame discounts the accumulated path cost by this factor"),

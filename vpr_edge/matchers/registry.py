@@ -17,13 +17,14 @@ from vpr_edge.matchers.constants import TARGET_PRECISION
 
 
 MATCHERS: dict[str, Matcher] = {m.name: m for m in (
-    Matcher("stream", "trajectories over (position, speed) with contrast-normalised similarities: any speed "
-            "0-4 places/frame, lock-on anywhere, lost state (online, default)", start=stream_matcher,
-            definitions=P.STREAM, min_confidence=1.0, reads_route=True),
-    Matcher("stream-filter", "a Bayes filter over (place, speed) and off the map: any speed 0-4 places/frame, "
-            "stops, detours; its confidence is the probability the answer is right, lost below the target "
-            "precision (online)", start=bayes_filter, definitions=P.STREAM_FILTER, min_confidence=TARGET_PRECISION,
+    Matcher("stream", "a Bayes filter over (place, speed) and off the map: any speed 0-4 places/frame, stops, "
+            "detours; its confidence is the probability the answer is right, lost below the target precision "
+            "(online, default)", start=bayes_filter, definitions=P.STREAM, min_confidence=TARGET_PRECISION,
             reads_route=True, probability=True),
+    Matcher("stream-rules", "trajectories over (position, speed) with contrast-normalised similarities and rules "
+            "for the lost state: any speed 0-4 places/frame, lock-on anywhere; answers more where the filter is "
+            "unsure, and more of them wrong (online)", start=stream_matcher, definitions=P.STREAM_RULES,
+            min_confidence=1.0, reads_route=True),
     Matcher("single", "best single match per frame, no sequence information (online)", start=BestMatch),
     Matcher("stream-dtw", "decayed streaming DTW over 1 - cos (online; the first streaming matcher, kept "
             "as a baseline)", start=StreamingDTW, definitions=P.STREAM_DTW),

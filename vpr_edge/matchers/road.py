@@ -82,7 +82,7 @@ frame of a moving camera resembles (imagery of somewhere else) is no trajectory 
 between 1 and 2 asks for a more unambiguous answer still.
 
 The state and its recursion are ``trajectories.TrajectoryState``'s; the parameters, ``stream_config.StreamConfig``
-(from ``params.STREAM``). The max over speeds with the speed penalty is a distance transform (two passes over the
+(from ``params.STREAM_RULES``). The max over speeds with the speed penalty is a distance transform (two passes over the
 speeds), so a frame costs O(grid * speeds * R) vectorised work in preallocated buffers, and the state is
 (grid * speeds + 1) * R floats, whatever the stream's length.
 
@@ -120,7 +120,7 @@ class RoadMatcher(TrajectoryState):
 
     def __init__(self, n_refs: int, config: StreamConfig, route: np.ndarray | None = None,
                  graph: RouteGraph | None = None, reach: int = 0) -> None:
-        """``config``: the parameters (``stream_config.StreamConfig``, from ``matchers.params.STREAM``).
+        """``config``: the parameters (``stream_config.StreamConfig``, from ``matchers.params.STREAM_RULES``).
         ``route``: (n_refs,) bool, the references where the map's drive stood (``motion.route_stands``; None:
         not known). ``graph``: the map's drives and where they meet (``route.RouteGraph``; None: one drive).
         ``reach``: how far along the map references stay alike (``likeness.reach``; 0: not known): a rival
@@ -351,7 +351,7 @@ class RoadMatcher(TrajectoryState):
 
 def stream_matcher(n_refs: int, *, route: np.ndarray | None = None, graph: RouteGraph | None = None,
                    reach: int = 0, **params: Any) -> RoadMatcher:
-    """The registry's ``stream`` (``params.STREAM``); ``route``, ``graph`` and ``reach`` are the map's
+    """The registry's ``stream-rules`` (``params.STREAM_RULES``); ``route``, ``graph`` and ``reach`` are the map's
     (``Matcher.on_route``)."""
     return RoadMatcher(n_refs, StreamConfig.of(params), route, graph, reach)
 

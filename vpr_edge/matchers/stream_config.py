@@ -1,6 +1,6 @@
-"""The ``stream`` matcher's parameters (``road.RoadMatcher``), checked once: ``StreamConfig``, in three groups,
+"""The ``stream-rules`` matcher's parameters (``road.RoadMatcher``), checked once: ``StreamConfig``, in three groups,
 the trajectories' model, the search and the lock's rules (``lock.LockRules``). Their defaults and meanings are
-``params.STREAM``'s, defined there only: ``StreamConfig.of(params)`` reads a parameter dict (the registry's),
+``params.STREAM_RULES``'s, defined there only: ``StreamConfig.of(params)`` reads a parameter dict (the registry's),
 ``StreamConfig.default()`` the defaults.
 """
 from __future__ import annotations
@@ -9,7 +9,7 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from vpr_edge.matchers.lock import LockRules
-from vpr_edge.matchers.params import STREAM, defaults
+from vpr_edge.matchers.params import STREAM_RULES, defaults
 
 
 @dataclass(frozen=True)
@@ -51,7 +51,7 @@ GROUPS = (TrajectoryModel, SearchConfig, LockRules)
 
 @dataclass(frozen=True)
 class StreamConfig:
-    """Every ``params.STREAM`` parameter, by group: ``model``, ``search``, ``rules``. The lock's rules are
+    """Every ``params.STREAM_RULES`` parameter, by group: ``model``, ``search``, ``rules``. The lock's rules are
     checked by ``LockRules``, the rest here."""
 
     model: TrajectoryModel
@@ -72,15 +72,15 @@ class StreamConfig:
 
     @classmethod
     def of(cls, params: dict[str, Any]) -> StreamConfig:
-        """The configuration from a parameter dict (``params.STREAM``'s names); keys it does not hold are
+        """The configuration from a parameter dict (``params.STREAM_RULES``'s names); keys it does not hold are
         ignored, a missing one is a TypeError."""
         return cls(*(group(**{f.name: params[f.name] for f in fields(group) if f.name in params})
                      for group in GROUPS))
 
     @classmethod
     def default(cls) -> StreamConfig:
-        """The configuration of ``params.STREAM``'s defaults."""
-        return cls.of(defaults(STREAM))
+        """The configuration of ``params.STREAM_RULES``'s defaults."""
+        return cls.of(defaults(STREAM_RULES))
 
     def params(self) -> dict[str, Any]:
         """The parameter dict it was read from (``of``'s inverse)."""

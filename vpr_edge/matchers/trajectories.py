@@ -1,4 +1,4 @@
-"""The ``stream`` matcher's trajectory state and its recursion: H, the score of the best recent trajectory
+"""The ``stream-rules`` matcher's trajectory state and its recursion: H, the score of the best recent trajectory
 ending at each (speed, position on the 1/``grid`` reference grid), and one frame of
 
     H_t(v, p) = max(0, decay * max_v' [H_{t-1}(v', p - v) - turn * |v - v'| * grid] + z_t(p) - bias)

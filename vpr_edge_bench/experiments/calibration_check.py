@@ -1,6 +1,6 @@
 """Does a confidence calibrated on one dataset mean the same on another? Leave one dataset out, both ways.
 
-    python -m vpr_edge_bench calibration-check --streams out/corridor out/nordland-dev [--modes stream]
+    python -m vpr_edge_bench calibration-check --streams out/corridor out/nordland-dev [--modes stream-rules]
 
 For each mode, the answers of every derived stream of one dataset (``evaluate``, the function behind
 ``vpr-edge evaluate``, on STREAMS/KIND with the map STREAMS/map.npz and ground truth STREAMS/KIND.csv, so the
@@ -35,7 +35,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p = parser(__name__, __doc__)
     p.add_argument("--streams", type=Path, nargs=2, required=True,
                    help="two derived-streams folders (DS = name), each with its map.npz")
-    p.add_argument("--modes", default="stream,single")
+    p.add_argument("--modes", default="stream-rules,single")
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--fits", default=calibration.DEFAULT_METHOD,
                    help=f"calibration fits, comma-separated ({', '.join(calibration.METHODS)})")

@@ -4,7 +4,7 @@
 
 A map of the sample's reference frames (build-map's defaults, no positions: as the README's quick start
 makes it), its query frames evaluated against its ground truth (``evaluate``, tolerance 1) with four
-matchers (stream, stream-filter, single, dtw), and the three figures ``evaluate`` draws: the PR curves
+matchers (stream, stream-rules, single, dtw), and the three figures ``evaluate`` draws: the PR curves
 (``--plot``), the similarity matrix with each mode's answers (``--plot-matrix``) and where each mode puts the
 vehicle frame by frame (``--plot-route`` on a map without positions). Each PNG must stay under ``MAX_KB``
 (checked; the run fails otherwise). Needs the fit and plot extras. Bad input is one line on stderr and exit
@@ -24,7 +24,7 @@ from vpr_edge.matchers import get_matcher
 from vpr_edge.resources import sample_folder
 from vpr_edge_bench.runner import parser, run_checked
 
-MODES = ("stream", "stream-filter", "single", "dtw")
+MODES = ("stream", "stream-rules", "single", "dtw")
 MAX_KB = 150
 FIGURES = {"pr": "corridor_pr.png", "matrix": "corridor_matrix.png", "route": "corridor_route.png"}
 

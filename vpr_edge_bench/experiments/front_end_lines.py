@@ -5,7 +5,7 @@ on every derived stream and on foreign imagery, from the similarity matrices the
 wrote, scored by the library's ``scoring.evaluate_mode`` (what ``evaluate`` runs).
 
     python -m vpr_edge_bench front-end-cache --streams out/corridor out/nordland-dev --out out/fronts
-    python -m vpr_edge_bench front-end-lines --cache out/fronts --modes stream,stream-filter,seqslam-online
+    python -m vpr_edge_bench front-end-lines --cache out/fronts --modes stream,stream-rules,seqslam-online
 
 Per dataset and front end, one row per mode and stream: the front end alone (``single``'s R@1 at the cache's
 tolerance), the best answers' R@1 (lost ignored), the precision
@@ -24,7 +24,7 @@ right at least half the best answers' R@1) on the eligible streams and, apart, o
 follows (best answers' R@1 at least ``FOLLOWED``) that are not eligible: there no line on the mode's score
 answers half at the target precision, so not silent means answers below it; the detour's unmapped frames and
 foreign imagery lost for at least ``UNMAPPED_LOST`` and ``FOREIGN_LOST``. Last, for the modes whose score is a
-probability (``stream-filter``), its reliability (``reliability``): per bin of the probability,
+probability (``stream``), its reliability (``reliability``): per bin of the probability,
 the share of answers right, over the derived streams' frames but those whose truth lies where the map shows one
 view (foreign imagery: its own column), per front end and pooled; beside it each front end's lead, the median
 of how far ahead of the truth the frame's best match within ``LEAD_REACH`` of it lies (the truth's convention
@@ -93,7 +93,7 @@ def score(mode: str, case: dict[str, np.ndarray], tolerance: int, target: float,
 def main(argv: Sequence[str] | None = None) -> int:
     p = parser(__name__, __doc__)
     p.add_argument("--cache", type=Path, required=True)
-    p.add_argument("--modes", default="stream,stream-filter,seqslam-online",
+    p.add_argument("--modes", default="stream,stream-rules,seqslam-online",
                    help="comma-separated modes, each a registered matcher or NAME:KEY=VALUE[;KEY=VALUE] "
                         "(some of its parameters set, e.g. stream:stuck=0)")
     p.add_argument("--fronts", default=None, help="comma-separated front ends (default: every one cached)")

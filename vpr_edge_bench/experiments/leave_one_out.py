@@ -1,6 +1,6 @@
-"""Leave one dataset out, both ways: the stream matcher's settings chosen on one, scored on the other.
+"""Leave one dataset out, both ways: the stream-rules matcher's settings chosen on one, scored on the other.
 
-Leave one dataset out, both ways: the stream matcher's settings chosen on one dataset by written rules,
+Leave one dataset out, both ways: the stream-rules matcher's settings chosen on one dataset by written rules,
 then scored on the other beside its own choice and the package defaults.
 
     python -m vpr_edge_bench leave-one-out --streams out/nordland-dev out/corridor [--tolerance 2]
@@ -27,12 +27,12 @@ import numpy as np
 
 from vpr_edge.evaluation.scoring import ModeReport
 from vpr_edge.matchers import Matcher, get_matcher
-from vpr_edge.matchers.params import STREAM
+from vpr_edge.matchers.params import STREAM_RULES
 from vpr_edge_bench.folder import StreamsFolder, streams_folders
 from vpr_edge_bench.runner import check_tolerance, parser, run_checked
 from vpr_edge_bench.streams import KINDS
 
-Table = dict[float, dict[str, ModeReport]]   # a parameter's value -> stream kind -> the stream matcher's report
+Table = dict[float, dict[str, ModeReport]]   # a parameter's value -> stream kind -> the stream-rules matcher's report
 
 
 def _share(report: ModeReport, other: bool) -> float:
@@ -66,7 +66,7 @@ def most_lost_within(drop: float) -> Callable[[Table], float]:
 
 @dataclass(frozen=True)
 class Rule:
-    """How one ``stream`` parameter is chosen on a dataset: ``choose`` over its reports at each of ``values``
+    """How one ``stream-rules`` parameter is chosen on a dataset: ``choose`` over its reports at each of ``values``
     (the first is the one drops are measured from); ``says``: the rule in words."""
 
     param: str
@@ -90,7 +90,7 @@ RULES: tuple[Rule, ...] = (
 
 def _stream(settings: dict[str, float]) -> Matcher:
     """The stream matcher with ``settings`` (whole-number parameters as whole numbers)."""
-    return get_matcher("stream").with_params(**{k: type(STREAM[k].default)(v) for k, v in settings.items()})
+    return get_matcher("stream-rules").with_params(**{k: type(STREAM_RULES[k].default)(v) for k, v in settings.items()})
 
 
 def _reports(folder: StreamsFolder, modes: dict[str, Matcher], tolerance: int) -> dict[str, dict[str, ModeReport]]:
@@ -124,8 +124,8 @@ def _run(a: argparse.Namespace) -> int:
     folders = streams_folders(a.streams, distinct=True)
     names = [f.name for f in folders]
     chosen = {f.name: choose(f, a.tolerance) for f in folders}
-    defaults = {r.param: float(STREAM[r.param].default) for r in RULES}
-    print(f"stream matcher, tolerance {a.tolerance}; each parameter chosen in this order, the ones above at the "
+    defaults = {r.param: float(STREAM_RULES[r.param].default) for r in RULES}
+    print(f"stream-rules matcher, tolerance {a.tolerance}; each parameter chosen in this order, the ones above at the "
           "values chosen, the rest at the defaults\n")
     print(f"| parameter | values tried | rule | chosen on {names[0]} | chosen on {names[1]} | default |")
     print("|---|---|---|---|---|---|")

@@ -1,6 +1,6 @@
-"""What the stream matcher's lost threshold trades: off-map frames lost against mapped frames right.
+"""What the stream-rules matcher's lost threshold trades: off-map frames lost against mapped frames right.
 
-What the stream matcher's lost threshold trades: off-map frames reported lost against mapped frames
+What the stream-rules matcher's lost threshold trades: off-map frames reported lost against mapped frames
 answered right, on every derived stream of each dataset.
 
     python -m vpr_edge_bench lost-tradeoff --streams out/corridor out/nordland-dev [--locks 5,6,6.5,7,8] [--tolerance 2]
@@ -8,14 +8,14 @@ answered right, on every derived stream of each dataset.
 
 For each folder (``derive-streams`` output with its map.npz) every stream is evaluated once
 (``evaluate``, the function behind ``vpr-edge evaluate``: the map's front end, the motion cue) with the
-``stream`` matcher at each ``lock`` (``--param lock=L``; or each value of the parameter ``--vary`` names, e.g.
+``stream-rules`` matcher at each ``lock`` (``--param lock=L``; or each value of the parameter ``--vary`` names, e.g.
 ``--vary evidence --values 0,1,1.5``; everything else default, or as ``--param`` sets it for every row) and prints, per lock: the detour's unmapped frames reported lost, frames from leaving the map
 to the first lost frame and from re-entering to the first right answer; the lowest share of answered frames
 right and of mapped frames answered right over the streams (and which stream); the largest drop of a
 stream's mapped frames answered right from the default ``lock`` (always run, with the same ``--param``
 values; or from ``--against``'s value); the same two over the frames whose truth does not lie where the map
 shows one view (``truth.one_view``: a run of references its drive saw alike, where a frame-counted truth is a
-count no image recovers); the mean ``stream`` R@1 and AUC. Only which answers are called lost moves with ``lock`` (the
+count no image recovers); the mean ``stream-rules`` R@1 and AUC. Only which answers are called lost moves with ``lock`` (the
 trajectory search is the same), so the table is the trade-off the threshold allows. Bad input (a lock that is
 not a positive number, an unknown parameter, a folder without its map or streams) is one line on stderr and
 exit code 2, before any work.
@@ -30,7 +30,7 @@ import numpy as np
 
 from vpr_edge.errors import VprError
 from vpr_edge.matchers import get_matcher
-from vpr_edge.matchers.params import STREAM
+from vpr_edge.matchers.params import STREAM_RULES
 from vpr_edge_bench.folder import streams_folders
 from vpr_edge_bench.runner import parser, run_checked
 from vpr_edge_bench.streams import KINDS
@@ -51,10 +51,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--streams", type=Path, nargs="+", required=True, help="derived-streams folders with map.npz")
     p.add_argument("--locks", "--values", dest="locks", default="5,6,6.5,7,8",
                    help="values of the varied parameter to compare (default: lost thresholds around lock's 6)")
-    p.add_argument("--vary", default="lock", help="the stream parameter the rows vary (default lock; e.g. evidence)")
+    p.add_argument("--vary", default="lock", help="the stream-rules parameter the rows vary (default lock; e.g. evidence)")
     p.add_argument("--tolerance", type=int, default=2)
     p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
-                   help="another stream parameter for every row (as `vpr-edge evaluate --param`)")
+                   help="another stream-rules parameter for every row (as `vpr-edge evaluate --param`)")
     p.add_argument("--against", type=float, default=None,
                    help="the value the drops are measured from (default: the parameter's default; e.g. 0 for a "
                         "rule read against the parameter switched off)")
@@ -76,26 +76,26 @@ def _locks(text: str, vary: str = "lock") -> list[float]:
 
 def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, inputs checked first: --locks, --param, each folder's map and streams."""
-    numeric = [k for k, p in STREAM.items() if isinstance(p.default, (int, float)) and not isinstance(p.default, bool)]
+    numeric = [k for k, p in STREAM_RULES.items() if isinstance(p.default, (int, float)) and not isinstance(p.default, bool)]
     if a.vary not in numeric:
         raise VprError(f"--vary {a.vary!r}: not a numeric stream parameter ({', '.join(numeric)})")
     locks = _locks(a.locks, a.vary)
-    kind = type(STREAM[a.vary].default)   # an int parameter (e.g. still_memory) takes whole values
+    kind = type(STREAM_RULES[a.vary].default)   # an int parameter (e.g. still_memory) takes whole values
     if kind is int and any(x != int(x) for x in locks):
         raise VprError(f"--values: {a.vary} takes whole numbers")
-    default = float(STREAM[a.vary].default if a.against is None else a.against)
+    default = float(STREAM_RULES[a.vary].default if a.against is None else a.against)
     if not np.isfinite(default) or (kind is int and default != int(default)):
         raise VprError(f"--against {a.against:g}: want a {'whole ' if kind is int else ''}number")
     try:
-        fixed = get_matcher("stream").parse_params(a.param)
+        fixed = get_matcher("stream-rules").parse_params(a.param)
         for x in [*locks, default]:   # one at a time: the items of one call set one key
-            get_matcher("stream").parse_params([f"{a.vary}={kind(x)}"])
+            get_matcher("stream-rules").parse_params([f"{a.vary}={kind(x)}"])
     except ValueError as e:
         raise VprError(str(e)) from None
     folders = streams_folders(a.streams)
     locks = sorted(set(locks) | {default})
-    modes = {f"{a.vary}={x:g}": get_matcher("stream").with_params(**fixed | {a.vary: kind(x)}) for x in locks}
-    print(f"stream matcher{''.join(f' {k}={v}' for k, v in fixed.items())}, tolerance {a.tolerance}; "
+    modes = {f"{a.vary}={x:g}": get_matcher("stream-rules").with_params(**fixed | {a.vary: kind(x)}) for x in locks}
+    print(f"stream-rules matcher{''.join(f' {k}={v}' for k, v in fixed.items())}, tolerance {a.tolerance}; "
           "worst stream in brackets\n")
     print(f"| dataset | `{a.vary}` | detour unmapped lost | exit frames | re-lock frames | min answered right "
           f"| min mapped right | mapped right, largest drop from {default:g} | other frames: min answered right | "

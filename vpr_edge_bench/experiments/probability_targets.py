@@ -1,6 +1,6 @@
 """Does a mode's probability keep its word on every front end? Its targets, per dataset and front end.
 
-    python -m vpr_edge_bench probability-targets --cache out/fronts --modes stream-filter
+    python -m vpr_edge_bench probability-targets --cache out/fronts --modes stream
 
 From the similarity matrices ``front-end-cache`` wrote, each mode (a registered matcher whose score is a
 probability, or ``NAME:KEY=VALUE[;KEY=VALUE]``) runs on every derived stream; tolerance 2 (the derived
@@ -110,7 +110,7 @@ def front_row(mode: str, folder: Path, target: float) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     p = parser(__name__, __doc__)
     p.add_argument("--cache", type=Path, required=True)
-    p.add_argument("--modes", default="stream-filter", help="comma-separated modes (NAME or NAME:KEY=VALUE;...)")
+    p.add_argument("--modes", default="stream", help="comma-separated modes (NAME or NAME:KEY=VALUE;...)")
     p.add_argument("--fronts", default=None, help="comma-separated front ends (default: every one cached)")
     p.add_argument("--target-precision", type=float, default=TARGET_PRECISION)
     a = p.parse_args(argv)

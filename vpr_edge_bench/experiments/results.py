@@ -77,7 +77,7 @@ SECTIONS = (
     _e2e("nordland-dev"),
     _e2e("corridor"),
     Section("front-end-lines", "front-end-lines", ("--cache", "{out}/fronts", "--modes",
-                                                   "stream,stream-filter,seqslam-online", "--ranges",
+                                                   "stream,stream-rules,seqslam-online", "--ranges",
                                                    "--oracle"),
             setup=(("-m", "vpr_edge_bench", "front-end-cache", "--streams", "{corridor}", "{nordland-dev}",
                     "--out", "{out}/fronts"),)),   # the front ends' matrices (kept where made)
