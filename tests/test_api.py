@@ -123,7 +123,7 @@ def test_threads_limit_blas() -> None:
 def test_local_search_reads_only_the_window(api_map: Path, small_queries: Path) -> None:
     """With a local search (window 3 on the 111-place sample map) push computes only the similarities the
     matcher asks for, and answers as the matcher does on the full similarity matrix (evaluate's path)."""
-    loc = Localizer(api_map, params={"window": 3, "hold": 0.5, "probe": 16}, threads=1)
+    loc = Localizer(api_map, params={"window": 3, "hold": 0.5, "probe": 16}, threads=1, standardise=False)
     files = sorted(small_queries.iterdir())
     sizes: list[int] = []
     real = loc.map.scores
@@ -145,7 +145,7 @@ def test_push_gives_the_matcher_the_motion_cue(api_map: Path, small_queries: Pat
     files = sorted(small_queries.iterdir())
     order = [0, 1, 2, 3, 4, 5, 5, 5, 5, 5, 5, 5, 5, 6, 7, 8, 9, 9, 9, 9, 9, 9, 10, 11, 12, 13, 14]
     images = [load_image(files[i]) for i in order]
-    loc = Localizer(api_map, threads=1)
+    loc = Localizer(api_map, threads=1, standardise=False)   # similarity() below: raw cosines
     pushed = [loc.push(im) for im in images]
     enc = loc.encode(images)
     cue = loc.matcher.cue(enc)
@@ -186,7 +186,8 @@ def test_evaluate_runs_the_stream_matcher_as_localize_does(api_map: Path, small_
                                                            if not lost]
     assert [m.lost_why for m in pushed] == list(report.why)          # the same reason for each lost frame
     assert all((m.lost_why is None) == (not m.lost) for m in pushed) and pushed[0].lost_why == "off-map"
-    blind = get_matcher("stream").run(loc.similarity(loc.encode([load_image(f) for f in sorted(stream.iterdir())])))
+    blind = evaluate(Source(map=api_map, queries=stream, threads=1), Truth(gt=tmp_path / "stops.csv"),
+                     {"stream": get_matcher("stream").with_params(still=0.0)}, tolerance=1).reports["stream"]
     assert not np.allclose(blind.scores, report.scores, atol=1e-5)       # the cue made a difference here
 
 

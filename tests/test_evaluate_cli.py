@@ -395,7 +395,7 @@ def test_evaluate_agrees_with_a_count_from_localizes_own_output(tmp_path: Path) 
     truth = {int(q): {int(r) for r in refs.split()}
              for q, refs in csv.reader((c / "ground_truth.csv").read_text().splitlines()[1:])}
     counted = []
-    for switch in ([], ["--standardise"]):   # raw cosines, and the standardised ones: the same chain both ways
+    for switch in (["--raw-cosines"], []):   # raw cosines, and the standardised ones: the same chain both ways
         assert run("localize", "-m", m, "-s", c / "query", "-o", out, *switch).returncode == 0
         proc = run("evaluate", "--map", m, "--queries", c / "query", "--gt", c / "ground_truth.csv", "--json", js,
                    *switch)

@@ -118,8 +118,10 @@ def _help(program: str, command: str) -> str:
 
 
 def _lists(help_text: str, option: str) -> bool:
-    """``option`` is one of the options a -h text lists (at a line's start, alone or after a short form)."""
-    return re.search(rf"^\s*(?:-\w+, )*{re.escape(option)}(?=[\s,=/]|$)", help_text, re.M) is not None
+    """``option`` is one of the options a -h text lists (at a line's start, alone, after a short form, or as
+    the second name of an on/off pair: ``--standardise / --raw-cosines``)."""
+    return re.search(rf"^\s*(?:-\w+, )*(?:--[\w-]+ / )?{re.escape(option)}(?=[\s,=/]|$)", help_text,
+                     re.M) is not None
 
 
 def test_every_readme_command_names_options_its_command_has() -> None:

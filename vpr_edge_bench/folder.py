@@ -11,6 +11,7 @@ import os
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
+from vpr_edge.encoders.standardise import STANDARDISE
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation import Evaluation, Source, Truth, evaluate
 from vpr_edge.matchers import Matcher
@@ -65,7 +66,7 @@ class StreamsFolder:
 
     def evaluate(self, matchers: dict[str, Matcher], tolerance: int, *, map: Path | None = None,
                  pixels: bool = False, truth_in: Path | None = None, threads: int = 0,
-                 kinds: Sequence[str] | None = None, standardise: bool = False
+                 kinds: Sequence[str] | None = None, standardise: bool = STANDARDISE
                  ) -> Iterator[tuple[str, Evaluation]]:
         """``evaluate`` (the function behind ``vpr-edge evaluate``) on each stream, in kind order: (kind, its
         evaluation). Frames through ``map`` (default: the folder's map.npz), or with ``pixels`` SeqSLAM's pixel

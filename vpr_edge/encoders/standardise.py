@@ -23,7 +23,7 @@ import numpy as np
 
 from vpr_edge.encoders.base import unit_rows
 
-STANDARDISE = False   # localize, Localizer and evaluate: raw cosines unless told to standardise (--standardise)
+STANDARDISE = True    # localize, Localizer and evaluate standardise unless told not to (--raw-cosines)
 PRIOR_FRAMES = 10.0   # the references' mean counts as this many of the stream's frames
 HORIZON = 1000.0      # frames of the stream's running mean (an exponential memory)
 MIN_SPREAD = 1e-6     # the smallest distance of a reference from the mean divided by (a reference at the mean)

@@ -189,7 +189,7 @@ def _run(a: argparse.Namespace) -> int:
     for r in range(a.rounds):
         for v in variants[::1 if r % 2 == 0 else -1]:
             runs[v].append(run_command(["localize", "--map", str(map_path), "--stream", str(queries), "--threads",
-                                        "1", "-o", str(outs[v]), "--mode", a.mode, *(["--standardise"] if v else [])]))
+                                        "1", "-o", str(outs[v]), "--mode", a.mode, "--standardise" if v else "--raw-cosines"]))
     checkpoints = sorted(int(c) for c in a.checkpoints.split(","))
     ms, marks = per_frame(map_path, queries, checkpoints, variants, a.mode)
     yard = yardstick_ms()

@@ -22,6 +22,7 @@ import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
+from vpr_edge.encoders.standardise import STANDARDISE
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation import report
 from vpr_edge.matchers import MATCHERS, get_matcher
@@ -39,7 +40,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--plot", default="aligned", help="stream whose PR curves go to STREAMS/eval/KIND.FRONT.pr.png "
                                                      "(empty: none)")
     p.add_argument("--fronts", default=",".join(FRONTS), help="map, pixels or both (comma-separated)")
-    p.add_argument("--standardise", action="store_true", help="the map's cosines standardised (evaluate --standardise)")
+    p.add_argument("--standardise", action=argparse.BooleanOptionalAction, default=STANDARDISE,
+                   help="the map's cosines standardised (evaluate --standardise; --no-standardise: raw cosines)")
     a = p.parse_args(argv)
     return run_checked(__name__, lambda: _run(a))
 
