@@ -30,6 +30,7 @@ from vpr_edge.matchers.constants import (CUE_FLOOR, CUE_MOVING_SD, CUE_STANDING,
 from vpr_edge.matchers.filter_config import FilterConfig
 from vpr_edge.matchers.route import RouteGraph
 
+
 def speed_values(vmax: int, step: float) -> np.ndarray:
     """The speeds followed, places a frame (U,): 0, ``SLOW_SPEED``, then 1 to ``vmax`` in steps of ``step``
     (none but 0 when ``vmax`` is 0)."""
@@ -65,7 +66,8 @@ def by_move(moves: np.ndarray) -> list[tuple[int, np.ndarray]]:
 def value_kernel(speeds: np.ndarray, change: float) -> np.ndarray:
     """(U, U) row-stochastic over ``speed_values``: to the next speed up or down with probability ``change``
     each (standing's next up is one place a frame; a change that would leave the range stays); into the slow
-    speed from standing or one place a frame with ``SLOW_CHANGE``, out of it to either with ``change``."""
+    speed from standing or one place a frame with ``SLOW_CHANGE``, out of it to either with ``change``. The
+    order is ``speed_values``': standing, slow, then one place a frame and up."""
     n = len(speeds)
     k = np.zeros((n, n))
     if n == 1:
