@@ -109,7 +109,7 @@ def adapt_and_score(source_map: Path, learn: LabelledDrive, test: Path, test_gt:
     for kind, path in maps.items():
         for std in (False, True):
             print(f"$ vpr-edge evaluate -m {path} -q {test} --gt {test_gt} --modes "
-                  f"single,stream --tolerance T{' --standardise' if std else ''}")
+                  f"single,stream --tolerance T{' --standardise' if std else ' --raw-cosines'}")
             for tol in TOLERANCES:
                 ev = evaluate(Source(map=path, queries=test, threads=threads, standardise=std), Truth(gt=test_gt),
                               matchers, tol)
