@@ -63,7 +63,7 @@ def test_bench_scale_runs_another_mode_and_refuses_an_offline_mode(tmp_path: Pat
     out = tool("bench-scale", "--work", str(tmp_path), "--places", "500", "--frames", "100", "--dim", "16",
                "--noise", "0.5", "--checkpoints", "100", "--mode", "stream-rules")
     assert "mode stream-rules" in out
-    assert (tmp_path / "stream_500x16_100_n0.5_s0.stream-rules.results.csv").is_file()
+    assert (tmp_path / "stream_500x16_100_n0.5_s0.stream-rules.std.results.csv").is_file()   # standardised: the default
     proc = bench_run("bench-scale", "--work", str(tmp_path / "w"), "--mode", "seqslam")
     errors = [ln for ln in proc.stderr.splitlines() if "error" in ln]
     assert proc.returncode == 2 and len(errors) == 1 and "--mode seqslam: not an online matcher" in errors[0]

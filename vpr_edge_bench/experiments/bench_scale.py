@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vpr_edge.encoders.standardise import STANDARDISE
 from vpr_edge.errors import VprError
 from vpr_edge.evaluation.metrics import answered_shares, transition_delays
 from vpr_edge.evaluation.truth import load_csv
@@ -150,8 +151,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--checkpoints", default="1000,5000,10000,50000,100000")
     p.add_argument("--skip-build", action="store_true", help="use the map already in --work")
     p.add_argument("--mode", default=DEFAULT_MATCHER, help="the online matcher localize runs (localize --mode)")
-    p.add_argument("--standardise", choices=tuple(VARIANTS), default="off",
-                   help="standardised encodings (localize --standardise): off, on, or both side by side")
+    p.add_argument("--standardise", choices=tuple(VARIANTS), default="on" if STANDARDISE else "off",
+                   help="standardised encodings (localize --standardise): off, on, or both side by side "
+                        "(default: as localize)")
     p.add_argument("--rounds", type=int, default=1, help="localize commands of each variant (step 2)")
     a = p.parse_args(argv)
     return run_checked(__name__, lambda: _run(a))
