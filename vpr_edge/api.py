@@ -49,8 +49,8 @@ class Match:
     interpolated between references where the matcher resolves finer than one reference, a score (higher =
     more confident; its meaning per mode: docs/matchers.md), the ``confidence`` (the probability that the
     answer is right: from a calibration of the mode where one is given, else the mode's own where it models
-    one, ``stream``; None without either), the lost flag and, for a lost frame of
-    a mode that says so, why it is lost (``matchers.LOST_WHY``: off-map, ambiguous, settling; ``stream-rules``: weak-view, no-trajectory,
+    one, ``stream``; None without either), the lost flag and, for a lost frame of a mode that says so, why it
+    is lost (``matchers.LOST_WHY``: off-map, ambiguous, settling; ``stream-rules``: weak-view, no-trajectory,
     ambiguous; else None)."""
 
     frame_index: int

@@ -93,7 +93,8 @@ MODEL_HELP = ("ONNX feature model exported by vpr_edge_export (default: $VPR_EDG
               "320x240 frames, 320x240 above).")
 STANDARDISE_HELP = ("Standardise the cosines: take each traversal's own mean encoding away first, the map's "
                     "references' and a running mean of this stream's frames (docs/usage.md, \"Fitting vpr-edge to "
-                    "your route\"). Finds a place from one frame more often across seasons; default on (--raw-cosines: off).")
+                    "your route\"). Finds a place from one frame more often across seasons; default on "
+                    "(--raw-cosines: off).")
 PRECISION_HELP = ("The model's numeric form: fp32 (default); int8: its int8 form, kept beside it (faster, less "
                   "accurate: docs/results.md); auto: int8 where this CPU has int8 dot-product instructions (x86 "
                   "VNNI, ARM dotprod), else fp32. `vpr-edge info MAP` says what auto runs here.")

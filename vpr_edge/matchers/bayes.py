@@ -7,9 +7,10 @@ somewhere the map does not hold (*off-map*). Each frame:
 1. **Predict** (the motion model). A speed changes to the next one up or down with probability
    ``speed_change`` each (``filter_motion.speed_kernel``; on a frame with no motion cue a stopped camera also
    starts again, ``filter_motion.blind``); then the camera moves on by its speed, a fractional speed by whole
-   places in a fixed cycle (1.5: one, then two; ``filter_motion.phases``). Mass that runs past a
-   drive's last place leaves the map; a drive joined to another (``route.RouteGraph``'s junctions) passes a
-   share ``JOIN`` of its junction places' mass on to the other drive. Every frame, ``leave`` of the on-map
+   places in a fixed cycle (1.5: one, then two; ``filter_motion.phases``). Mass that runs past a drive's last
+   place goes on into the drives its junctions say follow it (``route.RouteGraph``; ``filter_motion.overruns``),
+   else leaves the map; a junction from inside a drive (a fork) passes a share ``JOIN`` of its places' mass on
+   to the other drive. Every frame, ``leave`` of the on-map
    mass moves off the map, ``jump`` of it to a place anywhere on the map (a re-localisation), and ``enter`` of
    the off-map mass comes back onto the map at any place.
 2. **Correct** (the likelihood of the frame's similarity row). The row is read on its own scale: robust
@@ -47,8 +48,8 @@ On a route of more than ``4 * window`` places a firm answer (confidence at least
 standing after a window, lets the next frame read only the places within ``window`` of it
 (``filter_motion.Window``: the rest of the on-map mass held as one number, *elsewhere*, its likelihood that of
 the off-map state), its row's median and spread read on a fixed ``probe`` sample; ``span`` frames in every
-``check`` read the whole route, as ``stream-rules``'s local search does. On such a route with an index, a frame that
-would read the whole route reads instead the places within ``seek`` of the index's candidates and within
+``check`` read the whole route, as ``stream-rules``' local search does. On such a route with an index, a frame
+that would read the whole route reads instead the places within ``seek`` of the index's candidates and within
 ``max(seek, window / 4)`` of the ``peaks`` most probable places held (``around``): the state never spans the
 whole route.
 

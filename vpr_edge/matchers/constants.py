@@ -36,7 +36,7 @@ SVM_C = 1.0          # the linear SVMs' regularisation (scikit-learn's default)
 
 # --- the ``stream`` filter (``bayes``) ----------------------------------------------------------------------
 START_OFF = 0.5          # the prior probability of being off the map at a stream's first frame
-JOIN = 0.5               # the share of a junction's source places' mass that crosses into its targets each frame
+JOIN = 0.5               # the share of a fork's source places' mass that crosses into its targets each frame
 # the likelihood's scale (the mean z-score of the true place): its prior and the prior's weight in frames, and
 # the range it is kept in (a sanity bound, not a fit)
 SCALE_PRIOR, SCALE_PRIOR_FRAMES, SCALE_BOUNDS = 2.0, 10.0, (0.5, 8.0)

@@ -12,7 +12,7 @@ its view is read by the motion cue, and a slow speed held without need lets a tr
 (docs/decisions.md).
 
 On a route of more than ``4 * window`` places the filter reads only the places within ``window`` of a firm
-answer (and a fixed probe sample for the row's median and spread), as ``stream-rules``'s local search does; every
+answer (and a fixed probe sample for the row's median and spread), as ``stream-rules``' local search does; every
 ``check`` frames it reads the whole route for ``span`` frames, and it reads it whenever the answer is not
 firm. ``Window`` moves the mass it holds one frame on with the same motion model as the whole-route
 ``Transitions``; what leaves the window joins *elsewhere*, what enters it comes from there. On a
@@ -258,8 +258,10 @@ class Window:
                        len(t)) for s, t in fork_list]
         self.cont = []   # (rows, source columns, landing columns (-1: elsewhere), shares)
         for dd in np.unique(self.moves[self.moves > 0]):
-            src, dst, share = over.get(int(dd), (np.zeros(0, np.int64),) * 2 + (np.zeros(0),))
-            s_pos, s_in = self.positions(src) if len(src) else (src, src.astype(bool))
+            src, dst, share = over[int(dd)]
+            if not len(src):
+                continue
+            s_pos, s_in = self.positions(src)
             if not s_in.any():
                 continue
             d_pos, d_in = self.positions(dst[s_in])

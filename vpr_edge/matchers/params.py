@@ -84,8 +84,8 @@ STREAM_RULES: dict[str, Param] = {
     "still_memory": Param(MEMORY, "motion cue: moving frames whose median step (1 - cosine of encodings) is the "
                                   "stream's typical moving step"),
 }
-# the default ``stream`` matcher (``bayes``): the motion model, the likelihood, the confidence and the motion cue. Chosen
-# on nordland-dev, reported on Corridor (docs/decisions.md, "The stream filter's parameters")
+# the default ``stream`` matcher (``bayes``): the motion model, the likelihood, the confidence and the motion
+# cue. Chosen on nordland-dev, reported on Corridor (docs/decisions.md, "The stream filter's parameters")
 STREAM: dict[str, Param] = {
     "vmax": Param(4, "fastest speed followed, in places per frame (speeds 0..vmax)"),
     "speed_step": Param(0.5, "the speeds followed above standing and half a place a frame run from one place per "

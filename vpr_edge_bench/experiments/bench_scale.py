@@ -190,8 +190,9 @@ def _run(a: argparse.Namespace) -> int:
     runs: dict[bool, list[dict]] = {v: [] for v in variants}
     for r in range(a.rounds):
         for v in variants[::1 if r % 2 == 0 else -1]:
+            cosines = "--standardise" if v else "--raw-cosines"
             runs[v].append(run_command(["localize", "--map", str(map_path), "--stream", str(queries), "--threads",
-                                        "1", "-o", str(outs[v]), "--mode", a.mode, "--standardise" if v else "--raw-cosines"]))
+                                        "1", "-o", str(outs[v]), "--mode", a.mode, cosines]))
     checkpoints = sorted(int(c) for c in a.checkpoints.split(","))
     ms, marks = per_frame(map_path, queries, checkpoints, variants, a.mode)
     yard = yardstick_ms()
