@@ -10,6 +10,7 @@ from vpr_edge.matchers.bayes import BayesFilter, FilterConfig, robust_z
 from vpr_edge.matchers.constants import (CUE_FLOOR, CUE_MOVING_SD, CUE_STANDING, GO_BLIND, JOIN, SCALE_BOUNDS,
                                          SCALE_PRIOR, SCALE_PRIOR_FRAMES, SLOW_CHANGE, SLOW_SPEED, START_OFF,
                                          Z_CAP)
+from vpr_edge.matchers.filter_motion import Transitions, stationary
 from vpr_edge.matchers.params import STREAM
 from vpr_edge.matchers.route import RouteGraph
 
@@ -32,28 +33,12 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
         rows_of += [(i, d) for d in cycle]
     speeds = rows_of
     n_v, n_r = len(speeds), rows.shape[1]
-    b = np.full((n_v, n_r), (1 - START_OFF) / (n_v * n_r))
-    off = START_OFF
-    scale_s = scale_w = 0.0
-    seq_of = np.array([np.searchsorted(graph.starts, p, side="right") - 1 for p in range(n_r)])
-    answers, confs = [], []
-    for t, row in enumerate(rows):
-        cue = None if cues is None else cues[t]
-        new = 1.0
-        if cue is not None and cue >= cfg.still:   # standing by the cue: the chance it moves all the same
-            stand = np.exp(-0.5 * ((cue - CUE_STANDING[0]) / CUE_STANDING[1]) ** 2) / CUE_STANDING[1]
-            move = np.exp(-0.5 * (cue / CUE_MOVING_SD) ** 2) / CUE_MOVING_SD
-            w_s, w_m = max(stand / max(stand, move), CUE_FLOOR), max(move / max(stand, move), CUE_FLOOR)
-            new = w_m / (w_m + w_s)
-        mean = (scale_s + SCALE_PRIOR * SCALE_PRIOR_FRAMES) / (scale_w + SCALE_PRIOR_FRAMES)
-        scale = min(max(mean, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
-        z = np.minimum(robust_z(row), scale + Z_CAP)   # no more evidence than the true place gives
-        beta = cfg.temper * scale * new
-        # speeds: a kept speed moves to its cycle's next row; a change lands on each row of the new speed
-        mixed = np.zeros_like(b)
-        blind = cue is None or not cfg.still   # no motion cue: a stopped camera may start again
-        n_u = len(values)
-        ladder = [0] + list(range(2, n_u)) if n_u > 1 else [0]
+    n_u = len(values)
+    ladder = [0] + list(range(2, n_u)) if n_u > 1 else [0]
+
+    def speed_matrix(blind: bool) -> np.ndarray:
+        """(V, V): a kept speed moves to its cycle's next row; a change lands on each row of the new speed."""
+        k = np.zeros((n_v, n_v))
         for r, (u, _) in enumerate(speeds):
             to = {}   # speed index -> probability
             if n_u == 1:
@@ -70,21 +55,45 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
             for w, pr in to.items():
                 targets = [r2 for r2, (u2, _) in enumerate(speeds) if u2 == w]
                 if w == u:   # the cycle's next row
-                    mine = [r2 for r2 in targets]
-                    k = mine.index(r)
-                    targets, pr_each = [mine[(k + 1) % len(mine)]], pr
+                    targets, pr_each = [targets[(targets.index(r) + 1) % len(targets)]], pr
                 else:
                     pr_each = pr / len(targets)
                 for r2 in targets:
-                    share = pr_each
-                    if blind and r == 0:
-                        share *= 1 - GO_BLIND
-                    for p in range(n_r):
-                        mixed[r2, p] += share * b[r, p]
+                    k[r, r2] += pr_each * (1 - GO_BLIND if blind and r == 0 else 1.0)
             if blind and r == 0:   # ... and from standing to one place a frame
-                one = [r2 for r2, (u2, _) in enumerate(speeds) if values[u2] == 1.0][0]
+                k[r, [r2 for r2, (u2, _) in enumerate(speeds) if values[u2] == 1.0][0]] += GO_BLIND
+        return k
+
+    # where mass coming onto the map lands over the speed rows: the cued kernel's long run, by iterating the lazy
+    # chain (the same long run, no oscillation) from every row alike
+    lazy = 0.5 * (speed_matrix(False) + np.eye(n_v))
+    prior = np.full(n_v, 1.0 / n_v)
+    for _ in range(20000):
+        prior = prior @ lazy
+    b = np.outer(prior, np.full(n_r, (1 - START_OFF) / n_r))
+    off = START_OFF
+    scale_s = scale_w = 0.0
+    seq_of = np.array([np.searchsorted(graph.starts, p, side="right") - 1 for p in range(n_r)])
+    answers, confs = [], []
+    for t, row in enumerate(rows):
+        cue = None if cues is None else cues[t]
+        new = 1.0
+        if cue is not None and cue >= cfg.still:   # standing by the cue: the chance it moves all the same
+            stand = np.exp(-0.5 * ((cue - CUE_STANDING[0]) / CUE_STANDING[1]) ** 2) / CUE_STANDING[1]
+            move = np.exp(-0.5 * (cue / CUE_MOVING_SD) ** 2) / CUE_MOVING_SD
+            w_s, w_m = max(stand / max(stand, move), CUE_FLOOR), max(move / max(stand, move), CUE_FLOOR)
+            new = w_m / (w_m + w_s)
+        mean = (scale_s + SCALE_PRIOR * SCALE_PRIOR_FRAMES) / (scale_w + SCALE_PRIOR_FRAMES)
+        scale = min(max(mean, SCALE_BOUNDS[0]), SCALE_BOUNDS[1])
+        z = np.minimum(robust_z(row), scale + Z_CAP)   # no more evidence than the true place gives
+        beta = cfg.temper * scale * new
+        blind = cue is None or not cfg.still   # no motion cue: a stopped camera may start again
+        kernel = speed_matrix(blind)
+        mixed = np.zeros_like(b)
+        for r in range(n_v):
+            for r2 in range(n_v):
                 for p in range(n_r):
-                    mixed[one, p] += GO_BLIND * b[r, p]
+                    mixed[r2, p] += kernel[r, r2] * b[r, p]
         # moves
         moved = np.zeros_like(b)
         ran = 0.0
@@ -116,7 +125,7 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
                     moved[v, tg] += share / len(targets)
         on = moved.sum()
         leave, jump, enter = new * cfg.leave, new * cfg.jump, new * cfg.enter   # a standing camera's share
-        nb = moved * (1 - leave - jump) + (jump * on + enter * off) / (n_v * n_r)
+        nb = moved * (1 - leave - jump) + (jump * on + enter * off) * prior[:, None] / n_r
         noff = off * (1 - enter) + leave * on + ran
         if cue is not None and cfg.still:   # the cue's densities, standing and moving, the larger 1
             stand = np.exp(-0.5 * ((cue - CUE_STANDING[0]) / CUE_STANDING[1]) ** 2) / CUE_STANDING[1]
@@ -217,6 +226,40 @@ def test_imagery_of_somewhere_else_is_lost_as_off_the_map():
     r = get_matcher("stream").run(rows)
     assert (r.scores < 0.98).mean() >= 0.99
     assert (r.why[20:] == "off-map").mean() > 0.55   # 0.59 measured; the rest "settling", lost all the same
+
+
+def test_one_view_matched_again_and_again_while_the_camera_moves_is_lost():
+    """Imagery of somewhere else that looks like one stretch of the map in every frame, while the motion cue
+    says the camera moves (a place that looks like anything): no trajectory explains it, so it is lost. Mass
+    coming onto the map takes the speeds' long run, where the slow speed is rare; an even share of the speed
+    rows once let a slow trajectory hold the place (1 to 4 of 15 frames at 0.98 on these seeds)."""
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        rows = rng.normal(0.0, 0.05, (15, 200))
+        rows[:, 100] += 0.4
+        rows[:, 101] += 0.2
+        f = BayesFilter(200, config())
+        confs = [f.update(r, still=None if i == 0 else 0.0)[1] for i, r in enumerate(rows)]
+        assert max(confs) < 0.98, (seed, confs)
+
+
+def test_mass_coming_onto_the_map_takes_the_speeds_long_run():
+    """``Transitions.prior`` is the speed kernel's long run (the lazy chain iterated from every row alike): the
+    regular speeds share it evenly, the slow speed gets what ``SLOW_CHANGE`` lets in."""
+    for step in (1.0, 0.5):
+        moves = Transitions(RouteGraph.line(50), config(speed_step=step))
+        p = np.full(len(moves.prior), 1.0 / len(moves.prior))
+        lazy = 0.5 * (moves.kernel + np.eye(len(p)))
+        for _ in range(20000):
+            p = p @ lazy
+        np.testing.assert_allclose(moves.prior, p, atol=1e-9)
+        np.testing.assert_allclose(stationary(moves.kernel) @ moves.kernel, moves.prior, atol=1e-12)
+        per_speed = np.bincount(moves.of, weights=moves.prior)
+        assert per_speed[1] < 0.1 * per_speed[2]                      # slow: rare
+        np.testing.assert_allclose(per_speed[[0, *range(2, len(per_speed))]], per_speed[0], rtol=1e-6)
+        entry = moves.entry()
+        np.testing.assert_allclose(entry.sum(axis=1), moves.prior)
+        assert abs(entry.sum() - 1.0) < 1e-12
 
 
 def test_a_detour_is_lost_within_a_few_frames_and_found_again():

@@ -30,7 +30,7 @@ def test_a_window_of_every_place_is_the_whole_route_model(step: float) -> None:
     b = rng.random((len(Transitions(g, cfg).moves), g.n_refs))
     b /= b.sum() * 1.25
     want_b, want_off = whole.predict(b, 0.2)
-    got_b, got_off, got_else = Window(g, np.arange(g.n_refs), whole.moves).predict(
+    got_b, got_off, got_else = Window(g, np.arange(g.n_refs), whole.moves, whole.prior).predict(
         b, 0.2, 0.0, cfg.leave, cfg.jump, cfg.enter, whole.kernel)
     np.testing.assert_allclose(got_b, want_b, atol=1e-15)
     assert abs(got_off - want_off) < 1e-12 and got_else == 0.0
@@ -49,8 +49,8 @@ def test_a_window_keeps_the_mass_and_matches_the_whole_route_inside(step: float)
     b /= b.sum() * 1.25
     whole = Transitions(g, cfg)
     want_b, want_off = whole.predict(b, 0.2)
-    got_b, got_off, got_else = Window(g, cols, whole.moves).predict(b[:, cols], 0.2, 0.0, 0.0, 0.0, 0.0,
-                                                                     whole.kernel)
+    got_b, got_off, got_else = Window(g, cols, whole.moves, whole.prior).predict(b[:, cols], 0.2, 0.0, 0.0, 0.0,
+                                                                                  0.0, whole.kernel)
     np.testing.assert_allclose(got_b, want_b[:, cols], atol=1e-15)
     assert abs(got_b.sum() + got_off + got_else - 1.0) < 1e-12
     assert abs(got_off - want_off) < 1e-12
@@ -59,11 +59,32 @@ def test_a_window_keeps_the_mass_and_matches_the_whole_route_inside(step: float)
 def test_regather_moves_mass_between_windows() -> None:
     rng = np.random.default_rng(3)
     b = rng.random((5, 20))
+    prior = np.array([0.4, 0.05, 0.25, 0.2, 0.1])
     cols, new = np.arange(100, 120), np.arange(110, 140)
-    out, elsewhere = regather(b, cols, 0.3, new, 1000)
+    out, elsewhere = regather(b, cols, 0.3, new, 1000, prior)
     assert out.shape == (5, 30)
     np.testing.assert_array_equal(out[:, :10], b[:, 10:])
     assert abs(out.sum() + elsewhere - (b.sum() + 0.3)) < 1e-12
+    np.testing.assert_allclose(out[:, 10:], np.repeat(0.3 * prior[:, None] / 980, 20, axis=1))   # by the prior
+
+
+@pytest.mark.parametrize("step", [1.0, 0.5])
+def test_elsewhere_feeds_a_window_as_the_whole_route_model_would(step: float) -> None:
+    """Mass spread outside the window as ``elsewhere`` spreads it (every place alike, the rows by the prior):
+    one step on, the window's columns are the whole-route model's (the prior is the speeds' long run, so the
+    speed changes keep it)."""
+    g, cfg = graph(), config(jump=0.0, leave=0.0, enter=0.0, speed_step=step)
+    whole = Transitions(g, cfg)
+    cols = np.arange(10, 40)
+    outside = np.setdiff1d(np.arange(g.n_refs), cols)
+    b = np.zeros((len(whole.moves), g.n_refs))
+    b[:, cols] = np.random.default_rng(4).random((len(whole.moves), len(cols))) * 0.01
+    b[:, outside] = 0.3 * whole.prior[:, None] / len(outside)
+    want_b, want_off = whole.predict(b, 0.2)
+    got_b, got_off, got_else = Window(g, cols, whole.moves, whole.prior).predict(
+        b[:, cols], 0.2, 0.3, 0.0, 0.0, 0.0, whole.kernel)
+    np.testing.assert_allclose(got_b, want_b[:, cols], atol=1e-15)
+    assert abs(got_b.sum() + got_off + got_else - (b.sum() + 0.2)) < 1e-12
 
 
 def long_route(rng, n: int, truth: np.ndarray) -> tuple[np.ndarray, BayesFilter, BayesFilter]:

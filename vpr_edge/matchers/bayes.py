@@ -12,7 +12,8 @@ somewhere the map does not hold (*off-map*). Each frame:
    else leaves the map; a junction from inside a drive (a fork) passes a share ``JOIN`` of its places' mass on
    to the other drive. Every frame, ``leave`` of the on-map
    mass moves off the map, ``jump`` of it to a place anywhere on the map (a re-localisation), and ``enter`` of
-   the off-map mass comes back onto the map at any place.
+   the off-map mass comes back onto the map at any place. Mass coming onto the map (the prior too) takes the
+   speeds' long run under the motion model (``filter_motion.stationary``): the slow speed is rare there.
 2. **Correct** (the likelihood of the frame's similarity row). The row is read on its own scale: robust
    z-scores ``z = (s - median) / spread`` (``robust_z``: the bulk's or the upper tail's spread, the larger;
    a front end whose unrelated places often stand out reads lower), less each place's running
@@ -376,12 +377,12 @@ class BayesFilter:
         *elsewhere*, places newly held take their even share of it."""
         cols = self.cols if self.cols is not None else np.arange(self.n_refs)
         target = new if new is not None else np.arange(self.n_refs)
-        self.b, self.elsewhere = regather(self.b, cols, self.elsewhere, target, self.n_refs)
+        self.b, self.elsewhere = regather(self.b, cols, self.elsewhere, target, self.n_refs, self.moves.prior)
         if new is None:
             self.elsewhere = 0.0
         self.cols = new
-        self._window = None if new is None else Window(self.graph, new, self.moves.moves, self.moves.over,
-                                                             self.moves.forks)
+        self._window = None if new is None else Window(self.graph, new, self.moves.moves, self.moves.prior,
+                                                             self.moves.over, self.moves.forks)
         self._whole = self._whole and new is None
 
     def _learn_scale(self, z_answer: float) -> None:

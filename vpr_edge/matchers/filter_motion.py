@@ -1,6 +1,7 @@
 """The stream filter's motion model (``bayes``, step 1): over the whole route (``Transitions``), or over a
 window of places around its answer on a long route (``Window``), the rest of the on-map mass held as one
-number spread evenly (*elsewhere*); and what the motion cue says of the speed (``cue_weights``, step 3).
+number spread evenly over its places (*elsewhere*); and what the motion cue says of the speed (``cue_weights``,
+step 3).
 
 Speeds are 0 (standing), a slow ``SLOW_SPEED`` (half a place a frame: a camera slower than the map's drive),
 then one place a frame to ``vmax`` in steps of ``speed_step`` (0.5: 1, 1.5, 2, ..). A speed between whole
@@ -17,6 +18,10 @@ answer (and a fixed probe sample for the row's median and spread), as ``stream-r
 firm. ``Window`` moves the mass it holds one frame on with the same motion model as the whole-route
 ``Transitions``; what leaves the window joins *elsewhere*, what enters it comes from there. On a
 window of every place it is ``Transitions`` exactly (tested).
+
+Mass that comes onto the map (the stream's start, a return from off the map, a re-localisation, places newly
+held from *elsewhere*) lands on every place alike and on the speeds as the motion model holds them in the long
+run (``stationary``): the slow speed is as rare there as ``SLOW_CHANGE`` makes it anywhere else.
 """
 from __future__ import annotations
 
@@ -102,6 +107,18 @@ def speed_kernel(speeds: np.ndarray, of: np.ndarray, change: float) -> np.ndarra
     return k
 
 
+def stationary(kernel: np.ndarray) -> np.ndarray:
+    """A row-stochastic (V, V) kernel -> its long-run distribution over the rows (V,) (``p = p @ kernel``,
+    summing to 1): how the speed rows share mass that has moved by the motion model for a long time."""
+    n = len(kernel)
+    a = np.vstack([kernel.T - np.eye(n), np.ones((1, n))])
+    rhs = np.zeros(n + 1)
+    rhs[-1] = 1.0
+    p = np.linalg.lstsq(a, rhs, rcond=None)[0]
+    p = np.maximum(p, 0.0)
+    return p / p.sum()
+
+
 def cue_weights(cue: float, as_motion: bool = False) -> tuple[float, float]:
     """A frame's motion cue (``motion.MotionCue``: 1 the same view again, 0 a typical moving step) -> the
     weights (moving, standing) of the moving speeds and of speed 0: the cue's density where the camera moves
@@ -174,6 +191,7 @@ class Transitions:
         self.n_speeds = len(self.of)
         self.shifts = by_move(self.moves)
         self.kernel = speed_kernel(self.speeds, self.of, config.speed_change)
+        self.prior = stationary(self.kernel)   # (V,) how mass coming onto the map shares the speed rows
         one = np.flatnonzero(self.speeds == 1.0)
         self.blind_kernel = blind(self.kernel, int(np.flatnonzero(self.of == one[0])[0]) if len(one) else 0)
         later = [(int(s), int(e) + 1) for s, e in zip(graph.starts[1:], graph.ends[1:])]
@@ -184,8 +202,9 @@ class Transitions:
         self.forks = forks(graph)
 
     def entry(self) -> np.ndarray:
-        """Where mass coming onto the map lands: (V, R), every place and speed alike, summing to 1."""
-        return np.full((self.n_speeds, self.graph.n_refs), 1.0 / (self.n_speeds * self.graph.n_refs))
+        """Where mass coming onto the map lands: (V, R), every place alike, the speed rows by ``prior``
+        (``stationary``), summing to 1."""
+        return np.repeat(self.prior[:, None] / self.graph.n_refs, self.graph.n_refs, axis=1)
 
     def predict(self, b: np.ndarray, off: float, kernel: np.ndarray | None = None,
                 hazard: float = 1.0) -> tuple[np.ndarray, float]:
@@ -222,23 +241,26 @@ class Transitions:
             moved[:, targets] += (share / len(targets))[:, None]
         on = float(moved.sum())
         out = moved * (1.0 - leave - jump)
-        out += (jump * on + enter * off) / out.size   # onto every place and speed alike (``entry``)
+        out += (jump * on + enter * off) * self.prior[:, None] / r   # as ``entry``
         return out, off * (1.0 - enter) + leave * on + ran
 
 
 class Window:
     """The places ``cols`` (sorted int64 (W,)) of ``graph`` held at rows that move ``moves`` (V,) whole places a
     frame: for each row and column, where its mass comes from (``src``: a flat index into the (V, W) mass, or
-    past its end: ``gone`` for a predecessor in another drive (no mass), ``gone + 1`` for one outside the window
-    (*elsewhere*'s density)), and whether moving on leaves the map (``exit_off``: past its drive's end) or the
-    window (``exit_else``); ``over`` and ``forks``: the route's (``overruns``, ``forks``; None: made here).
+    past its end: ``gone`` for a predecessor in another drive (no mass), ``gone + 1 + row`` for one outside the
+    window (*elsewhere*'s density at that row)), and whether moving on leaves the map (``exit_off``: past its
+    drive's end) or the window (``exit_else``); ``prior`` (V,): how *elsewhere* and mass coming onto the map
+    share the rows (``Transitions.prior``); ``over`` and ``forks``: the route's (``overruns``, ``forks``; None:
+    made here).
     Mass that overruns a held drive end lands on the held places that follow it (``cont``), or joins
     elsewhere; a drive start's predecessor outside the window brings none."""
 
-    def __init__(self, graph: RouteGraph, cols: np.ndarray, moves: np.ndarray,
+    def __init__(self, graph: RouteGraph, cols: np.ndarray, moves: np.ndarray, prior: np.ndarray,
                  over: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None,
                  fork_list: list[tuple[np.ndarray, np.ndarray]] | None = None) -> None:
         self.graph, self.cols, self.moves = graph, np.asarray(cols, np.int64), np.asarray(moves, np.int64)
+        self.prior = np.asarray(prior, np.float64)
         over = overruns(graph, int(self.moves.max())) if over is None else over
         fork_list = forks(graph) if fork_list is None else fork_list
         starts = np.asarray(graph.starts, np.int64)
@@ -250,8 +272,9 @@ class Window:
         n_v, w = len(self.moves), len(self.cols)
         self.gone = n_v * w
         flat = np.arange(n_v)[:, None] * w + pos
-        self.src = np.where(before < first, self.gone, np.where(inside, flat, self.gone + 1))
-        self.n_from_else = int((self.src == self.gone + 1).sum())
+        from_else = (before >= first) & ~inside
+        self.src = np.where(before < first, self.gone, np.where(inside, flat, self.gone + 1 + np.arange(n_v)[:, None]))
+        self.n_from_else = from_else.sum(axis=1)   # (V,) columns of each row fed from elsewhere
         self.exit_off = after > last
         self.exit_else = ~self.exit_off & ~self.positions(after)[1]
         self.joins = [(self.positions(s)[0][self.positions(s)[1]], self.positions(t)[0][self.positions(t)[1]],
@@ -277,12 +300,11 @@ class Window:
                 kernel: np.ndarray) -> tuple[np.ndarray, float, float]:
         """(V, W) window mass, the off-map and elsewhere masses -> the same one frame on (sums kept)."""
         r, w = self.graph.n_refs, len(self.cols)
-        n_speeds = len(self.moves)
-        density = elsewhere / (n_speeds * (r - w)) if r > w else 0.0
+        density = elsewhere * self.prior / (r - w) if r > w else np.zeros(len(self.moves))   # (V,) a place
         b = kernel.T @ b
-        moved = np.concatenate([b.ravel(), [0.0, density]])[self.src]
+        moved = np.concatenate([b.ravel(), [0.0], density])[self.src]
         ran = float(b[self.exit_off].sum())
-        elsewhere += float(b[self.exit_else].sum()) - density * self.n_from_else
+        elsewhere += float(b[self.exit_else].sum()) - float(density @ self.n_from_else)
         for rows, src, dst, share in self.cont:   # on past a drive's end into the drives that follow it
             went = b[np.ix_(rows, src)] * share
             held = dst >= 0
@@ -297,21 +319,21 @@ class Window:
             elsewhere += float(share.sum()) * (n_targets - len(targets)) / n_targets
         on = float(moved.sum()) + elsewhere
         spread = jump * on + enter * off
-        out = moved * (1.0 - leave - jump) + spread / (n_speeds * r)
+        out = moved * (1.0 - leave - jump) + spread * self.prior[:, None] / r
         elsewhere = elsewhere * (1.0 - leave - jump) + spread * (r - w) / r
         return out, off * (1.0 - enter) + leave * on + ran, max(elsewhere, 0.0)
 
 
-def regather(b: np.ndarray, cols: np.ndarray, elsewhere: float, new: np.ndarray,
-             n_refs: int) -> tuple[np.ndarray, float]:
+def regather(b: np.ndarray, cols: np.ndarray, elsewhere: float, new: np.ndarray, n_refs: int,
+             prior: np.ndarray) -> tuple[np.ndarray, float]:
     """Mass (V, W) held at places ``cols`` and ``elsewhere`` -> the same held at places ``new``: columns
-    leaving join elsewhere, columns entering take their even share of it."""
+    leaving join elsewhere, columns entering take their even share of it, over the rows by ``prior`` (V,)."""
     n_speeds = b.shape[0]
     out_w = n_refs - len(cols)
-    density = elsewhere / (n_speeds * out_w) if out_w > 0 else 0.0
+    density = elsewhere * np.asarray(prior, np.float64) / out_w if out_w > 0 else np.zeros(n_speeds)
     pos = np.clip(np.searchsorted(cols, new), 0, max(len(cols) - 1, 0))
     kept = (cols[pos] == new) if len(cols) else np.zeros(len(new), bool)
-    out = np.full((n_speeds, len(new)), density)
+    out = np.repeat(density[:, None], len(new), axis=1)
     out[:, kept] = b[:, pos[kept]]
     held = float(out.sum())
     total = float(b.sum()) + elsewhere
