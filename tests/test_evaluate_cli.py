@@ -403,7 +403,8 @@ def test_evaluate_agrees_with_a_count_from_localizes_own_output(tmp_path: Path) 
         rows = list(csv.DictReader(out.read_text().splitlines()))
         given = [r for r in rows if r["lost"] == "0"]
         right = [r for r in given if int(r["ref_index"]) in truth[int(r["frame_index"])]]
-        assert len(rows) == 111 and len(right) > 55 and len(right) == len(given)   # lost where unsure, else right
+        # lost where unsure, else right: 55 of 111 answered on raw cosines, 79 standardised (the default)
+        assert len(rows) == 111 and len(right) >= (50 if switch else 70) and len(right) == len(given)
         stream = json.loads(js.read_text())["modes"]["stream"]
         assert stream["mapped_right"] == pytest.approx(len(right) / len(rows))
         assert stream["answered_right"] == pytest.approx(len(right) / len(given))
