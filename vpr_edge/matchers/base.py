@@ -184,9 +184,10 @@ class Matcher:
     """A registered matcher: a name, a one-line summary, and either ``start(n_refs, **params)`` making an
     online matcher or ``align(sim, k, **params)`` computing a Result offline. ``definitions`` defines its
     parameters (``params.Param``: default and meaning); ``params`` are the values it runs with (default: the
-    definitions' defaults; a preset changes some); ``with_params`` overrides some of them. ``min_confidence``: the default score below
-    which a frame is reported lost (None: the matcher has no lost state). ``scores``: the (Q, R) matrix it
-    runs on: ``cosine`` similarities of encodings, or ``svm`` decision values (a map built with --svm)."""
+    definitions' defaults; a preset changes some); ``with_params`` overrides some of them. ``min_confidence``:
+    the default score below which a frame is reported lost (None: the matcher has no lost state). ``scores``:
+    the (Q, R) matrix it runs on: ``cosine`` similarities of encodings, or ``svm`` decision values (a map built
+    with --svm)."""
 
     name: str
     summary: str
