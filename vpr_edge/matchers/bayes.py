@@ -374,7 +374,7 @@ class BayesFilter:
 
     def _move(self, new: np.ndarray | None) -> None:
         """Hold the places ``new`` (sorted; None: every place): the mass of places no longer held joins
-        *elsewhere*, places newly held take their even share of it."""
+        *elsewhere*, places newly held take their even share of it (over the speed rows by the long run)."""
         cols = self.cols if self.cols is not None else np.arange(self.n_refs)
         target = new if new is not None else np.arange(self.n_refs)
         self.b, self.elsewhere = regather(self.b, cols, self.elsewhere, target, self.n_refs, self.moves.prior)
