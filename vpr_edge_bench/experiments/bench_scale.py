@@ -7,15 +7,16 @@ dims and a hard stream over it (``synthetic``: cold start, speed changes, two de
 the second re-entering far away, a long stop of new exposures; a frame alone right about 1 time in 4), then:
 
 1. ``vpr-edge build-map ROUTE.npy -o MAP`` as a command: wall time and peak RSS (its index included);
-2. ``vpr-edge localize --threads 1 --map MAP --stream QUERIES.npy -o OUT.csv`` as a command: wall time (start-up
-   included) a frame, its RssAnon / RssFile sampled every 0.2 s (max and last);
+2. ``vpr-edge localize --threads 1 --map MAP --stream QUERIES.npy -o OUT.csv --min-confidence 0`` as a command:
+   wall time (start-up included) a frame, its RssAnon / RssFile sampled every 0.2 s (max and last); every line
+   keeps its best answer, and a frame is lost below the mode's own line (what localize reports by default);
 3. the same stream through ``Localizer.push_encoding`` in this process, each frame timed: p50 / p99 / max ms and
    RssAnon at checkpoints (flat or not);
 4. the yardstick (one fp32 inference of the 320x240 model, one thread) measured after them, every time printed
    beside it as a ratio;
-5. the localize output scored against the ground truth: R@1 within +-2 over mapped frames, answers given
-   right, mapped frames answered right, off-map frames reported lost, frames from leaving the map to the first
-   lost one and from each re-entry to the first right answer.
+5. the localize output scored against the ground truth: R@1 within +-2 over mapped frames (the best answers,
+   sure or not), answers given right, mapped frames answered right, off-map frames reported lost, frames from
+   leaving the map to the first lost one and from each re-entry to the first right answer.
 
 --standardise on runs steps 2, 3 and 5 with standardised encodings (``encoders.standardise``, localize's
 --standardise); both runs them plain and standardised side by side: step 2 once each a round (--rounds; the
@@ -41,6 +42,7 @@ from vpr_edge.errors import VprError
 from vpr_edge.evaluation.metrics import answered_shares, transition_delays
 from vpr_edge.evaluation.truth import load_csv
 from vpr_edge.matchers import DEFAULT_MATCHER, MATCHERS, get_matcher
+from vpr_edge.matchers.base import is_lost
 from vpr_edge_bench.runner import parser, run_checked
 from vpr_edge_bench.synthetic import plan_stream, write_route, write_stream
 from vpr_edge_bench.yardstick import yardstick_ms
@@ -119,15 +121,16 @@ def per_frame(map_path: Path, queries: Path, checkpoints: list[int],
     return ms, marks
 
 
-def score(results: Path, truth_csv: Path, tolerance: int = 2) -> dict:
-    """The localize output against the ground truth (module docstring, step 5)."""
+def score(results: Path, truth_csv: Path, line: float | None, tolerance: int = 2) -> dict:
+    """The localize output (every line with its best answer, ``--min-confidence 0``) against the ground truth
+    (module docstring, step 5): a frame is lost below ``line`` (its score; None: as the output says)."""
     truth = load_csv(truth_csv)[:, 0]
     ref = np.full(len(truth), -10 ** 9, np.int64)
     lost = np.ones(len(truth), bool)
     with open(results, newline="") as f:
         for row in csv.DictReader(f):
             i = int(row["frame_index"])
-            lost[i] = row["lost"] in ("1", "True", "true")
+            lost[i] = row["lost"] in ("1", "True", "true") if line is None else bool(is_lost(float(row["score"]), line))
             if row["ref_index"]:
                 ref[i] = int(row["ref_index"])
     mapped = truth >= 0
@@ -192,8 +195,9 @@ def _run(a: argparse.Namespace) -> int:
         for v in variants[::1 if r % 2 == 0 else -1]:
             cosines = "--standardise" if v else "--raw-cosines"
             runs[v].append(run_command(["localize", "--map", str(map_path), "--stream", str(queries), "--threads",
-                                        "1", "-o", str(outs[v]), "--mode", a.mode, cosines]))
+                                        "1", "-o", str(outs[v]), "--mode", a.mode, cosines, "--min-confidence", "0"]))
     checkpoints = sorted(int(c) for c in a.checkpoints.split(","))
+    line = get_matcher(a.mode).lost_line(live=True)   # what localize reports lost below, by default
     ms, marks = per_frame(map_path, queries, checkpoints, variants, a.mode)
     yard = yardstick_ms()
     rows.append(("yardstick: one fp32 inference, 320x240, one thread", f"{yard:.2f} ms", ""))
@@ -203,7 +207,7 @@ def _run(a: argparse.Namespace) -> int:
         located[v] = {"wall_s": float(np.median([x["wall_s"] for x in runs[v]]))} | \
             {key: max(x[key] for x in runs[v]) for key in ("peak_rss_mb", "anon_max_mb", "file_max_mb")} | \
             {"anon_last_mb": runs[v][-1]["anon_last_mb"]}
-        rows += variant_rows(located[v], ms[k], score(outs[v], truth), yard, a.frames,
+        rows += variant_rows(located[v], ms[k], score(outs[v], truth, line), yard, a.frames,
                              f" [{LABELS[v]}]" if both else "", a.rounds)
     rows.append(("RssAnon in process after " + " / ".join(f"{f:,}" for f, _, _ in marks) + " frames"
                  + (" (both Localizers)" if both else ""), " / ".join(f"{anon:.0f}" for _, anon, _ in marks) + " MB",
