@@ -272,9 +272,8 @@ class Window:
         n_v, w = len(self.moves), len(self.cols)
         self.gone = n_v * w
         flat = np.arange(n_v)[:, None] * w + pos
-        from_else = (before >= first) & ~inside
         self.src = np.where(before < first, self.gone, np.where(inside, flat, self.gone + 1 + np.arange(n_v)[:, None]))
-        self.n_from_else = from_else.sum(axis=1)   # (V,) columns of each row fed from elsewhere
+        self.n_from_else = (self.src > self.gone).sum(axis=1)   # (V,) columns of each row fed from elsewhere
         self.exit_off = after > last
         self.exit_else = ~self.exit_off & ~self.positions(after)[1]
         self.joins = [(self.positions(s)[0][self.positions(s)[1]], self.positions(t)[0][self.positions(t)[1]],
