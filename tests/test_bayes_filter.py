@@ -8,8 +8,8 @@ import pytest
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.bayes import BayesFilter, FilterConfig, robust_z
 from vpr_edge.matchers.constants import (CUE_FLOOR, CUE_MOVING_SD, CUE_STANDING, GO_BLIND, JOIN, SCALE_BOUNDS,
-                                         SCALE_PRIOR, SCALE_PRIOR_FRAMES, SLOW_CHANGE, SLOW_SPEED, START_OFF,
-                                         Z_CAP)
+                                         REPEAT, SCALE_PRIOR, SCALE_PRIOR_FRAMES, SLOW_CHANGE, SLOW_SPEED,
+                                         START_OFF, Z_CAP)
 from vpr_edge.matchers.filter_motion import Transitions, stationary
 from vpr_edge.matchers.params import STREAM
 from vpr_edge.matchers.route import RouteGraph
@@ -77,6 +77,10 @@ def naive_forward(rows: np.ndarray, cfg: FilterConfig, graph: RouteGraph, cues=N
     answers, confs = [], []
     for t, row in enumerate(rows):
         cue = None if cues is None else cues[t]
+        if cue is not None and cfg.still and cue >= REPEAT:   # a duplicated frame: the last answer again
+            answers.append(answers[-1] if answers else 0)
+            confs.append(confs[-1] if confs else 0.0)
+            continue
         new = 1.0
         if cue is not None and cue >= cfg.still:   # standing by the cue: the chance it moves all the same
             stand = np.exp(-0.5 * ((cue - CUE_STANDING[0]) / CUE_STANDING[1]) ** 2) / CUE_STANDING[1]
@@ -161,6 +165,7 @@ def test_filter_equals_a_plain_loop_forward_algorithm(graph_of, step):
     rows = rng.random((25, 17))
     rows[np.arange(10), np.arange(10)] += 1.5   # a trajectory to follow
     cues = [None if i % 5 == 0 else float(c) for i, c in enumerate(rng.random(25))]
+    cues[7] = 1.0   # a duplicated frame
     cfg = config(hub_memory=0.0, vmax=3, speed_step=step)
     graph = graph_of(17)
     f = BayesFilter(17, cfg, graph)
@@ -283,6 +288,22 @@ def test_a_standing_camera_keeps_its_place():
     # a stop is a rare change of speed: its first frame may still be read one place on, then the place holds
     assert abs(r.refs[40] - 39) <= 1 and (r.refs[41:60] == 39).all()
     assert (r.refs[70:] == places[70:]).mean() > 0.95
+
+
+def test_a_duplicated_frame_is_no_new_frame():
+    """A stream whose every frame comes twice, bit for bit (cue 1: a video's frame rate doubled), is answered
+    as the plain stream, each answer twice: read as stops, half its frames were a stop and a start again."""
+    rng = np.random.default_rng(8)
+    places = np.arange(0, 120, 2)
+    rows = planted(len(places), 130, places, 1.0, rng)
+    cues = rng.uniform(-0.3, 0.3, len(places))
+    plain = get_matcher("stream").run(rows, still=cues)
+    twice = np.repeat(cues, 2)
+    twice[1::2] = 1.0
+    doubled = get_matcher("stream").run(np.repeat(rows, 2, axis=0), still=twice)
+    np.testing.assert_array_equal(doubled.refs, np.repeat(plain.refs, 2))
+    np.testing.assert_allclose(doubled.scores, np.repeat(plain.scores, 2))
+    assert (plain.refs[10:] == places[10:]).mean() > 0.9
 
 
 @pytest.mark.parametrize("bad", [{"leave": 0.7}, {"temper": 0.0}, {"vmax": -1}, {"still": 2.0}])

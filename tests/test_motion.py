@@ -9,13 +9,14 @@ import pytest
 
 from helpers import exposures, naive_road, places_at_speeds, planted, stop_cues, unit_rows
 from vpr_edge.matchers import MATCHERS, get_matcher
-from vpr_edge.matchers.constants import MEMORY, MIN_STEPS
+from vpr_edge.matchers.constants import MEMORY, MIN_STEPS, REPEAT_STEP
 from vpr_edge.matchers.motion import route_stands, stillness
 
 
 def naive_cue(enc: np.ndarray, threshold: float | None, memory: int = MEMORY) -> list[float]:
     """The motion cue as plain loops, from ``motion``'s docstring: 1 - (1 - cosine to the anchor) / the
-    median step of the last ``memory`` moving frames (until MIN_STEPS of them, those frames move with cue 0)."""
+    median step of the last ``memory`` moving frames (until MIN_STEPS of them, those frames move with cue 0); the
+    anchor's encoding again (a duplicated frame): cue 1, no step."""
     anchor, steps, out = None, [], []
     for e in enc:
         if anchor is None or not np.linalg.norm(e) or not np.linalg.norm(anchor):
@@ -23,6 +24,11 @@ def naive_cue(enc: np.ndarray, threshold: float | None, memory: int = MEMORY) ->
             out.append(np.nan)
             continue
         d = 1 - e @ anchor / (np.linalg.norm(e) * np.linalg.norm(anchor))
+        if d <= REPEAT_STEP:   # the anchor again, bit for bit: the same view, no step
+            out.append(1.0)
+            if threshold is None:
+                anchor = e
+            continue
         typical = np.median(steps[-memory:]) if len(steps) >= min(MIN_STEPS, memory) else None
         out.append(0.0 if typical is None else 1 - d / typical)
         if threshold is None or not out[-1] >= threshold:
@@ -51,6 +57,18 @@ def test_stillness_against_a_loop(threshold: float | None, memory: int) -> None:
             blocks = np.split(enc, np.cumsum(cuts)[:-1])
             np.testing.assert_array_equal(route_stands(blocks, threshold, memory), want)
 
+
+
+def test_a_duplicated_frame_is_the_same_view_from_the_first():
+    """A stream that starts with its first frame repeated bit for bit (a video that waits, frames copied): the
+    copies read as the same view (cue 1) from the start, and add no step, so the first moving frames read as
+    moving (near 0), not as a hundred million typical steps of nothing."""
+    rng = np.random.default_rng(2)
+    enc = rng.normal(size=(12, 8))
+    enc[1:5] = enc[0]
+    got = stillness(enc, 0.5)
+    assert (got[1:5] == 1.0).all()
+    assert (np.abs(got[5:8]) < 1.0).all() and (got[5:] < 0.5).all()
 
 
 def test_narrow_band_front_end_moves_and_stands() -> None:

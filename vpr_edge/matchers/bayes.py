@@ -37,7 +37,9 @@ somewhere the map does not hold (*off-map*). Each frame:
    moving frame's) counts of its view's evidence only the probability, by the same two normals at even
    odds, that the camera moves all the same (a view seen again says nothing new), and as much
    of the frame's ``leave``, ``jump`` and ``enter`` (a camera that stands stays where it is: a long stop
-   keeps its answer). Where the map's own drive stood (``route``) the frame is read as motion.
+   keeps its answer). Where the map's own drive stood (``route``) the frame is read as motion. A frame whose
+   cue reaches ``REPEAT`` is the last frame again, bit for bit (a duplicated frame: a video's frame rate
+   raised by repeating frames): it is no new observation, and the filter skips it, answering as before.
 
 The answer is the place of the posterior's mode (summed over speeds), its **confidence** the posterior mass
 within ``tolerance`` places of it along the route: the probability that the answer is within ``tolerance``
@@ -68,7 +70,7 @@ from statistics import NormalDist
 import numpy as np
 
 from vpr_edge.matchers.base import AMBIGUOUS, OFF_MAP, SETTLING
-from vpr_edge.matchers.constants import (HUB_DELAY, MIN_SPREAD, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
+from vpr_edge.matchers.constants import (HUB_DELAY, MIN_SPREAD, REPEAT, SCALE_BOUNDS, SCALE_PRIOR, SCALE_PRIOR_FRAMES,
                                          START_OFF, TAIL_QUANTILE, Z_CAP)
 from vpr_edge.matchers.filter_config import FilterConfig
 from vpr_edge.matchers.filter_motion import Transitions, Window, cue_weights, regather
@@ -218,6 +220,8 @@ class BayesFilter:
         """The frame's similarities -> (answer, confidence): to every place (R,), or with ``refs`` exactly to
         the places ``wanted()`` named; ``still``: the frame's motion cue."""
         s = np.asarray(sim_row, np.float64)
+        if still is not None and self.config.still and still >= REPEAT:   # a duplicated frame: nothing new
+            return self._mode, self._conf
         part, sample = self._split(s, refs)
         new, route_stands = self._novelty(still)
         z = np.minimum(self._evidence(part, sample, new), self.scale + Z_CAP)   # (step 2)

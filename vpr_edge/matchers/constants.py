@@ -5,6 +5,7 @@ each was chosen on, and the modules that use them import them from here.
 from __future__ import annotations
 
 # --- the motion cue (``motion``) ---------------------------------------------------------------------------
+REPEAT_STEP = 1e-9   # a step (1 - cosine) this small: the anchor's encoding again, bit for bit (a duplicated frame)
 MIN_STEPS = 3        # moving frames seen before their median step is trusted (before: those frames move)
 MEMORY = 30          # moving frames whose median step is the typical one (the ``still_memory`` parameter's default)
 
@@ -57,6 +58,7 @@ GO_BLIND = 0.1
 # (docs/decisions.md, "The stream filter's parameters")
 SLOW_SPEED, SLOW_CHANGE = 0.5, 0.001
 MAX_PHASES = 4          # a speed's fraction of a place is a multiple of 1/n, n at most this (its cycle's length)
+REPEAT = 1.0 - 1e-6     # a motion cue this high: the last frame again, bit for bit (a duplicated frame), skipped
 CUE_FLOOR = 0.05        # the motion cue's weight of the speed it contradicts (the cue may be wrong)
 # the stream filter reads the motion cue as a normal about CUE_STANDING[0] (sd CUE_STANDING[1]) where the camera
 # stands and about 0 (sd CUE_MOVING_SD) where it moves (``filter_motion.cue_weights``); chosen on nordland-dev

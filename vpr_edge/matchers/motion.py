@@ -18,7 +18,9 @@ by steps too small to tell apart still shows motion once it has crept far enough
 steps then set the typical step.
 
 Until ``MIN_STEPS`` moving frames have been seen there is no typical step of the stream's own, and those
-first frames are taken as moving steps (cue 0), whatever they show. No step in cosine units is fixed in the
+first frames are taken as moving steps (cue 0), whatever they show. A frame whose encoding is its anchor's,
+bit for bit (within ``REPEAT_STEP``: a duplicated frame), is the same view again whenever it comes: cue 1, no
+step. No step in cosine units is fixed in the
 code: a front end whose cosines all lie in 0.999-1.0 (a network with random weights) and one whose cosines
 spread over 0-1 are each read on their own scale. (A fixed first step of 0.02 once read every frame of the
 first as standing, so nothing was ever followed. The map's own moving step as the first one was tried too: a
@@ -37,7 +39,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from vpr_edge.matchers.constants import MEMORY, MIN_STEPS
+from vpr_edge.matchers.constants import MEMORY, MIN_STEPS, REPEAT_STEP
 
 
 def stands(still: float | None, threshold: float | None) -> bool:
@@ -99,6 +101,8 @@ class MotionCue:
         """A frame at distance ``d`` (1 - cosine) from the anchor -> (its cue, whether it stands); a frame
         that does not stand adds its step (the caller makes it the anchor). Without a typical step yet (fewer
         than ``MIN_STEPS`` moving frames): cue 0, a moving step."""
+        if d <= REPEAT_STEP:   # the anchor's encoding again, bit for bit (a duplicated frame): no step
+            return 1.0, stands(1.0, self.threshold)
         typical = self.typical_step()
         if typical is None:
             self._steps.add(d)
