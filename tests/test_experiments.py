@@ -511,6 +511,13 @@ def test_front_end_cache_then_lines(every_stream: Path, tmp_path: Path) -> None:
                 sorted([*KINDS, "foreign"])
         with np.load(cache / ds / "ifv" / "aligned.npz", allow_pickle=False) as z:
             assert z["sim"].shape == (16, 16) and {"cue", "reach", "one_view", "truth"} <= set(z.files)
+            sim = z["sim"]
+    # without --standardise the cache keeps the plain cosines, whatever evaluate's default
+    from vpr_edge.evaluation import sources
+    from vpr_edge.map import MapQuery
+    raw = sources.from_map(MapQuery(cache / "nordland-dev" / "ifv" / "map.npz", None, 1), other / "aligned", 16,
+                           "aligned", lambda frame: None, standardise=False).cosine
+    np.testing.assert_allclose(sim, raw, atol=1e-5)
     assert "single R@1 (tolerance 0) on the aligned stream" in text and "| corridor |" in text
     again = tool("front-end-cache", "--streams", str(every_stream), str(other), "--out", str(cache), "--fronts",
                  "ifv,pixels", "--threads", "1")

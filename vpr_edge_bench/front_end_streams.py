@@ -94,9 +94,10 @@ def kept_rows(sims: sources.Similarities, truth: np.ndarray, stream: Stream) -> 
 
 
 def encode_map(query: MapQuery, stream: Stream) -> Encoded:
-    """``stream`` through ``query``'s chain (``sources.from_map``, as ``evaluate``)."""
+    """``stream`` through ``query``'s chain (``sources.from_map``, as ``evaluate --raw-cosines``): the plain
+    cosines, whatever ``evaluate``'s default (``record`` standardises them when asked)."""
     truth = load_truth(stream, query)
-    sims = sources.from_map(query, stream.frames, len(truth), stream.truth_name(), skip_warning)
+    sims = sources.from_map(query, stream.frames, len(truth), stream.truth_name(), skip_warning, standardise=False)
     return Encoded(sims.encodings, sims.cosine, kept_rows(sims, truth, stream))
 
 
