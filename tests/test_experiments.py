@@ -109,6 +109,7 @@ def test_bench_scale_builds_localizes_and_scores(tmp_path: Path) -> None:
     ("probability-targets", ["--cache", "{tmp}", "--target-precision", "1"], "must lie in (0, 1)"),
     ("front-end-lines", ["--cache", "{tmp}", "--modes", "stream,stream:peaks=maybe"], "'maybe' is not an int"),
     ("front-end-lines", ["--cache", "{tmp}", "--modes", "stream:nope=1"], "stream takes KEY=VALUE with KEY one of"),
+    ("front-end-lines", ["--cache", "{tmp}", "--frames", "drop:2"], "--frames must be one of as-recorded, twice"),
     ("one-view-check", ["--streams", "{tmp}"], NOT_STREAMS),
     ("eval-streams", ["--streams", "{tmp}"], NOT_STREAMS),
     ("eval-streams", ["--streams", "{tmp}", "--modes", "stream,nope"], "--modes 'stream,nope': unknown nope"),

@@ -2,7 +2,8 @@
 
 The lost line on many front ends (docs/results.md, "The line on any front end"): each stream mode's answers
 on every derived stream and on foreign imagery, from the similarity matrices the ``front-end-cache`` experiment
-wrote, scored by the library's ``scoring.evaluate_mode`` (what ``evaluate`` runs).
+wrote, scored by the library's ``scoring.evaluate_mode`` (what ``evaluate`` runs). ``--frames twice`` or
+``drop:P`` replays each stream as a camera that repeats or loses frames (``frame_edits``).
 
     python -m vpr_edge_bench front-end-cache --streams out/corridor out/nordland-dev --out out/fronts
     python -m vpr_edge_bench front-end-lines --cache out/fronts --modes stream,stream-rules,seqslam-online
@@ -60,6 +61,7 @@ from vpr_edge.evaluation.scoring import ModeReport, evaluate_mode
 from vpr_edge.matchers import get_matcher
 from vpr_edge.matchers.constants import TARGET_PRECISION
 from vpr_edge.threads import use_threads
+from vpr_edge_bench import frame_edits
 from vpr_edge_bench.line_targets import (EDGES, LEAD_REACH, StreamAnswers, StreamFigures, best_line,
                                          count_text, lead, line_figures, reliability, targets)
 from vpr_edge_bench.route_halves import HALVES, MIN_FRAMES, cut_stream, half_bounds, other_half
@@ -113,6 +115,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "turn), and fit --calibrate-on's drive on the other half (no place nor image shared)")
     p.add_argument("--counts", action="store_true",
                    help="print the streams that meet each target only (no rows, ranges nor reliability)")
+    p.add_argument("--frames", default="as-recorded", metavar="EDIT",
+                   help="as-recorded; twice (every frame twice, bit for bit: a video whose frame rate was raised "
+                        "by repeating frames); drop:P (each frame after the first lost with probability P)")
+    p.add_argument("--seed", type=int, default=0, help="the seed of --frames drop:P")
     a = p.parse_args(argv)
     return run_checked(__name__, lambda: _run(a))
 
@@ -149,6 +155,10 @@ def check_cache(cache: Path, modes: str) -> None:
 def _run(a: argparse.Namespace) -> int:
     """The work of ``main``, the cache and the modes checked first."""
     check_cache(a.cache, a.modes)
+    try:
+        frame_edits.parse(a.frames)
+    except ValueError as e:
+        raise VprError(str(e)) from None
     datasets = sorted(d for d in a.cache.iterdir() if d.is_dir() and d.name != "models")
     fronts_of = {ds: [f for f in sorted(g.name for g in ds.iterdir() if g.is_dir())
                       if not a.fronts or f in a.fronts.split(",")] for ds in datasets}
@@ -182,7 +192,8 @@ def _score_all(a: argparse.Namespace, fronts_of: dict[Path, list[str]], half: st
     sure: dict[tuple[str, str, str], list[tuple[np.ndarray, np.ndarray]]] = {}   # ... (probability, right) per stream
     leads: dict[tuple[str, str], list[np.ndarray]] = {}   # (dataset, front) -> each stream's leads
     answers: dict[tuple[str, str, str], list[StreamAnswers]] = {}   # ... each stream's answers (--oracle)
-    print(f"tolerance {a.tolerance}, target precision {a.target_precision}")
+    frames = "" if a.frames == "as-recorded" else f", frames {a.frames}" + (f" (seed {a.seed})" if "drop" in a.frames else "")
+    print(f"tolerance {a.tolerance}, target precision {a.target_precision}{frames}")
     row = (lambda text: None) if a.ranges or a.counts else (lambda text: print(text, flush=True))   # per stream
     row("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
         "distinct mapped right | best line @P | line gap | unmapped lost (first) | exact | signed error |")
@@ -194,6 +205,7 @@ def _score_all(a: argparse.Namespace, fronts_of: dict[Path, list[str]], half: st
             for mode in modes:
                 curve = None if drive is None else drive_curve(mode, drive, half, a.tolerance, a.target_precision)
                 for stem, case in cases(files, half):
+                    case = frame_edits.edited(case, a.frames, a.seed)
                     r = score(mode, case, a.tolerance, a.target_precision, curve)
                     key = (ds.name, front, mode)
                     if r.probability and stem != "foreign":   # frames whose truth is not at one view
