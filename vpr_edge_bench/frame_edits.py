@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vpr_edge_bench.front_end_streams import single_r1
+from vpr_edge_bench.front_end_streams import single_figures
 
 EDITS = ("as-recorded", "twice", "drop:P")
 
@@ -53,7 +53,5 @@ def edited(case: dict[str, np.ndarray], how: str, seed: int = 0) -> dict[str, np
             cue[1::2] = 1.0   # the copy: the same encoding as the frame before
         out["cue"] = cue
     if (out["truth"] >= 0).any():
-        tol = int(case.get("tolerance", 0))
-        out["single_r1"] = np.float64(single_r1(out["sim"], out["truth"]))
-        out["single_r1_tol"] = np.float64(single_r1(out["sim"], out["truth"], tol))
+        out.update(single_figures(out["sim"], out["truth"], int(case.get("tolerance", 0))))
     return out

@@ -115,6 +115,12 @@ def single_r1(sim: np.ndarray, truth: np.ndarray, tolerance: int = 0) -> float:
     return float(evaluate_mode(get_matcher("single"), sim, truth, tolerance=tolerance).recall[1])
 
 
+def single_figures(sim: np.ndarray, truth: np.ndarray, tolerance: int) -> dict[str, np.float64]:
+    """A cached stream's front end alone: ``single``'s R@1 exactly and within ``tolerance`` (the cache's keys)."""
+    exact, within = single_r1(sim, truth), single_r1(sim, truth, tolerance)
+    return {"single_r1": np.float64(exact), "single_r1_tol": np.float64(within)}
+
+
 def unit(x: np.ndarray) -> np.ndarray:
     """Rows scaled to unit length (zero rows left zero), float32."""
     x = np.asarray(x, np.float32)
@@ -140,8 +146,8 @@ def record(enc: Encoded, references: list[np.ndarray] | None, tolerance: int, st
     if standardise and references is not None and enc.encodings is not None:
         enc = Encoded(enc.encodings, standardised(enc.encodings, references).astype(np.float64), enc.truth)
     out: dict[str, np.ndarray | float | int] = {
-        "sim": enc.sim.astype(np.float32), "truth": enc.truth, "single_r1": single_r1(enc.sim, enc.truth),
-        "single_r1_tol": single_r1(enc.sim, enc.truth, tolerance), "tolerance": tolerance}
+        "sim": enc.sim.astype(np.float32), "truth": enc.truth, **single_figures(enc.sim, enc.truth, tolerance),
+        "tolerance": tolerance}
     if references is not None and enc.encodings is not None:
         stream = get_matcher("stream")
         on = stream.on_route(iter(references), None)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vpr_edge_bench.front_end_streams import single_r1
+from vpr_edge_bench.front_end_streams import single_figures
 
 HALVES = ("first", "second")
 MIN_FRAMES = 20   # a stream with fewer frames of the half is left out (a partial route of the other half)
@@ -68,7 +68,5 @@ def cut_stream(case: dict[str, np.ndarray], lo: int, hi: int,
     if "route" in case:
         out["route"] = np.asarray(case["route"])[lo:hi]
     if mapped[rows].any():
-        tol = int(case.get("tolerance", 0))
-        out["single_r1"] = np.float64(single_r1(out["sim"], out["truth"]))
-        out["single_r1_tol"] = np.float64(single_r1(out["sim"], out["truth"], tol))
+        out.update(single_figures(out["sim"], out["truth"], int(case.get("tolerance", 0))))
     return out

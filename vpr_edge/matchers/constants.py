@@ -58,7 +58,7 @@ GO_BLIND = 0.1
 # (docs/decisions.md, "The stream filter's parameters")
 SLOW_SPEED, SLOW_CHANGE = 0.5, 0.001
 MAX_PHASES = 4          # a speed's fraction of a place is a multiple of 1/n, n at most this (its cycle's length)
-REPEAT = 1.0 - 1e-6     # a motion cue this high: the last frame again, bit for bit (a duplicated frame), skipped
+REPEAT = 1.0 - 1e-6     # a motion cue this high (a copy reads 1: REPEAT_STEP): a duplicated frame, skipped
 CUE_FLOOR = 0.05        # the motion cue's weight of the speed it contradicts (the cue may be wrong)
 # the stream filter reads the motion cue as a normal about CUE_STANDING[0] (sd CUE_STANDING[1]) where the camera
 # stands and about 0 (sd CUE_MOVING_SD) where it moves (``filter_motion.cue_weights``); chosen on nordland-dev

@@ -192,7 +192,8 @@ def _score_all(a: argparse.Namespace, fronts_of: dict[Path, list[str]], half: st
     sure: dict[tuple[str, str, str], list[tuple[np.ndarray, np.ndarray]]] = {}   # ... (probability, right) per stream
     leads: dict[tuple[str, str], list[np.ndarray]] = {}   # (dataset, front) -> each stream's leads
     answers: dict[tuple[str, str, str], list[StreamAnswers]] = {}   # ... each stream's answers (--oracle)
-    frames = "" if a.frames == "as-recorded" else f", frames {a.frames}" + (f" (seed {a.seed})" if "drop" in a.frames else "")
+    frames = "" if a.frames == "as-recorded" else f", frames {a.frames}"
+    frames += f" (seed {a.seed})" if a.frames.startswith("drop") else ""
     print(f"tolerance {a.tolerance}, target precision {a.target_precision}{frames}")
     row = (lambda text: None) if a.ranges or a.counts else (lambda text: print(text, flush=True))   # per stream
     row("| dataset | front end | mode | stream | single R@1 | best R@1 | answered right | mapped right | "
